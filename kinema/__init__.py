@@ -1,0 +1,1 @@
+"""kinema: text- and constraint-driven skeletal motion generation for any rig."""

@@ -1,0 +1,43 @@
+"""The `kinema` command line. Each sub-command lives in its own module and registers itself here.
+
+Errors caused by user input (`KinemaError`) are printed as one line on stderr with exit status 2;
+anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from kinema.errors import KinemaError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Assemble the parser from the sub-command modules (imported lazily to keep start-up fast)."""
+    from kinema.cli import bench, convert, data
+
+    parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for module in (convert, data, bench):
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        result = args.func(args)
+    except KinemaError as err:
+        print(f"kinema: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("kinema: interrupted", file=sys.stderr)
+        return 130
+    return int(result or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
