@@ -1,0 +1,360 @@
+"""BVH reading: a raw layer (`parse_bvh` -> `BVHData`, file units and degrees, exactly as written)
+and a conversion to `Motion` (`read_bvh`, metres and quaternions; see kinema.io.bvh_convert).
+
+The raw layer accepts any per-joint channel layout (0-6 channels, any rotation order, position
+channels on any joint), End Sites, CRLF/CR line ends, tabs, scientific notation and ``.gz`` files.
+The MOTION block is parsed by numpy in one call, so a whole dataset reads in seconds; the slow,
+line-by-line scan only runs after that call has failed, to name the offending line in the
+`BVHError` (every error names the file and, when it has one, the 1-based line).
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import math
+import os
+import re
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from kinema.errors import BVHError
+
+#: Channel names as written in files; matching is case-insensitive.
+CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
+_CANONICAL = {n.lower(): n for n in CHANNEL_NAMES}
+_MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.M)
+_FRAMES_RE = re.compile(r"Frames\s*:\s*(\S*)\s*$", re.I)
+_FRAME_TIME_RE = re.compile(r"Frame\s+Time\s*:\s*(\S*)\s*$", re.I)
+
+
+@dataclass(eq=False)
+class BVHData:
+    """A BVH file exactly as written: file units, Euler angles in degrees, channels as listed.
+
+    ``values[:, c]`` is channel ``c`` counted across joints in hierarchy order (the order of
+    ``names``); `column_starts` gives where each joint's channels begin.
+    """
+
+    names: list[str]
+    parents: list[int]
+    offsets: np.ndarray  # (J, 3) float64, file units
+    channels: list[list[str]]  # per joint, canonical names in file order
+    end_sites: dict[int, np.ndarray] = field(default_factory=dict)  # joint -> (3,) End Site offset
+    frame_time: float = 1.0 / 30.0
+    values: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (T, C) float64
+    path: str = ""
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.names)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.values.shape[0])
+
+    @property
+    def num_channels(self) -> int:
+        return sum(len(c) for c in self.channels)
+
+    @property
+    def column_starts(self) -> list[int]:
+        """Index into ``values`` of each joint's first channel."""
+        starts, c = [], 0
+        for chans in self.channels:
+            starts.append(c)
+            c += len(chans)
+        return starts
+
+
+def parse_bvh(path_or_text: str | os.PathLike | bytes, *, source_name: str | None = None) -> BVHData:
+    """Parse a BVH file (path; ``.gz`` is decompressed) or BVH text (str/bytes containing a newline).
+
+    ``source_name`` names in-memory text in error messages. Raises `BVHError` for any malformed input.
+    """
+    if isinstance(path_or_text, bytes):
+        name = source_name or "<bytes>"
+        text = _decode(path_or_text)
+    elif isinstance(path_or_text, str) and ("\n" in path_or_text or "\r" in path_or_text):
+        name, text = source_name or "<string>", path_or_text
+    else:
+        name = source_name or str(path_or_text)
+        text = _decode(_read_bytes(Path(path_or_text), name))
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    if not text.strip():
+        raise BVHError("empty file", name, 1)
+
+    m = _MOTION_RE.search(text)
+    header = text[: m.start()] if m else text
+    names, parents, offsets, channels, end_sites = _parse_hierarchy(header.split("\n"), name)
+    if m is None:
+        raise BVHError("missing MOTION section after the hierarchy", name, text.count("\n") + 1)
+    motion_line = header.count("\n") + 1
+    num_frames, frame_time, data_start, data_line = _parse_motion_header(text, m.end(), motion_line, name)
+    num_channels = sum(len(c) for c in channels)
+    if num_channels == 0:
+        raise BVHError("the hierarchy declares no channels", name, motion_line)
+    values = _parse_values(text[data_start:], data_line, num_frames, num_channels, name)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        frame, col = (int(i[0]) for i in np.nonzero(bad))
+        joint = int(np.searchsorted(np.cumsum([len(c) for c in channels]), col, side="right"))
+        chan = channels[joint][col - sum(len(c) for c in channels[:joint])]
+        line = _frame_lines(text[data_start:], data_line)[frame]
+        raise BVHError(
+            f"non-finite value {values[frame, col]} in frame {frame + 1} ({names[joint]} {chan})", name, line
+        )
+    return BVHData(names, parents, offsets, channels, end_sites, frame_time, values, name)
+
+
+# ----------------------------------------------------------------------------- input
+
+
+def _read_bytes(path: Path, name: str) -> bytes:
+    """File contents, gunzipped when the name ends in ``.gz``."""
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise BVHError(f"cannot read file: {err.strerror or err}", name) from None
+    if path.name.lower().endswith(".gz"):
+        try:
+            raw = gzip.decompress(raw)
+        except (OSError, EOFError, zlib.error) as err:
+            raise BVHError(f"not a readable gzip file ({err})", name) from None
+    return raw
+
+
+def _decode(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+# ----------------------------------------------------------------------------- hierarchy
+
+
+def _tokens(lines: list[str]) -> list[tuple[str, int]]:
+    """Whitespace tokens with their 1-based line; braces are tokens even when glued to a word."""
+    out = []
+    for lineno, line in enumerate(lines, start=1):
+        if "{" in line or "}" in line:
+            line = line.replace("{", " { ").replace("}", " } ")
+        out.extend((tok, lineno) for tok in line.split())
+    return out
+
+
+def _parse_hierarchy(lines: list[str], name: str):
+    """(names, parents, offsets, channels, end_sites) from the lines before MOTION."""
+    toks = _tokens(lines)
+    eof_line = len(lines)
+    if not toks or toks[0][0].upper() != "HIERARCHY":
+        found = f"found {toks[0][0]!r}" if toks else "found nothing"
+        raise BVHError(f"missing HIERARCHY keyword ({found})", name, toks[0][1] if toks else 1)
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[np.ndarray | None] = []
+    channels: list[list[str]] = []
+    decl_lines: list[int] = []
+    end_sites: dict[int, np.ndarray] = {}
+    stack: list[int] = []  # open joints; -1 - j marks joint j's End Site block
+    i, n = 1, len(toks)
+
+    def need(what: str) -> tuple[str, int]:
+        if i >= n:
+            raise BVHError(f"unexpected end of hierarchy, expected {what}", name, eof_line + 1)
+        return toks[i]
+
+    while i < n:
+        tok, line = toks[i]
+        key = tok.upper()
+        i += 1
+        if key in ("ROOT", "JOINT"):
+            if key == "ROOT" and (stack or names):
+                raise BVHError("ROOT inside a joint or a second ROOT (only one root is supported)", name, line)
+            if key == "JOINT" and (not stack or stack[-1] < 0):
+                raise BVHError("JOINT outside a parent joint", name, line)
+            words = []
+            while i < n and toks[i][1] == line and toks[i][0] != "{":
+                words.append(toks[i][0])
+                i += 1
+            if not words:
+                raise BVHError(f"{tok} without a name", name, line)
+            tok2, line2 = need("'{'")
+            if tok2 != "{":
+                raise BVHError(f"expected '{{' after {tok} {' '.join(words)}, found {tok2!r}", name, line2)
+            i += 1
+            names.append(" ".join(words))
+            parents.append(stack[-1] if stack else -1)
+            offsets.append(None)
+            channels.append([])
+            decl_lines.append(line)
+            stack.append(len(names) - 1)
+        elif key == "END":
+            tok2, line2 = need("'Site'")
+            if tok2.upper() != "SITE":
+                raise BVHError(f"expected 'End Site', found 'End {tok2}'", name, line2)
+            i += 1
+            if not stack or stack[-1] < 0:
+                raise BVHError("End Site outside a joint", name, line)
+            if stack[-1] in end_sites:
+                raise BVHError(f"joint {names[stack[-1]]} has a second End Site", name, line)
+            tok2, line2 = need("'{'")
+            if tok2 != "{":
+                raise BVHError(f"expected '{{' after End Site, found {tok2!r}", name, line2)
+            i += 1
+            end_sites[stack[-1]] = np.full(3, np.nan)
+            stack.append(-1 - stack[-1])
+        elif key == "OFFSET":
+            if not stack:
+                raise BVHError("OFFSET outside a joint", name, line)
+            nums = []
+            for _ in range(3):
+                tok2, line2 = need("3 OFFSET numbers")
+                nums.append(_number(tok2, line2, "OFFSET", name))
+                i += 1
+            j = stack[-1]
+            if j < 0:
+                if not np.isnan(end_sites[-1 - j]).all():
+                    raise BVHError("End Site has a second OFFSET", name, line)
+                end_sites[-1 - j] = np.array(nums)
+            else:
+                if offsets[j] is not None:
+                    raise BVHError(f"joint {names[j]} has a second OFFSET", name, line)
+                offsets[j] = np.array(nums)
+        elif key == "CHANNELS":
+            if not stack or stack[-1] < 0:
+                raise BVHError("CHANNELS outside a joint", name, line)
+            j = stack[-1]
+            tok2, line2 = need("a channel count")
+            if not tok2.isdigit() or int(tok2) > 6:
+                raise BVHError(f"bad CHANNELS count {tok2!r} (expected 0 to 6)", name, line2)
+            count = int(tok2)
+            i += 1
+            if channels[j]:
+                raise BVHError(f"joint {names[j]} has a second CHANNELS line", name, line)
+            for k in range(count):
+                tok2, line2 = need("a channel name")
+                canon = _CANONICAL.get(tok2.lower())
+                if canon is None:
+                    raise BVHError(
+                        f"unknown channel name {tok2!r} (CHANNELS declares {count}, found {k} names)", name, line2
+                    )
+                if canon in channels[j]:
+                    raise BVHError(f"channel {canon} listed twice for joint {names[j]}", name, line2)
+                channels[j].append(canon)
+                i += 1
+        elif tok == "}":
+            if not stack:
+                raise BVHError("unbalanced '}' (no open block)", name, line)
+            j = stack.pop()
+            if j < 0 and np.isnan(end_sites[-1 - j]).any():
+                raise BVHError(f"End Site of {names[-1 - j]} has no OFFSET", name, line)
+            if j >= 0 and offsets[j] is None:
+                raise BVHError(f"joint {names[j]} has no OFFSET", name, decl_lines[j])
+        else:
+            raise BVHError(f"unexpected {tok!r} in the hierarchy", name, line)
+    if stack:
+        j = stack[-1] if stack[-1] >= 0 else -1 - stack[-1]
+        raise BVHError(f"unbalanced braces: block of {names[j]} is never closed", name, eof_line + 1)
+    if not names:
+        raise BVHError("the hierarchy has no ROOT", name, eof_line + 1)
+    return names, parents, np.stack(offsets), channels, end_sites
+
+
+def _number(tok: str, line: int, what: str, name: str) -> float:
+    try:
+        x = float(tok)
+    except ValueError:
+        raise BVHError(f"{what}: {tok!r} is not a number", name, line) from None
+    if not math.isfinite(x):
+        raise BVHError(f"{what}: {tok!r} is not finite", name, line)
+    return x
+
+
+# ----------------------------------------------------------------------------- motion
+
+
+def _next_line(text: str, pos: int, lineno: int) -> tuple[str | None, int, int]:
+    """(next non-blank line stripped, its 1-based number, position after it) from ``pos`` (after a newline)."""
+    while pos < len(text):
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        lineno += 1
+        line = text[pos:end].strip()
+        pos = end + 1
+        if line:
+            return line, lineno, pos
+    return None, lineno + 1, pos
+
+
+def _parse_motion_header(text: str, pos: int, motion_line: int, name: str) -> tuple[int, float, int, int]:
+    """(frames, frame time, data start position, line number just before the data) after MOTION."""
+    pos = text.find("\n", pos) + 1 if text.find("\n", pos) >= 0 else len(text)
+    line, lineno, pos = _next_line(text, pos, motion_line)
+    m = _FRAMES_RE.fullmatch(line or "")
+    if m is None:
+        raise BVHError(f"expected 'Frames: N' after MOTION, found {line!r}", name, lineno)
+    if not m.group(1).isdigit():
+        raise BVHError(f"bad frame count {m.group(1)!r}", name, lineno)
+    frames = int(m.group(1))
+    if frames == 0:
+        raise BVHError("the file declares zero frames", name, lineno)
+    line, lineno, pos = _next_line(text, pos, lineno)
+    m = _FRAME_TIME_RE.fullmatch(line or "")
+    if m is None:
+        raise BVHError(f"expected 'Frame Time: seconds' after Frames, found {line!r}", name, lineno)
+    try:
+        frame_time = float(m.group(1))
+    except ValueError:
+        frame_time = math.nan
+    if not (math.isfinite(frame_time) and frame_time > 0):
+        raise BVHError(f"bad Frame Time {m.group(1)!r} (expected seconds > 0)", name, lineno)
+    return frames, frame_time, pos, lineno
+
+
+def _parse_values(block: str, line_before: int, frames: int, channels: int, name: str) -> np.ndarray:
+    """(frames, channels) float64 from the frame lines; one numpy call, diagnosis only on failure."""
+    if block and not block.isspace():
+        try:
+            values = np.loadtxt(io.StringIO(block), dtype=np.float64, comments=None, ndmin=2)
+        except ValueError:
+            values = None
+        if values is not None and values.shape == (frames, channels):
+            return values
+    _diagnose(block, line_before, frames, channels, name)
+    raise BVHError("could not parse the frame values", name, line_before + 1)  # pragma: no cover
+
+
+def _frame_lines(block: str, line_before: int) -> list[int]:
+    """1-based file line of every non-blank line of the data block (error path only)."""
+    return [line_before + k for k, ln in enumerate(block.split("\n"), start=1) if ln.strip()]
+
+
+def _diagnose(block: str, line_before: int, frames: int, channels: int, name: str) -> None:
+    """Scan frame lines one by one and raise a `BVHError` at the first bad one."""
+    rows = [(line_before + k, ln.split()) for k, ln in enumerate(block.split("\n"), start=1) if ln.strip()]
+    for frame, (lineno, toks) in enumerate(rows):
+        if frame >= frames:
+            raise BVHError(f"more frame lines than the {frames} declared", name, lineno)
+        for tok in toks:
+            try:
+                if "_" in tok:
+                    raise ValueError
+                float(tok)
+            except ValueError:
+                raise BVHError(f"non-numeric value {tok!r} in frame {frame + 1}", name, lineno) from None
+        if len(toks) != channels:
+            short = "truncated motion: " if frame == len(rows) - 1 and len(toks) < channels else ""
+            raise BVHError(
+                f"{short}frame {frame + 1} has {len(toks)} values, expected {channels}", name, lineno
+            )
+    if len(rows) < frames:
+        last = rows[-1][0] if rows else line_before
+        raise BVHError(
+            f"truncated motion: {frames} frames declared but {len(rows)} found", name, last + 1
+        )
