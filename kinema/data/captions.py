@@ -103,9 +103,17 @@ CONTENT_PHRASES: dict[str, tuple[str, ...]] = {
         "makes a left turn while walking",
     ),
     "wave-both-hands": ("waves both hands", "waves with both hands", "raises both hands and waves them"),
-    "wave-left-hand": ("waves with {their} left hand", "waves {their} left hand", "raises {their} left hand and waves"),
+    "wave-left-hand": (
+        "waves with {their} left hand",
+        "waves {their} left hand",
+        "raises {their} left hand and waves",
+    ),
     "raise-up-both-hands": ("raises both hands", "raises both arms up", "puts both hands up"),
-    "raise-up-left-hand": ("raises {their} left hand", "raises {their} left arm up", "puts {their} left hand up"),
+    "raise-up-left-hand": (
+        "raises {their} left hand",
+        "raises {their} left arm up",
+        "puts {their} left hand up",
+    ),
 }
 
 

@@ -125,12 +125,15 @@ def quat_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """Minimal (shortest-arc) rotation taking direction ``u (..., 3)`` to direction ``v (..., 3)``.
 
     Uses ``q = (1 + u.v, u x v)`` normalised, with ``1 + u.v`` rewritten as ``|u x v|^2 / (1 - u.v)``
-    when the vectors point apart (no cancellation).  For (numerically) opposite vectors the axis is
-    undetermined; we rotate by 180 degrees about an axis perpendicular to ``u``.
+    when the vectors point apart (no cancellation).  Near-opposite inputs make ``u x v`` tiny, so its
+    rounding error along ``u`` would tilt the axis; projecting it off ``u`` keeps ``q u = v`` accurate
+    to rounding.  For exactly opposite vectors the axis is undetermined; we rotate by 180 degrees about
+    an axis perpendicular to ``u``.
     """
     u, v = torch.broadcast_tensors(_safe_normalize(u), _safe_normalize(v))
     d = (u * v).sum(-1, keepdim=True)
     c = torch.linalg.cross(u, v, dim=-1)
+    c = c - (c * u).sum(-1, keepdim=True) * u
     c2 = (c * c).sum(-1, keepdim=True)
     apart = d < 0
     w = torch.where(apart, c2 / torch.where(apart, 1.0 - d, torch.ones_like(d)), 1.0 + d)
@@ -139,7 +142,7 @@ def quat_between(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     basis = torch.nn.functional.one_hot(u.abs().argmin(-1), 3).to(u.dtype)
     perp = _safe_normalize(torch.linalg.cross(u, basis, dim=-1))
     q_opposite = torch.cat((torch.zeros_like(d), perp), dim=-1)
-    opposite = apart & (c2 < _eps(u))
+    opposite = apart & (c2 < _eps(u) ** 2)
     return torch.where(opposite, q_opposite, q_general)
 
 
@@ -356,7 +359,9 @@ def quat_slerp(q0: torch.Tensor, q1: torch.Tensor, t) -> torch.Tensor:
     om = torch.where(small, torch.ones_like(omega), omega)
     o2 = omega * omega
     w0 = torch.where(
-        small, (1.0 - t) * (1.0 + (1.0 - (1.0 - t) ** 2) * o2 / 6.0), torch.sin((1.0 - t) * om) / torch.sin(om)
+        small,
+        (1.0 - t) * (1.0 + (1.0 - (1.0 - t) ** 2) * o2 / 6.0),
+        torch.sin((1.0 - t) * om) / torch.sin(om),
     )
     w1 = torch.where(small, t * (1.0 + (1.0 - t * t) * o2 / 6.0), torch.sin(t * om) / torch.sin(om))
     return _safe_normalize(w0 * q0 + w1 * q1)

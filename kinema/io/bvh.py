@@ -1,5 +1,6 @@
 """BVH reading: a raw layer (`parse_bvh` -> `BVHData`, file units and degrees, exactly as written)
-and a conversion to `Motion` (`read_bvh`, metres and quaternions; see kinema.io.bvh_convert).
+and its conversion to a `Motion` (`read_bvh` / `bvh_data_to_motion`: metres, quaternions wxyz).
+Writing lives in kinema.io.bvh_writer.
 
 The raw layer accepts any per-joint channel layout (0-6 channels, any rotation order, position
 channels on any joint), End Sites, CRLF/CR line ends, tabs, scientific notation and ``.gz`` files.
@@ -19,9 +20,15 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import warnings
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from kinema.errors import BVHError
+
+if TYPE_CHECKING:
+    from kinema.motion.core import Motion
 
 #: Channel names as written in files; matching is case-insensitive.
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
@@ -358,3 +365,97 @@ def _diagnose(block: str, line_before: int, frames: int, channels: int, name: st
         raise BVHError(
             f"truncated motion: {frames} frames declared but {len(rows)} found", name, last + 1
         )
+
+
+# ----------------------------------------------------------------------------- conversion to Motion
+
+
+def read_bvh(path: str | os.PathLike, *, scale: float = 1.0) -> Motion:
+    """Read a ``.bvh``/``.bvh.gz`` file as a `Motion`; every length is multiplied by ``scale``
+    (0.01 for centimetre files such as Bandai Namco). See `bvh_data_to_motion` for the rules."""
+    return bvh_data_to_motion(parse_bvh(path), scale=scale)
+
+
+def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
+    """Convert raw BVH data to a `Motion` (float64, metres, full local rotations).
+
+    - Rotation channels, in the order listed, are intrinsic Euler angles in degrees
+      (``ZXY`` means ``R = Rz @ Rx @ Ry``); missing rotation axes count as zero, no rotation
+      channels give the identity.
+    - Position channels replace the joint's offset (missing axes keep the OFFSET value). A
+      `Skeleton` has constant offsets, so the first frame's values become the offset.
+    - The root's world position is its position channels (its OFFSET when it has none).
+    - When the root has a single child with position channels (Bandai Namco: a static
+      ``joint_Root`` whose child ``Hips`` carries the translation), that child's movement is moved
+      into ``root_translation``: every joint below the root keeps its exact file position, and only
+      the root joint itself is displaced by the child's movement since frame 1 (Bandai's dummy root
+      then follows the hips). ``Motion.prune(["joint_Root"])`` removes it exactly.
+    - Any other joint whose position channels move by more than 1 mm (after scaling) gets a
+      warning: its forward kinematics cannot match the file.
+    - ``fps = 1 / frame_time``, snapped to the nearest integer when within 0.01 % (``0.0333333``
+      is 30 fps).
+    """
+    import torch
+
+    from kinema.geometry.rotations import euler_to_quat, quat_rotate
+    from kinema.motion.core import Motion
+    from kinema.skeleton import Skeleton
+
+    if not (math.isfinite(scale) and scale > 0):
+        raise BVHError(f"scale must be a positive number, got {scale}", data.path)
+    T, J, C = data.num_frames, data.num_joints, data.num_channels
+    vals = np.concatenate([data.values, np.zeros((T, 1))], axis=1)  # column C is a constant zero
+    offsets = data.offsets * scale
+    positions: dict[int, np.ndarray] = {}  # joint -> (T, 3) scaled, for joints with position channels
+    by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
+    for j, (start, chans) in enumerate(zip(data.column_starts, data.channels, strict=True)):
+        pos_cols = {c[0]: start + k for k, c in enumerate(chans) if c.endswith("position")}
+        rot_cols = {c[0]: start + k for k, c in enumerate(chans) if c.endswith("rotation")}
+        if pos_cols:
+            p = np.repeat(offsets[j][None], T, axis=0)
+            for axis, col in pos_cols.items():
+                p[:, "XYZ".index(axis)] = vals[:, col] * scale
+            positions[j] = p
+            offsets[j] = p[0]
+        if rot_cols:
+            order = "".join(rot_cols) + "".join(a for a in "XYZ" if a not in rot_cols)
+            joints, cols = by_order.setdefault(order, ([], []))
+            joints.append(j)
+            cols.append([rot_cols.get(a, C) for a in order])
+    quats = torch.zeros(T, J, 4, dtype=torch.float64)
+    quats[..., 0] = 1.0
+    for order, (joints, cols) in by_order.items():
+        angles = torch.from_numpy(np.deg2rad(vals[:, np.array(cols)]))  # (T, n, 3)
+        quats[:, joints] = euler_to_quat(angles, order)
+    root = torch.from_numpy(positions.get(0, np.repeat(offsets[:1], T, axis=0)).copy())
+
+    children = [j for j in range(J) if data.parents[j] == 0]
+    carried = children[0] if len(children) == 1 and children[0] in positions else None
+    if carried is not None:
+        moved = torch.from_numpy(positions[carried] - positions[carried][:1])
+        root = root + quat_rotate(quats[:, 0], moved)
+    for j, p in positions.items():
+        drift = float(np.abs(p - p[:1]).max()) if j not in (0, carried) else 0.0
+        if drift > 1e-3:
+            warnings.warn(
+                f"{data.path}: joint {data.names[j]} has position channels that move by up to "
+                f"{drift * 1000:.1f} mm; its offset is taken from frame 1, so forward kinematics will "
+                "differ from the file",
+                stacklevel=3,
+            )
+    fps = 1.0 / data.frame_time
+    if round(fps) > 0 and abs(fps - round(fps)) <= 1e-4 * fps:
+        fps = float(round(fps))
+    name = Path(data.path).name
+    for suffix in (".gz", ".bvh"):
+        name = name[: -len(suffix)] if name.lower().endswith(suffix) else name
+    ends = {j: tuple(float(x) for x in v * scale) for j, v in data.end_sites.items()}
+    skeleton = Skeleton(data.names, data.parents, offsets, end_sites=ends, name=name)
+    return Motion(skeleton, fps, root, quats)
+
+
+def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY") -> BVHData:
+    """Raw BVH data for a motion (see kinema.io.bvh_writer, where it lives)."""
+    from kinema.io.bvh_writer import motion_to_bvh_data as convert
+
+    return convert(motion, scale=scale, order=order)

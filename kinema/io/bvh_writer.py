@@ -1,0 +1,149 @@
+"""BVH writing: `motion_to_bvh_data` (Motion -> raw `BVHData`), `format_bvh` (raw -> text) and
+`write_bvh` (both, written atomically; a ``.gz`` name is gzip-compressed).
+
+Files are plain, widely readable BVH: the root has ``Xposition Yposition Zposition`` plus three
+rotation channels, every other joint three rotation channels, and each leaf joint an End Site.
+Lengths are written as ``metres * scale``: the default ``scale=1`` writes metres, which Blender's
+BVH importer (scale 1.0) brings in at the right size; ``scale=100`` writes centimetres.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gzip
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from kinema.errors import KinemaError
+from kinema.io.bvh import BVHData
+
+if TYPE_CHECKING:
+    from kinema.motion.core import Motion
+
+_EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+
+
+def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY") -> BVHData:
+    """Raw BVH data for ``motion``: lengths ``* scale``, rotations as Euler degrees in ``order``.
+
+    Raises `KinemaError` (before anything is written) for a non-finite motion, a bad scale or
+    order, or joint names that cannot appear in a BVH file.
+    """
+    from kinema.geometry.rotations import quat_to_euler
+
+    order = order.upper()
+    if order not in _EULER_ORDERS:
+        raise KinemaError(f"bad Euler order {order!r}; use one of {', '.join(_EULER_ORDERS)}")
+    if not (math.isfinite(scale) and scale > 0):
+        raise KinemaError(f"scale must be a positive number, got {scale}")
+    if not motion.is_finite():
+        raise KinemaError("cannot write a motion with NaN or infinite rotations or root translation")
+    sk = motion.skeleton
+    for name in sk.names:
+        if not name.strip() or " ".join(name.split()) != name or "{" in name or "}" in name:
+            raise KinemaError(f"joint name {name!r} cannot be written to BVH (braces or odd whitespace)")
+    T, J = motion.num_frames, sk.num_joints
+    quats = motion.local_rotations.detach().to("cpu", torch.float64)
+    degrees = torch.rad2deg(quat_to_euler(quats, order)).numpy().reshape(T, J * 3)
+    root = motion.root_translation.detach().to("cpu", torch.float64).numpy() * scale
+    rot_names = [f"{axis}rotation" for axis in order]
+    channels = [["Xposition", "Yposition", "Zposition", *rot_names]] + [list(rot_names) for _ in range(J - 1)]
+    has_child = {p for p in sk.parents if p >= 0}
+    end_sites = {
+        j: np.asarray(sk.end_sites.get(j, (0.0, 0.0, 0.0)), dtype=np.float64) * scale
+        for j in range(J)
+        if j not in has_child
+    }
+    return BVHData(
+        names=list(sk.names),
+        parents=list(sk.parents),
+        offsets=sk.offsets.detach().to("cpu", torch.float64).numpy() * scale,
+        channels=channels,
+        end_sites=end_sites,
+        frame_time=1.0 / motion.fps,
+        values=np.concatenate([root, degrees], axis=1),
+        path="",
+    )
+
+
+def format_bvh(data: BVHData, *, precision: int = 6) -> str:
+    """BVH text for raw data; numbers get ``precision`` decimals, Frame Time 10 significant digits.
+
+    End Sites are written for leaf joints only (BVH readers expect them nowhere else).
+    """
+    values = np.round(np.asarray(data.values, dtype=np.float64), precision) + 0.0  # + 0.0: no "-0.000"
+    if values.ndim != 2 or values.shape[1] != data.num_channels or values.shape[0] == 0:
+        raise KinemaError(f"values have shape {values.shape}, expected (frames > 0, {data.num_channels})")
+    if not np.isfinite(values).all() or not np.isfinite(data.offsets).all():
+        raise KinemaError("cannot write NaN or infinite values to BVH")
+    if not (math.isfinite(data.frame_time) and data.frame_time > 0):
+        raise KinemaError(f"bad frame time {data.frame_time}")
+    children: list[list[int]] = [[] for _ in data.names]
+    for j, p in enumerate(data.parents):
+        if p >= 0:
+            children[p].append(j)
+    num = f"{{:.{precision}f}}"
+
+    def vec(v) -> str:
+        return " ".join(num.format(round(float(x), precision) + 0.0) for x in v)
+
+    out = ["HIERARCHY"]
+    # iterative depth-first walk: ("open", joint, depth) or ("close", None, depth)
+    todo: list[tuple[str, int | None, int]] = [("open", 0, 0)]
+    while todo:
+        kind, j, depth = todo.pop()
+        pad = "\t" * depth
+        if kind == "close":
+            out.append(pad + "}")
+            continue
+        out.append(f"{pad}{'ROOT' if depth == 0 else 'JOINT'} {data.names[j]}")
+        out.append(pad + "{")
+        out.append(f"{pad}\tOFFSET {vec(data.offsets[j])}")
+        out.append(f"{pad}\tCHANNELS {len(data.channels[j])} {' '.join(data.channels[j])}".rstrip())
+        if not children[j]:
+            site = data.end_sites.get(j, np.zeros(3))
+            out += [f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {vec(site)}", f"{pad}\t}}"]
+        todo.append(("close", None, depth))
+        todo.extend(("open", c, depth + 1) for c in reversed(children[j]))
+    out += ["MOTION", f"Frames: {values.shape[0]}", f"Frame Time: {data.frame_time:.10g}"]
+    row = " ".join([f"%.{precision}f"] * values.shape[1])
+    out += [row % tuple(r) for r in values.tolist()]
+    return "\n".join(out) + "\n"
+
+
+def write_bvh(
+    motion: Motion, path: str | os.PathLike, *, scale: float = 1.0, order: str = "ZXY", precision: int = 6
+) -> Path:
+    """Write ``motion`` as BVH (lengths ``metres * scale``, Euler ``order``) and return the path.
+
+    The file appears atomically (temp file in the same folder, then rename), so a failure leaves
+    no partial file; a name ending in ``.gz`` is gzip-compressed.
+    """
+    path = Path(path)
+    text = format_bvh(motion_to_bvh_data(motion, scale=scale, order=order), precision=precision)
+    payload = text.encode("utf-8")
+    if path.name.lower().endswith(".gz"):
+        payload = gzip.compress(payload, compresslevel=6, mtime=0)
+    _atomic_write(path, payload)
+    return path
+
+
+def _atomic_write(path: Path, payload: bytes) -> None:
+    """Write via a temp file next to ``path`` and ``os.replace``; the temp file never survives."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
