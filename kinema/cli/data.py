@@ -1,9 +1,97 @@
-"""`kinema data` sub-command (being written)."""
+"""`kinema data`: build the training cache of a motion dataset and summarise a build.
+
+    kinema data build bandai-namco --root PATH --out DIR [--fps 20] [--limit N] [--workers 2] [--no-mirror]
+    kinema data stats DIR
+
+See docs/dataset.md for what a build contains and how splits, mirroring and ``--limit`` work.
+"""
 
 from __future__ import annotations
 
+import argparse
+import time
+from collections import defaultdict
+
+DATASETS = ("bandai-namco",)
+
 
 def register(sub) -> None:
-    """Add the `data` sub-command to the top-level parser."""
-    p = sub.add_parser("data", help="(not yet available)")
-    p.set_defaults(func=lambda args: 0)
+    """Add the `data` sub-command (with `build` and `stats`) to the top-level parser."""
+    p = sub.add_parser("data", help="build and inspect training datasets",
+                       description="Build and inspect training datasets (see docs/dataset.md).")
+    dsub = p.add_subparsers(dest="data_command", required=True)
+
+    b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
+    b.add_argument("dataset", choices=DATASETS, help="which dataset layout to read")
+    b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
+    b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
+    b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features (default 20)")
+    b.add_argument("--limit", type=_positive_int, default=None,
+                   help="keep a deterministic, content-balanced subset of N clips")
+    b.add_argument("--workers", type=_positive_int, default=2, help="worker processes (default 2)")
+    b.add_argument("--no-mirror", dest="mirror", action="store_false",
+                   help="do not add left/right mirrored copies")
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    b.set_defaults(func=_build)
+
+    s = dsub.add_parser("stats", help="clips and hours per content, style and split of a build")
+    s.add_argument("dir", help="a folder written by `kinema data build`")
+    s.set_defaults(func=_stats)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
+    return n
+
+
+def _build(args) -> int:
+    from kinema.data.build import build_dataset
+
+    t0 = time.time()
+    meta = build_dataset(args.root, args.out, fps=args.fps, limit=args.limit, workers=args.workers,
+                         mirror=args.mirror, progress=not args.quiet)
+    c = meta["counts"]
+    print(f"wrote {args.out}: {c['clips']} clips ({c['source_clips']} source), {c['frames']} frames, "
+          f"{c['hours']:.2f} h at {meta['fps']:g} fps, D = {meta['layout']['dim']} "
+          f"in {time.time() - t0:.0f} s")
+    return 0
+
+
+def _table(title: str, rows: dict[str, list[dict]], order: list[str] | None = None) -> list[str]:
+    """Lines of one summary table: label, clips, of which mirrored, hours."""
+    width = max([len(title)] + [len(k) for k in rows])
+    lines = [f"{title:<{width}}  {'clips':>6}  {'mirrored':>8}  {'hours':>7}"]
+    for key in order or sorted(rows):
+        recs = rows.get(key, [])
+        hours = sum(r["duration_s"] for r in recs) / 3600.0
+        mirrored = sum(bool(r["mirrored"]) for r in recs)
+        lines.append(f"{key:<{width}}  {len(recs):>6}  {mirrored:>8}  {hours:>7.3f}")
+    return lines
+
+
+def _stats(args) -> int:
+    from kinema.data.dataset import load_clip_table
+    from kinema.data.split import SPLITS
+
+    meta, clips = load_clip_table(args.dir)
+    by: dict[str, dict[str, list[dict]]] = {"content": defaultdict(list), "style": defaultdict(list),
+                                            "split": defaultdict(list)}
+    for r in clips:
+        for field in by:
+            by[field][r[field]].append(r)
+    source = sum(not r["mirrored"] for r in clips)
+    hours = sum(r["duration_s"] for r in clips) / 3600.0
+    dim = meta.get("layout", {}).get("dim", "?")
+    out = [f"{args.dir}: {meta.get('dataset', '?')} at {meta.get('fps', 0):g} fps, D = {dim}, "
+           f"{len(clips)} clips ({source} source + {len(clips) - source} mirrored), {hours:.3f} h", ""]
+    out += _table("content", by["content"]) + [""]
+    out += _table("style", by["style"]) + [""]
+    out += _table("split", by["split"], order=list(SPLITS))
+    out += _table("total", {"total": clips})[1:]
+    print("\n".join(out))
+    return 0

@@ -16,11 +16,10 @@ import io
 import math
 import os
 import re
+import warnings
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import warnings
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -85,14 +84,16 @@ def parse_bvh(path_or_text: str | os.PathLike | bytes, *, source_name: str | Non
     if isinstance(path_or_text, bytes):
         name = source_name or "<bytes>"
         text = _decode(path_or_text)
-    elif isinstance(path_or_text, str) and ("\n" in path_or_text or "\r" in path_or_text):
+    elif isinstance(path_or_text, str) and (
+        "\n" in path_or_text or "\r" in path_or_text or not path_or_text.strip()
+    ):
         name, text = source_name or "<string>", path_or_text
     else:
         name = source_name or str(path_or_text)
         text = _decode(_read_bytes(Path(path_or_text), name))
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
-    if not text.strip():
+    if not text or text.isspace():
         raise BVHError("empty file", name, 1)
 
     m = _MOTION_RE.search(text)
@@ -158,7 +159,7 @@ def _tokens(lines: list[str]) -> list[tuple[str, int]]:
 def _parse_hierarchy(lines: list[str], name: str):
     """(names, parents, offsets, channels, end_sites) from the lines before MOTION."""
     toks = _tokens(lines)
-    eof_line = len(lines)
+    eof_line = len(lines)  # the MOTION line (or one past the last line when there is none)
     if not toks or toks[0][0].upper() != "HIERARCHY":
         found = f"found {toks[0][0]!r}" if toks else "found nothing"
         raise BVHError(f"missing HIERARCHY keyword ({found})", name, toks[0][1] if toks else 1)
@@ -173,8 +174,13 @@ def _parse_hierarchy(lines: list[str], name: str):
 
     def need(what: str) -> tuple[str, int]:
         if i >= n:
-            raise BVHError(f"unexpected end of hierarchy, expected {what}", name, eof_line + 1)
+            raise BVHError(f"unexpected end of hierarchy, expected {what}", name, eof_line)
         return toks[i]
+
+    def open_brace(after: str) -> None:
+        tok2, line2 = need("'{'")
+        if tok2 != "{":
+            raise BVHError(f"expected '{{' after {after}, found {tok2!r}", name, line2)
 
     while i < n:
         tok, line = toks[i]
@@ -182,7 +188,7 @@ def _parse_hierarchy(lines: list[str], name: str):
         i += 1
         if key in ("ROOT", "JOINT"):
             if key == "ROOT" and (stack or names):
-                raise BVHError("ROOT inside a joint or a second ROOT (only one root is supported)", name, line)
+                raise BVHError("ROOT inside a joint or a second ROOT (one root only)", name, line)
             if key == "JOINT" and (not stack or stack[-1] < 0):
                 raise BVHError("JOINT outside a parent joint", name, line)
             words = []
@@ -191,9 +197,7 @@ def _parse_hierarchy(lines: list[str], name: str):
                 i += 1
             if not words:
                 raise BVHError(f"{tok} without a name", name, line)
-            tok2, line2 = need("'{'")
-            if tok2 != "{":
-                raise BVHError(f"expected '{{' after {tok} {' '.join(words)}, found {tok2!r}", name, line2)
+            open_brace(f"{tok} {' '.join(words)}")
             i += 1
             names.append(" ".join(words))
             parents.append(stack[-1] if stack else -1)
@@ -210,9 +214,7 @@ def _parse_hierarchy(lines: list[str], name: str):
                 raise BVHError("End Site outside a joint", name, line)
             if stack[-1] in end_sites:
                 raise BVHError(f"joint {names[stack[-1]]} has a second End Site", name, line)
-            tok2, line2 = need("'{'")
-            if tok2 != "{":
-                raise BVHError(f"expected '{{' after End Site, found {tok2!r}", name, line2)
+            open_brace("End Site")
             i += 1
             end_sites[stack[-1]] = np.full(3, np.nan)
             stack.append(-1 - stack[-1])
@@ -222,7 +224,10 @@ def _parse_hierarchy(lines: list[str], name: str):
             nums = []
             for _ in range(3):
                 tok2, line2 = need("3 OFFSET numbers")
-                nums.append(_number(tok2, line2, "OFFSET", name))
+                try:
+                    nums.append(float(tok2) if math.isfinite(float(tok2)) else float("x"))
+                except ValueError:
+                    raise BVHError(f"OFFSET: {tok2!r} is not a finite number", name, line2) from None
                 i += 1
             j = stack[-1]
             if j < 0:
@@ -247,10 +252,10 @@ def _parse_hierarchy(lines: list[str], name: str):
             for k in range(count):
                 tok2, line2 = need("a channel name")
                 canon = _CANONICAL.get(tok2.lower())
+                if canon is None and line2 != line:
+                    raise BVHError(f"CHANNELS declares {count} channels but lists {k}", name, line)
                 if canon is None:
-                    raise BVHError(
-                        f"unknown channel name {tok2!r} (CHANNELS declares {count}, found {k} names)", name, line2
-                    )
+                    raise BVHError(f"unknown channel name {tok2!r}", name, line2)
                 if canon in channels[j]:
                     raise BVHError(f"channel {canon} listed twice for joint {names[j]}", name, line2)
                 channels[j].append(canon)
@@ -267,61 +272,41 @@ def _parse_hierarchy(lines: list[str], name: str):
             raise BVHError(f"unexpected {tok!r} in the hierarchy", name, line)
     if stack:
         j = stack[-1] if stack[-1] >= 0 else -1 - stack[-1]
-        raise BVHError(f"unbalanced braces: block of {names[j]} is never closed", name, eof_line + 1)
+        raise BVHError(f"unbalanced braces: block of {names[j]} is never closed", name, eof_line)
     if not names:
-        raise BVHError("the hierarchy has no ROOT", name, eof_line + 1)
+        raise BVHError("the hierarchy has no ROOT", name, eof_line)
     return names, parents, np.stack(offsets), channels, end_sites
-
-
-def _number(tok: str, line: int, what: str, name: str) -> float:
-    try:
-        x = float(tok)
-    except ValueError:
-        raise BVHError(f"{what}: {tok!r} is not a number", name, line) from None
-    if not math.isfinite(x):
-        raise BVHError(f"{what}: {tok!r} is not finite", name, line)
-    return x
 
 
 # ----------------------------------------------------------------------------- motion
 
 
-def _next_line(text: str, pos: int, lineno: int) -> tuple[str | None, int, int]:
-    """(next non-blank line stripped, its 1-based number, position after it) from ``pos`` (after a newline)."""
-    while pos < len(text):
-        end = text.find("\n", pos)
-        end = len(text) if end < 0 else end
-        lineno += 1
-        line = text[pos:end].strip()
-        pos = end + 1
-        if line:
-            return line, lineno, pos
-    return None, lineno + 1, pos
-
-
 def _parse_motion_header(text: str, pos: int, motion_line: int, name: str) -> tuple[int, float, int, int]:
     """(frames, frame time, data start position, line number just before the data) after MOTION."""
-    pos = text.find("\n", pos) + 1 if text.find("\n", pos) >= 0 else len(text)
-    line, lineno, pos = _next_line(text, pos, motion_line)
-    m = _FRAMES_RE.fullmatch(line or "")
-    if m is None:
-        raise BVHError(f"expected 'Frames: N' after MOTION, found {line!r}", name, lineno)
-    if not m.group(1).isdigit():
-        raise BVHError(f"bad frame count {m.group(1)!r}", name, lineno)
-    frames = int(m.group(1))
-    if frames == 0:
-        raise BVHError("the file declares zero frames", name, lineno)
-    line, lineno, pos = _next_line(text, pos, lineno)
-    m = _FRAME_TIME_RE.fullmatch(line or "")
-    if m is None:
-        raise BVHError(f"expected 'Frame Time: seconds' after Frames, found {line!r}", name, lineno)
+    nl = text.find("\n", pos)
+    pos, lineno, fields = (len(text) if nl < 0 else nl + 1), motion_line, []
+    for regex, what in ((_FRAMES_RE, "'Frames: N' after MOTION"), (_FRAME_TIME_RE, "'Frame Time: s'")):
+        line = ""
+        while not line and pos < len(text):  # the next non-blank line
+            end = text.find("\n", pos)
+            end = len(text) if end < 0 else end
+            line, pos, lineno = text[pos:end].strip(), end + 1, lineno + 1
+        m = regex.fullmatch(line)
+        if m is None:
+            raise BVHError(f"expected {what}, found {line or 'nothing'!r}", name, lineno + (not line))
+        fields.append((m.group(1), lineno))
+    (count, count_line), (seconds, time_line) = fields
+    if not count.isdigit():
+        raise BVHError(f"bad frame count {count!r}", name, count_line)
+    if int(count) == 0:
+        raise BVHError("the file declares zero frames", name, count_line)
     try:
-        frame_time = float(m.group(1))
+        frame_time = float(seconds)
     except ValueError:
         frame_time = math.nan
     if not (math.isfinite(frame_time) and frame_time > 0):
-        raise BVHError(f"bad Frame Time {m.group(1)!r} (expected seconds > 0)", name, lineno)
-    return frames, frame_time, pos, lineno
+        raise BVHError(f"bad Frame Time {seconds!r} (expected seconds > 0)", name, time_line)
+    return int(count), frame_time, pos, time_line
 
 
 def _parse_values(block: str, line_before: int, frames: int, channels: int, name: str) -> np.ndarray:
@@ -362,9 +347,7 @@ def _diagnose(block: str, line_before: int, frames: int, channels: int, name: st
             )
     if len(rows) < frames:
         last = rows[-1][0] if rows else line_before
-        raise BVHError(
-            f"truncated motion: {frames} frames declared but {len(rows)} found", name, last + 1
-        )
+        raise BVHError(f"truncated motion: {frames} frames declared but {len(rows)} found", name, last + 1)
 
 
 # ----------------------------------------------------------------------------- conversion to Motion
@@ -441,7 +424,7 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
                 f"{data.path}: joint {data.names[j]} has position channels that move by up to "
                 f"{drift * 1000:.1f} mm; its offset is taken from frame 1, so forward kinematics will "
                 "differ from the file",
-                stacklevel=3,
+                stacklevel=2,
             )
     fps = 1.0 / data.frame_time
     if round(fps) > 0 and abs(fps - round(fps)) <= 1e-4 * fps:

@@ -1,0 +1,89 @@
+"""`kinema train`: train a denoiser on a built dataset; `kinema train plot RUN`: loss curves as PNG."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("train", help="train a motion diffusion model (also: `kinema train plot RUN`)")
+    p.add_argument("action", nargs="?", default="run", choices=["run", "plot"],
+                   help="'plot' writes loss curves of an existing run (give the run folder with --out)")
+    p.add_argument("--config", default="small", help="model preset: tiny, small, small-1stage, paper")
+    p.add_argument("--data", type=Path, help="dataset folder from `kinema data build`")
+    p.add_argument("--out", type=Path, required=True, help="run folder, e.g. runs/NAME")
+    p.add_argument("--steps", type=int, help="total optimisation steps (both phases)")
+    p.add_argument("--batch-size", type=int)
+    p.add_argument("--lr", type=float)
+    p.add_argument("--optimizer", choices=["adamw", "adam-atan2"])
+    p.add_argument("--phase1-fraction", type=float, help="share of steps in text-only phase 1 (default 0.5)")
+    p.add_argument("--ckpt-every", type=int)
+    p.add_argument("--log-every", type=int)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--text-encoder", help="text encoder id (default minilm-l6-v2)")
+    p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
+    p.add_argument("--stop-after", type=int, help="stop after this many steps of this invocation")
+    p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=run)
+
+
+def _config_from_args(args: argparse.Namespace):
+    import json
+
+    from kinema.errors import KinemaError
+    from kinema.train.trainer import TrainConfig
+
+    overrides = {
+        "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
+        "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
+        "log_every": args.log_every, "seed": args.seed, "text_encoder": args.text_encoder,
+    }
+    saved = args.out / "train_config.json"
+    if args.resume and saved.exists():
+        base = TrainConfig.from_dict(json.loads(saved.read_text()))
+        clash = {k: v for k, v in overrides.items() if v is not None and k != "steps" and getattr(base, k) != v}
+        if clash and clash != {"model": args.config} or (clash.get("model") and args.config != "small"):
+            raise KinemaError(f"--resume keeps the run's settings; these differ from {saved}: {sorted(clash)}")
+        if args.steps is not None:
+            base.steps = args.steps
+        return base
+    cfg = TrainConfig()
+    for k, v in overrides.items():
+        if v is not None:
+            setattr(cfg, k, v)
+    return cfg
+
+
+def run(args: argparse.Namespace) -> int:
+    from kinema.errors import KinemaError
+
+    if args.action == "plot":
+        from kinema.train.plot import plot_losses
+
+        print(f"wrote {plot_losses(args.out)}")
+        return 0
+    if args.data is None:
+        raise KinemaError("kinema train needs --data DIR (a folder made by `kinema data build`)")
+    import torch
+
+    from kinema.train.trainer import Trainer
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    cfg = _config_from_args(args)
+    if not args.resume and (args.out / "latest").exists():
+        raise KinemaError(f"{args.out} already holds a run; pass --resume to continue it or choose another --out")
+    trainer = Trainer(cfg, args.data, args.out, cache_dir=args.cache_dir)
+    if args.resume and trainer.resume():
+        print(f"resumed {args.out} at step {trainer.step}")
+    n = trainer.model.num_parameters()
+    if trainer.rank == 0:
+        print(f"model {cfg.model}: {n / 1e6:.2f} M parameters; {len(trainer.dataset)} training clips; "
+              f"{cfg.steps} steps (phase 1: {trainer.phase1_steps})")
+    last = trainer.run(progress=not args.no_progress, stop_after=args.stop_after)
+    if last is not None:
+        print(f"checkpoint: {last}")
+    return 0

@@ -1,0 +1,1 @@
+"""Generation: sampling features from a trained denoiser and turning them into motions."""

@@ -1,0 +1,139 @@
+"""The Kimodo training loss (paper Sec. 4.3, Eq. 1) on normalised motion features.
+
+``L = g1 |r_p| + g2 |r_a| + g3 |j_p| + g4 |j_v| + g5 |j_a| + g6 |f| + g7 |FK(j_a) - j_p|`` where each
+``|.|`` is a smooth L1 between prediction and ground truth (``torch.nn.functional.smooth_l1_loss``,
+quadratic below ``beta``, linear above). The first six terms compare *normalised* feature groups (see
+kinema.motion.features for the layout and kinema.motion.stats for the normalisation). The FK term
+turns the predicted global 6D rotations into joint positions and compares them with the ground-truth
+joint positions in metres, so that rotations are trained to agree with positions.
+
+Every term is a mean over valid frames and over the channels of its group; padded frames (variable
+length batches) contribute nothing, not even through NaN or inf values, and receive zero gradient.
+Shapes: ``pred``/``target`` ``(B, T, D)`` normalised, ``pad_mask`` ``(B, T)`` bool, True = valid frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+import torch.nn.functional as F
+
+from kinema.geometry.rotations import sixd_to_matrix
+from kinema.kinematics import positions_from_global_rotations
+from kinema.motion.features import FeatureLayout
+from kinema.motion.stats import NormStats
+from kinema.skeleton import Skeleton
+
+#: Loss terms in the order of Eq. 1 (the first six are feature groups of FeatureLayout).
+TERMS = ("root_pos", "heading", "joint_pos", "joint_vel", "joint_rot", "contacts", "fk")
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    """gamma_1..gamma_7 of Eq. 1 (paper values) plus the smooth L1 settings.
+
+    ``beta`` is the smooth L1 transition point for the normalised terms (in units of one feature
+    standard deviation). The FK term works in metres: errors are divided by ``fk_unit`` metres before
+    the smooth L1 with ``fk_beta``, so with the defaults it is quadratic below 10 cm and grows by one
+    per extra decimetre (a decimetre is about one standard deviation of a joint position channel, so
+    the FK term has a scale comparable to the normalised joint_pos term).
+    """
+
+    root_pos: float = 10.0  # gamma_1
+    heading: float = 2.0  # gamma_2
+    joint_pos: float = 10.0  # gamma_3
+    joint_vel: float = 3.0  # gamma_4
+    joint_rot: float = 10.0  # gamma_5
+    contacts: float = 4.0  # gamma_6
+    fk: float = 5.0  # gamma_7
+    beta: float = 1.0
+    fk_unit: float = 0.1  # metres per loss unit (decimetres)
+    fk_beta: float = 1.0  # in fk_unit, i.e. 10 cm
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> LossWeights:
+        return cls(**{k: float(v) for k, v in d.items()})
+
+
+def _masked_mean(elementwise: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean of ``elementwise (B, T, ...)`` over valid frames (``mask (B, T)``) and all channels."""
+    per_frame = elementwise.flatten(2)
+    per_frame = torch.where(mask[..., None], per_frame, torch.zeros_like(per_frame))
+    count = mask.sum().clamp_min(1) * per_frame.shape[-1]
+    return per_frame.sum() / count
+
+
+def fk_joint_positions(rot6: torch.Tensor, root_joint_pos: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
+    """Joint positions ``(..., J, 3)`` in the ``j_p`` representation from global 6D rotations.
+
+    ``rot6 (..., J, 6)`` unnormalised (metric) 6D rotations; ``root_joint_pos (..., 3)`` the ``j_p``
+    entry of the root joint (x/z relative to the smoothed root, y global). Because ``j_p`` only shifts
+    x/z by the smoothed root, and FK is translation-equivariant, placing the root joint at its ``j_p``
+    entry yields every joint directly in the ``j_p`` representation: the same as placing it at the
+    global pelvis position and then subtracting the smoothed root.
+    """
+    mats = sixd_to_matrix(rot6)
+    return positions_from_global_rotations(
+        mats, root_joint_pos, skeleton.offsets, skeleton.ancestor_matrix, skeleton.parents
+    )
+
+
+def motion_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    pad_mask: torch.Tensor,
+    layout: FeatureLayout,
+    skeleton: Skeleton,
+    stats: NormStats,
+    weights: LossWeights = LossWeights(),
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Eq. 1: ``(total, {term: unweighted value})`` for normalised ``pred``/``target`` ``(B, T, D)``.
+
+    ``total = sum_i gamma_i * term_i`` is a differentiable scalar; the dict holds each of the seven
+    terms (keys of :data:`TERMS`) as detached 0-d tensors, for logging. ``pad_mask (B, T)`` is True on
+    valid frames.
+
+    FK term: ``pred`` is unnormalised with ``stats``, its global 6D rotations become matrices and FK
+    (:func:`kinema.kinematics.positions_from_global_rotations`) places the root joint at the *target*
+    root joint position (x/z relative to the target smoothed root, y global, i.e. the target ``j_p``
+    of joint 0). The predicted root/translation therefore plays no part: the term measures only how well
+    the predicted rotations reproduce the target joint positions (translation errors are already the
+    business of the root_pos and joint_pos terms). The comparison is in metres, divided by
+    ``weights.fk_unit`` (see :class:`LossWeights`); FK runs in float32 even under autocast.
+    """
+    if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != layout.dim:
+        raise ValueError(
+            f"pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, T, {layout.dim})"
+        )
+    if pad_mask.shape != pred.shape[:2]:
+        raise ValueError(f"pad_mask has shape {tuple(pad_mask.shape)}, expected {tuple(pred.shape[:2])}")
+    if skeleton.num_joints != layout.num_joints:
+        raise ValueError(f"skeleton has {skeleton.num_joints} joints, layout {layout.num_joints}")
+    mask = pad_mask.to(device=pred.device, dtype=torch.bool)
+    # Zero padded frames first: garbage (even NaN) there cannot leak into values or gradients.
+    keep = mask[..., None]
+    pred = torch.where(keep, pred, torch.zeros_like(pred))
+    target = torch.where(keep, target, torch.zeros_like(target))
+
+    terms: dict[str, torch.Tensor] = {}
+    for name, sl in layout.slices.items():
+        err = F.smooth_l1_loss(pred[..., sl], target[..., sl], reduction="none", beta=weights.beta)
+        terms[name] = _masked_mean(err, mask)
+
+    with torch.autocast(device_type=pred.device.type, enabled=False):
+        pred_m = stats.denormalize(pred.float())
+        target_m = stats.denormalize(target.float())
+        rot6 = layout.split(pred_m)["joint_rot"]  # (B, T, J, 6)
+        target_jp = layout.split(target_m)["joint_pos"]  # (B, T, J, 3)
+        fk_jp = fk_joint_positions(rot6, target_jp[..., 0, :], skeleton)
+        err = F.smooth_l1_loss(
+            fk_jp / weights.fk_unit, target_jp / weights.fk_unit, reduction="none", beta=weights.fk_beta
+        )
+        terms["fk"] = _masked_mean(err, mask)
+
+    total = sum(getattr(weights, name) * terms[name] for name in TERMS)
+    return total, {name: terms[name].detach() for name in TERMS}

@@ -1,0 +1,64 @@
+"""Loss-curve plots from a run's ``log.jsonl``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from kinema.errors import KinemaError
+from kinema.train.losses import TERMS
+
+
+def read_log(run_dir: Path) -> list[dict]:
+    path = Path(run_dir) / "log.jsonl"
+    if not path.exists():
+        raise KinemaError(f"{path}: no training log (is this a run folder?)")
+    records = []
+    for n, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            raise KinemaError(f"{path}:{n}: not a JSON line") from None
+    if not records:
+        raise KinemaError(f"{path}: empty training log")
+    # a resumed run may re-log steps: keep the last record of every step
+    by_step = {r["step"]: r for r in records}
+    return [by_step[s] for s in sorted(by_step)]
+
+
+def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    """Write a PNG with the total loss and every Eq. 1 term against the step (log scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from kinema.io.npz import atomic_write_bytes
+
+    run_dir = Path(run_dir)
+    recs = read_log(run_dir)
+    steps = [r["step"] for r in recs]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    axes[0].plot(steps, [r["loss"] for r in recs], lw=1)
+    axes[0].set(title=f"{run_dir.name}: total loss (Eq. 1)", xlabel="step", ylabel="loss", yscale="log")
+    for term in TERMS:
+        if term in recs[0]:
+            axes[1].plot(steps, [r[term] for r in recs], lw=1, label=term)
+    axes[1].set(title="loss terms (unweighted)", xlabel="step", yscale="log")
+    axes[1].legend(fontsize=8)
+    phase2 = next((r["step"] for r in recs if r.get("phase") == 2), None)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        if phase2 is not None:
+            ax.axvline(phase2, color="k", ls="--", lw=0.8)
+    fig.tight_layout()
+    out = Path(out) if out else run_dir / "loss.png"
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write_bytes(out, buf.getvalue())
+    return out

@@ -1,0 +1,219 @@
+"""The training loop (Kimodo Sec. 4.3): DDPM x0-prediction, Eq. 1 loss, two-phase curriculum, EMA.
+
+Runs on one CPU process or, under ``torchrun --nproc_per_node N``, as DistributedDataParallel (gloo on
+CPU, nccl on GPU) with rank-0-only checkpoints and logs. Resuming restores weights, EMA, optimizer and
+step; batches and noise are a pure function of (seed, rank, step) (see kinema.train.batching), so a
+resumed run continues exactly as the uninterrupted one would have.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import torch
+
+from kinema.data.dataset import MotionDataset
+from kinema.diffusion.guidance import Guidance
+from kinema.diffusion.sampler import DDIMSampler
+from kinema.diffusion.schedule import NoiseSchedule
+from kinema.errors import KinemaError
+from kinema.model.config import get_config
+from kinema.model.denoiser import Denoiser, local_root_stats
+from kinema.text import get_text_encoder
+from kinema.train.batching import BatchSampler, step_generator
+from kinema.train.checkpoint import load_checkpoint, load_optimizer_tensors, save_checkpoint
+from kinema.train.constraints import max_keyframes_at, sample_batch_masks
+from kinema.train.losses import LossWeights, motion_loss
+from kinema.train.optim import build_optimizer, lr_at, make_ema, update_ema
+
+
+@dataclass
+class TrainConfig:
+    """Everything that defines a run (saved in every checkpoint)."""
+
+    model: str = "small"
+    steps: int = 20000
+    batch_size: int = 32
+    lr: float = 2e-4
+    warmup: int = 500
+    weight_decay: float = 0.01
+    optimizer: str = "adamw"
+    grad_clip: float = 1.0
+    phase1_fraction: float = 0.5  # Kimodo: 500k text-only steps, then 500k with constraints
+    phase1_dropout: float = 0.1
+    max_keyframes: int = 20
+    ema_decay: float = 0.995
+    ema_every: int = 10
+    text_dropout: float = 0.1
+    random_heading: bool = True  # Kimodo's first-frame heading augmentation
+    max_seconds: float = 10.0
+    text_encoder: str = "minilm-l6-v2"
+    seed: int = 0
+    log_every: int = 20
+    ckpt_every: int = 1000
+    sampling_steps: int = 50  # saved with the model as the sampler default
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrainConfig:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def _dist_info() -> tuple[int, int]:
+    if "WORLD_SIZE" in os.environ and int(os.environ["WORLD_SIZE"]) > 1:
+        import torch.distributed as dist
+
+        if not dist.is_initialized():
+            dist.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+class Trainer:
+    """Builds data, model, optimizer and EMA from a TrainConfig and runs the loop."""
+
+    def __init__(self, cfg: TrainConfig, data_dir: str | Path, out_dir: str | Path, cache_dir: Path | None = None):
+        self.cfg, self.out_dir = cfg, Path(out_dir)
+        self.rank, self.world = _dist_info()
+        ds = MotionDataset(data_dir, "train")
+        if len(ds) == 0:
+            raise KinemaError(f"{data_dir}: the train split is empty")
+        self.dataset = ds
+        self.layout, self.skeleton, self.stats, self.fps = ds.layout, ds.skeleton, ds.stats, ds.fps
+        clips = [ds[i]["features"] for i in range(len(ds))]
+        captions: list[str] = []
+        ranges = []
+        for rec in ds.clips:
+            ranges.append((len(captions), len(captions) + len(rec["captions"])))
+            captions.extend(rec["captions"])
+        encoder = get_text_encoder(cfg.text_encoder, cache_dir=cache_dir)
+        self.text_encoder_id = encoder.id
+        self.text_table = encoder.encode(captions).float()
+        max_frames = int(round(cfg.max_seconds * self.fps))
+        self.batches = BatchSampler(
+            clips, ranges, self.layout, self.stats, cfg.batch_size, max_frames,
+            text_dropout=cfg.text_dropout, random_heading=cfg.random_heading, rank=self.rank, world_size=self.world,
+        )
+        self.model_config = get_config(
+            cfg.model, num_joints=self.skeleton.num_joints, text_dim=encoder.dim, fps=self.fps,
+            max_frames=max_frames, dropout=cfg.phase1_dropout,
+        )
+        torch.manual_seed(cfg.seed)
+        self.model = Denoiser(self.model_config)
+        self.model.set_normalization(self.stats.mean, self.stats.std)
+        lr_stats = local_root_stats(clips, self.fps)
+        self.model.set_local_root_normalization(lr_stats.mean, lr_stats.std)
+        self.ema = make_ema(self.model)
+        self.optimizer = build_optimizer(cfg.optimizer, self.model.parameters(), cfg.lr, cfg.weight_decay)
+        self.schedule = NoiseSchedule()
+        self.weights = LossWeights()
+        self.step = 0
+        self.phase1_steps = int(round(cfg.steps * cfg.phase1_fraction))
+
+    # ------------------------------------------------------------------ state
+    def info(self) -> dict:
+        """JSON saved with every checkpoint: what a loader needs to rebuild and use the model."""
+        sampler = DDIMSampler(self.schedule, num_inference_steps=self.cfg.sampling_steps)
+        return {
+            "format": "kinema-checkpoint-1",
+            "model_config": self.model_config.to_dict(),
+            "feature_layout": self.layout.to_dict(),
+            "fps": self.fps,
+            "skeleton": self.skeleton.to_dict(),
+            "stats": self.stats.to_dict(),
+            "text_encoder": self.text_encoder_id,
+            "sampler": sampler.to_dict(),
+            "guidance": Guidance().to_dict(),
+            "train_config": asdict(self.cfg),
+            "loss_weights": self.weights.to_dict(),
+            "phase": 1 if self.step < self.phase1_steps else 2,
+            "world_size": self.world,
+        }
+
+    def resume(self) -> bool:
+        """Load the newest checkpoint of ``out_dir``; False when there is none."""
+        if not (self.out_dir / "latest").exists():
+            return False
+        ck = load_checkpoint(self.out_dir)
+        self.model.load_state_dict(ck["model"])
+        if ck["ema"] is not None:
+            self.ema.load_state_dict(ck["ema"])
+        if ck["optimizer"] is not None:
+            load_optimizer_tensors(self.optimizer, ck["optimizer"], ck["info"]["optimizer_param_groups"])
+        self.step = int(ck["info"]["step"])
+        return True
+
+    def save(self) -> Path | None:
+        if self.rank != 0:
+            return None
+        return save_checkpoint(self.out_dir, self.step, self.model, self.ema, self.optimizer, self.info())
+
+    # ------------------------------------------------------------------ one step
+    def train_step(self, model: torch.nn.Module) -> dict[str, float]:
+        cfg, step = self.cfg, self.step
+        g = step_generator(cfg.seed, self.rank, step)
+        torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=g)))  # dropout masks
+        phase = 1 if step < self.phase1_steps else 2
+        self.model.set_dropout(cfg.phase1_dropout if phase == 1 else 0.0)
+        batch = self.batches.sample(g)
+        x0 = batch.features
+        B = x0.shape[0]
+        if phase == 2:
+            kmax = max_keyframes_at(step, self.phase1_steps, cfg.steps - self.phase1_steps, 1, cfg.max_keyframes)
+            mask = sample_batch_masks(batch.raw_features, batch.lengths, self.layout, self.skeleton, kmax, g)
+        else:
+            mask = torch.zeros_like(x0)
+        t = self.schedule.sample_timesteps(B, g)
+        noise = torch.randn(x0.shape, generator=g)
+        x_t = self.schedule.q_sample(x0, t, noise)
+        text = self.text_table[batch.caption_index]
+        pred = model(x_t, t, text, batch.text_keep, batch.c_dir, x0, mask, batch.pad_mask)
+        loss, terms = motion_loss(pred, x0, batch.pad_mask, self.layout, self.skeleton, self.stats, self.weights)
+        lr = lr_at(step, cfg.lr, cfg.warmup, cfg.steps)
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.grad_clip)
+        self.optimizer.step()
+        self.step += 1
+        if self.step % cfg.ema_every == 0:
+            update_ema(self.ema, self.model, cfg.ema_decay)
+        out = {k: float(v) for k, v in terms.items()}
+        out.update(loss=float(loss.detach()), lr=lr, grad_norm=float(grad_norm), phase=phase, frames=int(batch.lengths.sum()))
+        return out
+
+    # ------------------------------------------------------------------ loop
+    def run(self, progress: bool = True, stop_after: int | None = None) -> Path | None:
+        """Train until ``cfg.steps`` (or ``stop_after`` more steps); returns the last checkpoint."""
+        from tqdm.auto import tqdm
+
+        model: torch.nn.Module = self.model
+        if self.world > 1:
+            model = torch.nn.parallel.DistributedDataParallel(self.model)
+        end = self.cfg.steps if stop_after is None else min(self.cfg.steps, self.step + stop_after)
+        log_path = self.out_dir / "log.jsonl"
+        if self.rank == 0:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            (self.out_dir / "train_config.json").write_text(json.dumps(asdict(self.cfg), indent=1))
+        bar = tqdm(total=end, initial=self.step, disable=not progress or self.rank != 0, desc="train",
+                   dynamic_ncols=True)
+        last = None
+        t0, ema_loss = time.time(), None
+        while self.step < end:
+            rec = self.train_step(model)
+            ema_loss = rec["loss"] if ema_loss is None else 0.95 * ema_loss + 0.05 * rec["loss"]
+            bar.update(1)
+            bar.set_postfix(loss=f"{ema_loss:.4f}", phase=rec["phase"])
+            if self.rank == 0 and (self.step % self.cfg.log_every == 0 or self.step == end):
+                rec.update(step=self.step, time=round(time.time() - t0, 2))
+                with open(log_path, "a") as fh:
+                    fh.write(json.dumps(rec) + "\n")
+            if self.step % self.cfg.ckpt_every == 0 or self.step == end:
+                last = self.save() or last
+        bar.close()
+        return last

@@ -1,0 +1,122 @@
+"""Training: loss goes down, overfitting one clip reproduces it through DDIM, exact resume, DDP."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from kinema.data.build import build_dataset
+from kinema.generate.sampling import sample_features
+from kinema.model.loading import load_denoiser
+from kinema.motion.features import features_to_motion
+from kinema.motion.transform import canonicalize_start
+from kinema.train.trainer import Trainer, TrainConfig
+
+BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
+pytestmark = pytest.mark.skipif(not BANDAI.exists(), reason="shared Bandai Namco data not available")
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("data") / "bandai6"
+    build_dataset(BANDAI, out, fps=20, limit=6, workers=1, progress=False)
+    return out
+
+
+def _cfg(**kw) -> TrainConfig:
+    base = dict(model="tiny", steps=40, batch_size=4, lr=1e-3, warmup=5, text_encoder="hash-test-32",
+                log_every=5, ckpt_every=1000, max_seconds=4.0)
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def _single_clip_data(tiny_data: Path, tmp_path: Path, frames: int = 40) -> Path:
+    """A copy of the dataset whose train split is one short clip (everything else moved to test)."""
+    import shutil
+
+    out = tmp_path / "one"
+    shutil.copytree(tiny_data, out)
+    clips = json.loads((out / "clips.json").read_text())
+    first = next(i for i, c in enumerate(clips) if c["split"] == "train" and c["length"] >= frames)
+    for i, c in enumerate(clips):
+        c["split"] = "train" if i == first else "test"
+    clips[first]["length"] = frames
+    (out / "clips.json").write_text(json.dumps(clips))
+    return out
+
+
+def test_loss_drops_when_overfitting_a_few_clips(tiny_data, tmp_path):
+    trainer = Trainer(_cfg(steps=60, phase1_fraction=1.0), tiny_data, tmp_path / "run")
+    trainer.run(progress=False)
+    log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    first, last = log[0]["loss"], sum(r["loss"] for r in log[-3:]) / 3
+    assert last < 0.6 * first, (first, last)
+
+
+def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
+    data = _single_clip_data(tiny_data, tmp_path)
+    cfg = _cfg(steps=400, batch_size=8, lr=2e-3, warmup=20, text_dropout=0.0, phase1_fraction=1.0,
+               max_seconds=2.0, ema_decay=0.9, ema_every=1, phase1_dropout=0.0,
+               random_heading=False)
+    trainer = Trainer(cfg, data, tmp_path / "run")
+    trainer.batches.min_frames = 40  # always the whole clip: the target is unambiguous
+    trainer.run(progress=False)
+    loaded = load_denoiser(tmp_path / "run")
+    gt = canonicalize_start(trainer.batches.clips[0][None], trainer.layout)[0]
+    text = trainer.text_table[:1]
+    out = sample_features(loaded.denoiser, loaded.sampler, 40, text, gt[None, 0, 3:5], loaded.guidance.__class__(
+        mode="none"), steps=20, generator=torch.Generator().manual_seed(0))
+    pos = features_to_motion(out[0], loaded.skeleton, loaded.fps).positions
+    ref = features_to_motion(gt, loaded.skeleton, loaded.fps).positions
+    err = (pos - ref).norm(dim=-1).mean().item()
+    assert err < 0.05, f"mean joint error {err * 100:.1f} cm"
+
+
+def test_checkpoint_resume_is_exact(tiny_data, tmp_path):
+    straight = Trainer(_cfg(steps=10, ckpt_every=5, phase1_fraction=0.5), tiny_data, tmp_path / "a")
+    straight.run(progress=False)
+    first = Trainer(_cfg(steps=10, ckpt_every=5, phase1_fraction=0.5), tiny_data, tmp_path / "b")
+    first.run(progress=False, stop_after=5)
+    resumed = Trainer(_cfg(steps=10, ckpt_every=5, phase1_fraction=0.5), tiny_data, tmp_path / "b")
+    assert resumed.resume() and resumed.step == 5
+    resumed.run(progress=False)
+    for (name, p), q in zip(straight.model.state_dict().items(), resumed.model.state_dict().values(), strict=True):
+        assert torch.equal(p, q), name
+    for p, q in zip(straight.ema.state_dict().values(), resumed.ema.state_dict().values(), strict=True):
+        assert torch.equal(p, q)
+
+
+def test_interrupted_save_keeps_previous_checkpoint(tiny_data, tmp_path, monkeypatch):
+    trainer = Trainer(_cfg(steps=4, ckpt_every=2), tiny_data, tmp_path / "run")
+    trainer.run(progress=False, stop_after=2)
+    import kinema.train.checkpoint as ck
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ck, "save_file", boom)
+    with pytest.raises(KeyboardInterrupt):
+        trainer.run(progress=False)
+    monkeypatch.undo()
+    again = Trainer(_cfg(steps=4, ckpt_every=2), tiny_data, tmp_path / "run")
+    assert again.resume() and again.step == 2
+    assert not [p for p in (tmp_path / "run").iterdir() if p.name.startswith(".")]
+
+
+def test_two_process_gloo_run(tiny_data, tmp_path):
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--master_port", "29533",
+           "-m", "kinema", "train", "--config", "tiny", "--data", str(tiny_data), "--out", str(tmp_path / "ddp"),
+           "--steps", "4", "--batch-size", "2", "--ckpt-every", "2", "--text-encoder", "hash-test-32",
+           "--no-progress"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    info = json.loads((tmp_path / "ddp" / "ckpt-00000004" / "checkpoint.json").read_text())
+    assert info["world_size"] == 2 and info["step"] == 4
+    assert (tmp_path / "ddp" / "log.jsonl").exists()
