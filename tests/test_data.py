@@ -35,8 +35,22 @@ LIMIT = 12
 @pytest.fixture(scope="module")
 def build(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("data") / "bandai20"
-    argv = ["data", "build", "bandai-namco", "--root", str(DATA), "--fps", "20", "--out", str(out),
-            "--limit", str(LIMIT), "--workers", "2", "--quiet"]
+    argv = [
+        "data",
+        "build",
+        "bandai-namco",
+        "--root",
+        str(DATA),
+        "--fps",
+        "20",
+        "--out",
+        str(out),
+        "--limit",
+        str(LIMIT),
+        "--workers",
+        "2",
+        "--quiet",
+    ]
     assert main(argv) == 0
     return out
 
@@ -87,7 +101,8 @@ def test_mirrored_copies_have_mirrored_labels_and_captions(records):
     for m in mirrors:
         o = originals[m["source_clip_id"]]
         assert m["clip_id"] != o["clip_id"] and m["content"] == mirror_content(o["content"])
-        assert (m["style"], m["take"], m["length"], m["split"]) == (o["style"], o["take"], o["length"], o["split"])
+        same = ("style", "take", "length", "split", "source_clip_id")
+        assert [m[k] for k in same] == [o[k] if k != "source_clip_id" else o["clip_id"] for k in same]
         for co, cm in zip(o["captions"], m["captions"], strict=True):
             assert cm == co.replace("left", "@").replace("right", "left").replace("@", "right")
         if "left" in o["content"].split("-"):
@@ -130,8 +145,9 @@ def test_stats_cover_the_train_split_only(build, records):
 def test_data_stats_prints_labels_splits_and_totals(build, records, capsys):
     assert main(["data", "stats", str(build)]) == 0
     out = capsys.readouterr().out
-    for word in {r["content"] for r in records} | {r["style"] for r in records} | {"train", "val", "test",
-                                                                                   "total"}:
+    for word in (
+        {r["content"] for r in records} | {r["style"] for r in records} | {"train", "val", "test", "total"}
+    ):
         assert word in out
     assert f"{len(records)} clips" in out
 
@@ -253,3 +269,14 @@ def test_load_clip_prunes_the_static_root_and_moves_the_pelvis(clips_by_id):
     travel = (motion.root_translation[-1] - motion.root_translation[0])[[0, 2]].norm()
     assert travel > 2.0  # metres walked
     assert 0.0 < min_toe_height(motion) < 0.08
+
+
+def test_rebuild_replaces_an_earlier_build_in_process_without_mirrors(build, tmp_path):
+    d = _copy(build, tmp_path)
+    argv = ["data", "build", "bandai-namco", "--root", str(DATA), "--out", str(d), "--limit", "2"]
+    assert main(argv + ["--workers", "1", "--no-mirror", "--quiet"]) == 0
+    meta = json.loads((d / "meta.json").read_text())
+    assert meta["limit"] == 2 and meta["mirror"] is False and meta["counts"]["clips"] == 2
+    recs = json.loads((d / "clips.json").read_text())
+    assert not any(r["mirrored"] for r in recs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["copy"]

@@ -21,6 +21,7 @@ def register(sub) -> None:
     p = sub.add_parser("bench", help="time kinema's hot paths on real data", description=__doc__)
     targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
     _register_bvh(targets)
+    _register_train(targets)
 
 
 def _positive_int(text: str) -> int:
@@ -125,4 +126,36 @@ def run_bench_bvh(args) -> int:
     print("-" * len(header))
     for label, n, frames, hours, elapsed, fps, mbps in rows:
         print(f"{label:<10} {n:>6} {frames:>9} {hours:>7.3f} {elapsed:>8.2f} {fps:>8.1f} {mbps:>7.1f}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- bench train
+
+
+def _register_train(targets) -> None:
+    p = targets.add_parser("train", help="training step time, samples/s and FLOPs per model preset",
+                           description="Time full training steps (forward, loss, backward, AdamW) on synthetic "
+                           "features of the real size; also one batch-3 inference forward pass.")
+    p.add_argument("--configs", nargs="+", default=["tiny", "small", "small-1stage"],
+                   help="presets to time (default: tiny small small-1stage)")
+    p.add_argument("--batch-size", type=_positive_int, default=32)
+    p.add_argument("--frames", type=_positive_int, default=100, help="frames per sample (100 = 5 s @ 20 fps)")
+    p.add_argument("--joints", type=_positive_int, default=21)
+    p.add_argument("--repeats", type=_positive_int, default=3)
+    p.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: all cores)")
+    p.set_defaults(func=_run_train)
+
+
+def _run_train(args: argparse.Namespace) -> int:
+    import torch
+    from tqdm.auto import tqdm
+
+    from kinema.bench.train import bench_config, format_table
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    rows = [bench_config(c, args.joints, args.batch_size, args.frames, args.repeats)
+            for c in tqdm(args.configs, desc="bench train")]
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    print(format_table(rows))
     return 0

@@ -1,9 +1,50 @@
-"""`kinema convert` sub-command (being written)."""
+"""`kinema convert IN OUT`: motion files between BVH (.bvh/.bvh.gz) and the kinema npz contract.
+
+Units: BVH lengths are read in the file's unit times ``--in-scale`` (0.01 for centimetre files such as
+Bandai Namco) and written in metres times ``--out-scale`` (1 = metres, what Blender's importer expects
+at scale 1.0; 100 = centimetres). npz files are always metres, Y up (see docs/formats.md).
+"""
 
 from __future__ import annotations
+
+import argparse
+from pathlib import Path
 
 
 def register(sub) -> None:
     """Add the `convert` sub-command to the top-level parser."""
-    p = sub.add_parser("convert", help="(not yet available)")
-    p.set_defaults(func=lambda args: 0)
+    p = sub.add_parser("convert", help="convert motion files: BVH -> BVH, BVH -> npz, npz -> BVH")
+    p.add_argument("input", type=Path, help=".bvh, .bvh.gz or .npz")
+    p.add_argument("output", type=Path, help=".bvh, .bvh.gz or .npz")
+    p.add_argument("--in-scale", type=float, default=1.0,
+                   help="multiply BVH input lengths by this to get metres (0.01 for centimetres)")
+    p.add_argument("--out-scale", type=float, default=1.0,
+                   help="BVH output lengths = metres x this (1 = metres, 100 = centimetres)")
+    p.add_argument("--order", default="ZXY", help="Euler channel order of BVH output (default ZXY)")
+    p.add_argument("--drop", nargs="*", default=[], metavar="JOINT",
+                   help="joints to prune (folded into their children), e.g. joint_Root")
+    p.add_argument("--fps", type=float, help="resample to this frame rate")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from kinema.errors import KinemaError
+    from kinema.motion.core import load_motion
+
+    if not args.input.exists():
+        raise KinemaError(f"{args.input}: no such file")
+    motion = load_motion(args.input, scale=args.in_scale)
+    if args.drop:
+        motion = motion.prune(args.drop)
+    if args.fps:
+        motion = motion.resample(args.fps)
+    name = args.output.name.lower()
+    if name.endswith(".npz"):
+        motion.save(args.output)
+        units = "metres"
+    else:
+        motion.save(args.output, scale=args.out_scale, order=args.order)
+        units = "metres" if args.out_scale == 1 else f"metres x {args.out_scale:g}"
+    print(f"wrote {args.output}: {motion.num_frames} frames @ {motion.fps:g} fps, "
+          f"{motion.num_joints} joints, lengths in {units}")
+    return 0

@@ -17,8 +17,11 @@ DATASETS = ("bandai-namco",)
 
 def register(sub) -> None:
     """Add the `data` sub-command (with `build` and `stats`) to the top-level parser."""
-    p = sub.add_parser("data", help="build and inspect training datasets",
-                       description="Build and inspect training datasets (see docs/dataset.md).")
+    p = sub.add_parser(
+        "data",
+        help="build and inspect training datasets",
+        description="Build and inspect training datasets (see docs/dataset.md).",
+    )
     dsub = p.add_subparsers(dest="data_command", required=True)
 
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
@@ -26,11 +29,16 @@ def register(sub) -> None:
     b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
     b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
     b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features (default 20)")
-    b.add_argument("--limit", type=_positive_int, default=None,
-                   help="keep a deterministic, content-balanced subset of N clips")
+    b.add_argument(
+        "--limit",
+        type=_positive_int,
+        default=None,
+        help="keep a deterministic, content-balanced subset of N clips",
+    )
     b.add_argument("--workers", type=_positive_int, default=2, help="worker processes (default 2)")
-    b.add_argument("--no-mirror", dest="mirror", action="store_false",
-                   help="do not add left/right mirrored copies")
+    b.add_argument(
+        "--no-mirror", dest="mirror", action="store_false", help="do not add left/right mirrored copies"
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=_build)
 
@@ -53,12 +61,21 @@ def _build(args) -> int:
     from kinema.data.build import build_dataset
 
     t0 = time.time()
-    meta = build_dataset(args.root, args.out, fps=args.fps, limit=args.limit, workers=args.workers,
-                         mirror=args.mirror, progress=not args.quiet)
+    meta = build_dataset(
+        args.root,
+        args.out,
+        fps=args.fps,
+        limit=args.limit,
+        workers=args.workers,
+        mirror=args.mirror,
+        progress=not args.quiet,
+    )
     c = meta["counts"]
-    print(f"wrote {args.out}: {c['clips']} clips ({c['source_clips']} source), {c['frames']} frames, "
-          f"{c['hours']:.2f} h at {meta['fps']:g} fps, D = {meta['layout']['dim']} "
-          f"in {time.time() - t0:.0f} s")
+    print(
+        f"wrote {args.out}: {c['clips']} clips ({c['source_clips']} source), {c['frames']} frames, "
+        f"{c['hours']:.2f} h at {meta['fps']:g} fps, D = {meta['layout']['dim']} "
+        f"in {time.time() - t0:.0f} s"
+    )
     return 0
 
 
@@ -79,16 +96,22 @@ def _stats(args) -> int:
     from kinema.data.split import SPLITS
 
     meta, clips = load_clip_table(args.dir)
-    by: dict[str, dict[str, list[dict]]] = {"content": defaultdict(list), "style": defaultdict(list),
-                                            "split": defaultdict(list)}
+    by: dict[str, dict[str, list[dict]]] = {
+        "content": defaultdict(list),
+        "style": defaultdict(list),
+        "split": defaultdict(list),
+    }
     for r in clips:
         for field in by:
             by[field][r[field]].append(r)
     source = sum(not r["mirrored"] for r in clips)
     hours = sum(r["duration_s"] for r in clips) / 3600.0
     dim = meta.get("layout", {}).get("dim", "?")
-    out = [f"{args.dir}: {meta.get('dataset', '?')} at {meta.get('fps', 0):g} fps, D = {dim}, "
-           f"{len(clips)} clips ({source} source + {len(clips) - source} mirrored), {hours:.3f} h", ""]
+    out = [
+        f"{args.dir}: {meta.get('dataset', '?')} at {meta.get('fps', 0):g} fps, D = {dim}, "
+        f"{len(clips)} clips ({source} source + {len(clips) - source} mirrored), {hours:.3f} h",
+        "",
+    ]
     out += _table("content", by["content"]) + [""]
     out += _table("style", by["style"]) + [""]
     out += _table("split", by["split"], order=list(SPLITS))

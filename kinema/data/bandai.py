@@ -87,7 +87,7 @@ def _read_twin(json_path: Path) -> dict:
     except (OSError, ValueError) as exc:
         raise DataError(f"{json_path}: cannot read labels: {exc}") from None
     if not (isinstance(d, dict) and isinstance(d.get("content"), int) and isinstance(d.get("style"), int)):
-        raise DataError(f"{json_path}: expected {{\"content\": int, \"style\": int}}, got {d!r}")
+        raise DataError(f'{json_path}: expected {{"content": int, "style": int}}, got {d!r}')
     return d
 
 
@@ -127,7 +127,9 @@ def list_clips(root: str | Path) -> list[ClipInfo]:
                 rel = bvh.relative_to(root).as_posix()
             except ValueError:  # root is the dataset folder itself
                 rel = bvh.name
-            clips.append(ClipInfo(fields["dataset"], content, style, fields["take"], fields["clip_id"], bvh, rel))
+            clips.append(
+                ClipInfo(fields["dataset"], content, style, fields["take"], fields["clip_id"], bvh, rel)
+            )
     clips.sort(key=lambda c: c.clip_id)
     for a, b in zip(clips, clips[1:], strict=False):
         if a.clip_id == b.clip_id:

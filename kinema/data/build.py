@@ -45,6 +45,11 @@ from kinema.skeleton import Skeleton
 FORMAT_VERSION = 1
 FILES = ("features.safetensors", "clips.json", "skeleton.json", "stats.json", "meta.json")
 MIRROR_SUFFIX = "_mirrored"
+#: Fields of each clips.json record, in file order (documented in docs/dataset.md).
+RECORD_KEYS = tuple(
+    "clip_id source_clip_id dataset content style take mirrored split start length fps duration_s "
+    "min_toe_height captions path".split()
+)
 
 
 def select_subset(clips: list[ClipInfo], limit: int | None) -> list[ClipInfo]:
@@ -234,9 +239,7 @@ def build_dataset(
     if not torch.isfinite(features).all():
         raise DataError("features contain NaN or inf")
 
-    keys = ["clip_id", "source_clip_id", "dataset", "content", "style", "take", "mirrored", "split",
-            "start", "length", "fps", "duration_s", "min_toe_height", "captions", "path"]
-    table = [{k: r[k] for k in keys} for r in records]
+    table = [{k: r[k] for k in RECORD_KEYS} for r in records]
     toe = [r["min_toe_height"] for r in records]
     meta = {
         "format_version": FORMAT_VERSION,
@@ -267,8 +270,11 @@ def build_dataset(
 
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
     try:
-        save_file({"features": features.contiguous()}, str(tmp / "features.safetensors"),
-                  metadata={"format": "kinema-features", "fps": str(float(fps)), "dim": str(layout.dim)})
+        save_file(
+            {"features": features.contiguous()},
+            str(tmp / "features.safetensors"),
+            metadata={"format": "kinema-features", "fps": str(float(fps)), "dim": str(layout.dim)},
+        )
         _write_json(tmp / "clips.json", table)
         _write_json(tmp / "skeleton.json", skeleton.to_dict())
         _write_json(tmp / "stats.json", stats.to_dict(), indent=None)

@@ -89,8 +89,9 @@ class MotionDataset(torch.utils.data.Dataset):
             )
         D = self.layout.dim
         if self.stats.mean.shape != (D,) or self.stats.std.shape != (D,):
-            raise DataError(f"{self.dir / 'stats.json'}: statistics have {self.stats.mean.numel()} channels, "
-                            f"expected {D}")
+            raise DataError(
+                f"{self.dir / 'stats.json'}: statistics have {self.stats.mean.numel()} channels, expected {D}"
+            )
         self.features = self._load_features(D)
         total = self.features.shape[0]
         for r in records:
@@ -99,7 +100,9 @@ class MotionDataset(torch.utils.data.Dataset):
             except (KeyError, TypeError):
                 ok = False
             if not ok:
-                raise DataError(f"{self.dir / 'clips.json'}: bad record {str(r)[:200]} for {total} feature rows")
+                raise DataError(
+                    f"{self.dir / 'clips.json'}: bad record {str(r)[:200]} for {total} feature rows"
+                )
         self.clips = records if split == "all" else [r for r in records if r["split"] == split]
 
     def _load_features(self, D: int) -> torch.Tensor:

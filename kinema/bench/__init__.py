@@ -1,0 +1,1 @@
+"""Benchmarks behind `kinema bench ...` (printed tables; targets live here, not in timed tests)."""
