@@ -134,3 +134,32 @@ def test_real_clip_features_round_trip_within_a_millimetre(clip):
     assert 0.0 < parts["contacts"].mean() < 1.0 or "wave" in clip
     mirrored = features_to_motion(motion_to_features(m.mirror()), m.skeleton, m.fps).mirror()
     assert (mirrored.positions - m.positions).norm(dim=-1).max() < 1e-3
+
+
+def test_rotate_features_matches_rotating_the_motion():
+    from kinema.geometry.rotations import quat_mul, quat_rotate
+    from kinema.motion.transform import rotate_features
+
+    m = random_motion(T=20)
+    layout = FeatureLayout(m.num_joints)
+    angle = 0.9
+    turn = axis_angle_to_quat(torch.tensor([0.0, angle, 0.0], dtype=torch.float64)).expand(m.num_frames, 4)
+    q = m.local_rotations.clone()
+    q[:, 0] = quat_mul(turn, q[:, 0])
+    turned = Motion(m.skeleton, m.fps, quat_rotate(turn, m.root_translation), q)
+    expected = motion_to_features(turned)
+    got = rotate_features(motion_to_features(m), torch.tensor(angle, dtype=torch.float64), layout)
+    assert torch.allclose(got, expected, atol=1e-6)
+
+
+def test_isotropic_stats_are_rotation_invariant():
+    from kinema.motion.transform import rotate_features
+
+    m = random_motion(T=30)
+    layout = FeatureLayout(m.num_joints)
+    f = motion_to_features(m)
+    a = NormStats.compute([f], xz_pairs=layout.xz_pairs())
+    b = NormStats.compute([rotate_features(f, torch.tensor(2.0, dtype=torch.float64), layout)],
+                          xz_pairs=layout.xz_pairs())
+    assert torch.allclose(a.std, b.std, atol=1e-5) and torch.allclose(a.mean, b.mean, atol=1e-5)
+    assert a.mean[layout.slices["heading"]].abs().max() == 0

@@ -6,7 +6,8 @@ One build turns the BVH files into a folder that training reads without touching
     DIR/clips.json            one record per clip (and per mirrored copy): labels, split, captions,
                               and the clip's rows [start, start + length) in "features"
     DIR/skeleton.json         the shared 21-joint skeleton (Skeleton.to_dict)
-    DIR/stats.json            per-channel mean/std over the TRAIN split only (NormStats.to_dict)
+    DIR/stats.json            per-channel mean/std over the TRAIN split only, start-canonicalised, with
+                              ground-plane (x, z) pairs made isotropic (NormStats.compute, xz_pairs)
     DIR/meta.json             fps, feature layout, smoothing and contact settings, source, counts
 
 Why this shape: features are computed once (FK, smoothing and contact labels are the slow part), a
@@ -40,6 +41,7 @@ from kinema.motion.contacts import ContactThresholds
 from kinema.motion.features import FeatureLayout, motion_to_features
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
 from kinema.motion.stats import NormStats
+from kinema.motion.transform import canonicalize_start
 from kinema.skeleton import Skeleton
 
 FORMAT_VERSION = 1
@@ -233,7 +235,8 @@ def build_dataset(
     train = [torch.from_numpy(f) for f, r in zip(feats, records, strict=True) if r["split"] == "train"]
     if not train:
         raise DataError("no clip of the selection is in the train split; use a larger --limit")
-    stats = NormStats.compute(train)
+    # statistics of what training sees: first frame over the origin, any heading (see NormStats)
+    stats = NormStats.compute((canonicalize_start(f, layout) for f in train), xz_pairs=layout.xz_pairs())
     features = torch.from_numpy(np.concatenate(feats, axis=0))
     del feats, train
     if not torch.isfinite(features).all():

@@ -20,7 +20,7 @@ class ContactThresholds:
     """Heights in metres above the floor and speeds in metres per second."""
 
     heel_height: float = 0.15  # ankle joints sit 8-10 cm above the floor when planted
-    toe_height: float = 0.06
+    toe_height: float = 0.08  # toe joints sit 2-5.5 cm up inside the shoe when planted (Bandai)
     speed: float = 0.30
 
 

@@ -70,6 +70,17 @@ class FeatureLayout:
             "contacts": x[..., s["contacts"]],
         }
 
+    def xz_pairs(self) -> list[tuple[int, int]]:
+        """(x, z) channel index pairs of every ground-plane vector: root position, heading (cos, sin),
+        and per joint its position, velocity and both 6D rotation columns."""
+        s = self.slices
+        pairs = [(s["root_pos"].start, s["root_pos"].start + 2), (s["heading"].start, s["heading"].start + 1)]
+        for group, width in (("joint_pos", 3), ("joint_vel", 3), ("joint_rot", 3)):
+            start = s[group].start
+            n = (s[group].stop - start) // width
+            pairs += [(start + k * width, start + k * width + 2) for k in range(n)]
+        return pairs
+
     def to_dict(self) -> dict:
         return {"num_joints": self.num_joints, "dim": self.dim,
                 "slices": {k: [v.start, v.stop] for k, v in self.slices.items()}}

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -20,8 +20,18 @@ class NormStats:
     std: torch.Tensor
 
     @classmethod
-    def compute(cls, chunks: Iterable[torch.Tensor], min_std: float = MIN_STD) -> NormStats:
-        """Exact mean/std over all frames of ``chunks`` (each (T_i, D)), accumulated in float64."""
+    def compute(
+        cls,
+        chunks: Iterable[torch.Tensor],
+        min_std: float = MIN_STD,
+        xz_pairs: Sequence[tuple[int, int]] = (),
+    ) -> NormStats:
+        """Exact mean/std over all frames of ``chunks`` (each (T_i, D)), accumulated in float64.
+
+        ``xz_pairs`` lists (x, z) channel pairs of ground-plane vectors. Training turns every clip to a
+        random heading, which makes such pairs isotropic: their mean is 0 and both share the std
+        ``sqrt((E[x^2] + E[z^2]) / 2)``. Statistics of the un-rotated data would be far too narrow
+        (e.g. a dataset whose clips all start facing +Z has a heading std near 0)."""
         n, s, s2 = 0, None, None
         for x in chunks:
             x = x.reshape(-1, x.shape[-1]).double()
@@ -32,6 +42,10 @@ class NormStats:
             raise ValueError("no frames to compute statistics from")
         mean = s / n
         var = (s2 / n - mean**2).clamp_min(0)
+        for ix, iz in xz_pairs:
+            m2 = 0.5 * (s2[ix] + s2[iz]) / n
+            mean[ix] = mean[iz] = 0.0
+            var[ix] = var[iz] = m2
         return cls(mean.float(), var.sqrt().clamp_min(min_std).float())
 
     def normalize(self, x: torch.Tensor) -> torch.Tensor:
