@@ -62,7 +62,8 @@ def humanoid(scheme: dict[str, str]) -> Skeleton:
                 name = left[role] if sign > 0 else swap_side(left[role])
                 names.append(name)
                 parents.append(prev)
-                off = first if i == 0 else ([0.25, 0, 0] if chain is arm else ([0, -0.05, 0.12] if i == 3 else [0, -0.4, 0]))
+                leg_off = [0, -0.05, 0.12] if i == 3 else [0, -0.4, 0]
+                off = first if i == 0 else ([0.25, 0, 0] if chain is arm else leg_off)
                 offsets.append([sign * off[0], off[1], off[2]])
                 prev = len(names) - 1
     return Skeleton(names, parents, offsets)

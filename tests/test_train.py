@@ -11,22 +11,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from kinema.data.build import build_dataset
 from kinema.generate.sampling import sample_features
 from kinema.model.loading import load_denoiser
 from kinema.motion.features import features_to_motion
 from kinema.motion.transform import canonicalize_start
-from kinema.train.trainer import Trainer, TrainConfig
-
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-pytestmark = pytest.mark.skipif(not BANDAI.exists(), reason="shared Bandai Namco data not available")
-
-
-@pytest.fixture(scope="module")
-def tiny_data(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("data") / "bandai6"
-    build_dataset(BANDAI, out, fps=20, limit=6, workers=1, progress=False)
-    return out
+from kinema.train.trainer import TrainConfig, Trainer
 
 
 def _cfg(**kw) -> TrainConfig:

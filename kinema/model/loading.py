@@ -52,7 +52,8 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
     ckpt = find_checkpoint(path)
     try:
         info = json.loads((ckpt / "checkpoint.json").read_text())
-        weights_file = ckpt / ("ema.safetensors" if ema and (ckpt / "ema.safetensors").exists() else "model.safetensors")
+        use_ema = ema and (ckpt / "ema.safetensors").exists()
+        weights_file = ckpt / ("ema.safetensors" if use_ema else "model.safetensors")
         state = load_file(str(weights_file))
         config = ModelConfig.from_dict(info["model_config"])
         model = Denoiser(config)

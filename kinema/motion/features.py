@@ -99,7 +99,7 @@ def heading_from_positions(positions: torch.Tensor, skeleton: Skeleton) -> torch
 def motion_to_features(
     motion: Motion,
     root_sigma: float = DEFAULT_ROOT_SIGMA_SECONDS,
-    thresholds: ContactThresholds = ContactThresholds(),
+    thresholds: ContactThresholds | None = None,
 ) -> torch.Tensor:
     """Kimodo features ``(T, 5 + 12 J + 4)`` of a motion (float32 unless the motion is float64)."""
     skel = motion.skeleton
@@ -120,7 +120,7 @@ def motion_to_features(
     if motion.foot_contacts is not None:
         contacts = (motion.foot_contacts > 0.5).to(P.dtype)
     else:
-        contacts = foot_contacts(P, motion.fps, skel, thresholds)
+        contacts = foot_contacts(P, motion.fps, skel, thresholds or ContactThresholds())
     return torch.cat(
         [root, heading, jp.flatten(-2), vel.flatten(-2), rot6.flatten(-2), contacts], dim=-1
     )

@@ -184,7 +184,8 @@ class Trainer:
         if self.step % cfg.ema_every == 0:
             update_ema(self.ema, self.model, cfg.ema_decay)
         out = {k: float(v) for k, v in terms.items()}
-        out.update(loss=float(loss.detach()), lr=lr, grad_norm=float(grad_norm), phase=phase, frames=int(batch.lengths.sum()))
+        out.update(loss=float(loss.detach()), lr=lr, grad_norm=float(grad_norm), phase=phase,
+                   frames=int(batch.lengths.sum()))
         return out
 
     # ------------------------------------------------------------------ loop
