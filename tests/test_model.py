@@ -236,3 +236,13 @@ def test_forward_guided_regular_and_none() -> None:
                                inp["pad_mask"], g)
     expected = 2.0 * _branch(model, inp, True, False) - _branch(model, inp, False, False)
     torch.testing.assert_close(out, expected, atol=1e-5, rtol=1e-5)
+
+
+def test_set_dropout_zero_makes_training_mode_deterministic() -> None:
+    model = _model("tiny")
+    model.set_dropout(0.5)
+    model.train()
+    inp = _inputs(model)
+    assert not torch.equal(model(**inp), model(**inp))
+    model.set_dropout(0.0)
+    torch.testing.assert_close(model(**inp), model(**inp))
