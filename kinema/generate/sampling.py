@@ -3,6 +3,12 @@
 Shapes: ``text_emb (B, E)``, ``c_dir (B, 2)``, ``x_tgt``/``mask`` ``(B, T, D)`` in *unnormalised*
 feature units (metres, radians...) — they are normalised here, with the model's statistics.
 Returns unnormalised features ``(B, T, D)``; constrained channels hold exactly their targets.
+
+World-frame joint targets. Joint positions are stored with x/z relative to the smoothed root, so a
+target given in world x/z (``world_xz (B, T, J, 2)`` where ``world_mask (B, T, J)``) can only be imputed
+once the root is known. The root is predicted by the model itself, so after every denoising step the
+relative target is refreshed from the current x0 estimate of the root: ``j_p.xz = world.xz - root.xz``.
+The first step runs without these channels; by the last step root and target agree.
 """
 
 from __future__ import annotations
@@ -12,6 +18,13 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.model.denoiser import Denoiser
+
+
+def _world_channels(layout_dim: int, num_joints: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Feature indices of joint_pos x and z for every joint: (J,), (J,)."""
+    start = 5  # root_pos (3) + heading (2)
+    x = start + 3 * torch.arange(num_joints)
+    return x, x + 2
 
 
 @torch.no_grad()
@@ -27,30 +40,57 @@ def sample_features(
     steps: int | None = None,
     generator: torch.Generator | None = None,
     progress: bool = False,
+    world_xz: torch.Tensor | None = None,
+    world_mask: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Run the reverse process for a batch of ``c_dir.shape[0]`` motions of ``num_frames`` frames."""
     B = c_dir.shape[0]
     D = denoiser.config.feature_dim
+    J = denoiser.config.num_joints
     if steps is not None:
         sampler.set_timesteps(steps)
-    tgt_n = None
+    has_world = world_xz is not None and world_mask is not None and bool(world_mask.any())
+    if mask is None and has_world:
+        mask = torch.zeros(B, num_frames, D)
+        x_tgt = torch.zeros(B, num_frames, D)
+    tgt = None
     if mask is not None:
         if x_tgt is None:
             raise ValueError("a constraint mask needs targets")
-        tgt_n = denoiser.normalize(torch.nan_to_num(x_tgt.float())) * mask
+        mask = mask.float().clone()
+        tgt = torch.nan_to_num(x_tgt.float()).clone()
     if text_emb is None:
-        guidance = Guidance(mode="none") if mask is None else guidance
         text_mask = torch.zeros(B, dtype=torch.bool)
+        if mask is None:
+            guidance = Guidance(mode="none")
     else:
         text_mask = None
+    ix, iz = _world_channels(D, J)
+    state = {"world_on": False}
+
+    def refresh_world(x0_norm: torch.Tensor) -> None:
+        """Re-target world-frame joints against the current root estimate (unnormalised)."""
+        root = denoiser.denormalize(x0_norm)[..., [0, 2]]  # (B, T, 2)
+        rel = world_xz - root[:, :, None, :]  # (B, T, J, 2)
+        m = world_mask.float()
+        tgt[..., ix] = torch.where(m > 0, rel[..., 0], tgt[..., ix])
+        tgt[..., iz] = torch.where(m > 0, rel[..., 1], tgt[..., iz])
+        mask[..., ix] = torch.maximum(mask[..., ix], m)
+        mask[..., iz] = torch.maximum(mask[..., iz], m)
+        state["world_on"] = True
 
     def denoise(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        tgt_n = None if mask is None else denoiser.normalize(tgt) * mask
         x0 = denoiser.forward_guided(x_t, t, text_emb, c_dir, tgt_n, mask, None, guidance, text_mask=text_mask)
+        if has_world:
+            refresh_world(x0)
+            tgt_n = denoiser.normalize(tgt) * mask
         if mask is not None:  # keep constrained channels exact in the running estimate
             x0 = mask * tgt_n + (1 - mask) * x0
         return x0
 
     x = sampler.sample(denoise, (B, num_frames, D), generator=generator, progress=progress)
+    out = denoiser.denormalize(x)
     if mask is not None:
-        x = mask * tgt_n + (1 - mask) * x
-    return denoiser.denormalize(x)
+        out = mask * tgt + (1 - mask) * out
+    return out

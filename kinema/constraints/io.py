@@ -1,0 +1,331 @@
+"""Constraint files: JSON <-> typed constraints (format in docs/constraints.md), and poses from BVH.
+
+A constraints file is a JSON list of objects, each with a ``type`` (``fullbody``, ``end-effector``,
+``left-hand``/``right-hand``/``left-foot``/``right-foot``, ``root2d``, ``foot-contact``), keyframes as
+``frame_indices`` or ``times`` and per-type arrays with one row per keyframe. Kimodo's field names are
+accepted (``smooth_root_2d``, ``global_root_heading``, ``local_joints_rot``, ``root_positions``).
+`load_constraints` validates everything against the model skeleton, fps and duration and raises
+`ConstraintError` naming the file, the constraint (counted from 0), the field and the reason.
+Keys starting with ``_`` (and ``comment``) are ignored, any other unknown key is an error (typos).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from kinema.constraints.types import (
+    CONSTRAINT_TYPES,
+    EFFECTOR_SHORTHANDS,
+    Constraint,
+    ConstraintError,
+    EndEffectorConstraint,
+    FullBodyConstraint,
+)
+from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_inverse, quat_mul, quat_normalize, quat_to_axis_angle
+from kinema.skeleton import Skeleton
+
+#: Per type: JSON key -> dataclass attribute (first key of each attribute is the one `save` writes).
+KEYS: dict[str, dict[str, str]] = {
+    "fullbody": {"local_joints_rot": "local_rotations", "local_rotations": "local_rotations",
+                 "root_positions": "root_positions", "smooth_root_2d": "smooth_root_2d"},
+    "end-effector": {"joint": "joint", "positions": "positions", "rotations": "rotations",
+                     "smooth_root_2d": "smooth_root_2d"},
+    "root2d": {"smooth_root_2d": "positions", "positions": "positions", "global_root_heading": "heading",
+               "heading": "heading", "dense": "dense"},
+    "foot-contact": {"contacts": "contacts", "foot_contacts": "contacts"},
+}
+COMMON_KEYS = ("type", "frame_indices", "times")
+BVH_KEYS = ("bvh", "source_frames", "scale", "recenter")
+#: Bone-length ratio (BVH / model) outside [1/LIMIT, LIMIT] means a wrong ``scale``.
+SCALE_RATIO_LIMIT = 4.0
+
+
+# ---------------------------------------------------------------------------- JSON values
+def _array(value, key: str, allow_bool: bool = False) -> torch.Tensor:
+    """Nested JSON lists of numbers -> float64 tensor (ragged rows and non-numbers are errors)."""
+
+    def shape_of(v) -> tuple:
+        if isinstance(v, list):
+            shapes = {shape_of(x) for x in v}
+            if len(shapes) > 1:
+                raise ConstraintError("rows have different lengths (ragged array)", field=key)
+            return (len(v), *(shapes.pop() if shapes else ()))
+        if (isinstance(v, bool) and not allow_bool) or not isinstance(v, int | float):
+            raise ConstraintError(f"expected numbers, found {json.dumps(v)}", field=key)
+        return ()
+
+    shape_of(value)
+    return torch.tensor(value, dtype=torch.float64)
+
+
+def _int_list(value, key: str) -> list[int]:
+    if not isinstance(value, list):
+        raise ConstraintError(f"expected a list of integers, got {json.dumps(value)}", field=key)
+    return value  # element checks (integers, range) happen in Constraint.frames
+
+
+def _resolve_file(path: str, base_dirs: Sequence[Path]) -> Path:
+    """A relative path is looked up in each of ``base_dirs`` in turn (the constraints file's folder,
+    then the current directory); an absolute one is used as is."""
+    p = Path(path).expanduser()
+    candidates = [p] if p.is_absolute() else [Path(b) / p for b in base_dirs]
+    for c in candidates:
+        if c.is_file():
+            return c
+    tried = ", ".join(str(c) for c in candidates)
+    raise ConstraintError(f"BVH file not found: {path} (looked for {tried})", field="bvh")
+
+
+# ---------------------------------------------------------------------------- poses from BVH
+def poses_from_bvh(path, source_frames: Sequence[int], *, skeleton: Skeleton, fps: float, scale: float = 1.0,
+                   recenter: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """Poses of a BVH clip on the model skeleton: ``(local axis-angle (K, J, 3), root position (K, 3))``.
+
+    The file is read with `kinema.io.bvh.read_bvh` (lengths times ``scale``), joints the model lacks
+    are pruned (Bandai's static ``joint_Root`` above ``Hips`` included), the clip is resampled to
+    ``fps`` and ``source_frames`` index that resampled clip. Joints are matched by name; the model's
+    joints missing from the file are an error naming them. Global rotations are kept exactly and
+    turned into local rotations with the model's parents. ``recenter`` shifts the poses horizontally
+    so that the first one's root is above the origin (where the model's training clips start).
+    """
+    from kinema.io.bvh import read_bvh
+
+    if isinstance(scale, bool) or not isinstance(scale, int | float) or not (math.isfinite(scale) and scale > 0):
+        raise ConstraintError(f"expected a positive number, got {scale!r}", field="scale")
+    if not Path(path).is_file():
+        raise ConstraintError(f"BVH file not found: {path}", field="bvh")
+    try:
+        motion = read_bvh(path, scale=float(scale))
+    except KinemaError as err:
+        raise ConstraintError(str(err), field="bvh") from None
+    names = motion.skeleton.names
+    missing = [n for n in skeleton.names if n not in names]
+    if missing:
+        raise ConstraintError(
+            f"{path}: joints of the model skeleton missing from the BVH (matched by name): {missing}", field="bvh")
+    extra = [n for n in names if n not in skeleton.names]
+    try:
+        motion = motion.prune(extra).resample(fps)
+    except KinemaError as err:
+        raise ConstraintError(f"{path}: cannot prune joints {extra}: {err}", field="bvh") from None
+    idx = [motion.skeleton.names.index(n) for n in skeleton.names]
+    model_len = float(skeleton.offsets.norm(dim=-1).sum())
+    clip_len = float(motion.skeleton.offsets[idx].norm(dim=-1).sum())
+    ratio = clip_len / max(model_len, 1e-12)
+    if not 1.0 / SCALE_RATIO_LIMIT <= ratio <= SCALE_RATIO_LIMIT:
+        raise ConstraintError(
+            f"the BVH skeleton is {ratio:.3g} times the model skeleton's size: wrong scale? "
+            "(use 0.01 for centimetre files such as Bandai Namco's)", field="scale")
+    frames = _int_list(list(source_frames), "source_frames")
+    T = motion.num_frames
+    frames = [int(f) if isinstance(f, numbers.Integral) and not isinstance(f, bool) else f for f in frames]
+    for f in frames:
+        if isinstance(f, bool) or not isinstance(f, numbers.Integral) or not 0 <= f < T:
+            raise ConstraintError(
+                f"source frame {f!r} is outside the clip ({T} frames at {fps:g} fps after resampling)",
+                field="source_frames")
+    if not frames:
+        raise ConstraintError("needs at least one frame", field="source_frames")
+    G, P = motion.global_transforms()
+    G, P = G[frames][:, idx], P[frames][:, idx]
+    parents = [max(p, 0) for p in skeleton.parents]
+    local = quat_mul(quat_inverse(G[:, parents]), G)
+    local[:, 0] = G[:, 0]
+    root = P[:, 0].clone()
+    if recenter:
+        root[:, [0, 2]] -= root[:1, [0, 2]].clone()
+    return quat_to_axis_angle(quat_normalize(local)), root
+
+
+# ---------------------------------------------------------------------------- parsing
+def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton | None = None,
+                     fps: float | None = None) -> Constraint:
+    """One JSON object -> constraint (not yet checked against skeleton/duration, except that a
+    ``bvh`` source needs ``skeleton`` and ``fps``). Errors carry field names as written in JSON."""
+    if not isinstance(obj, dict):
+        raise ConstraintError(f"expected a JSON object, got {type(obj).__name__}")
+    if "type" not in obj:
+        raise ConstraintError("missing required field", field="type")
+    kind = obj["type"]
+    joint = EFFECTOR_SHORTHANDS.get(kind) if isinstance(kind, str) else None
+    canonical = "end-effector" if joint else kind
+    if canonical not in CONSTRAINT_TYPES:
+        known = sorted([*CONSTRAINT_TYPES, *EFFECTOR_SHORTHANDS])
+        raise ConstraintError(f"unknown constraint type {json.dumps(kind)}; choose from {known}", field="type")
+    keys = KEYS[canonical]
+    allowed = {*COMMON_KEYS, *keys, *(BVH_KEYS if canonical == "fullbody" else ())}
+    kwargs: dict = {}
+    written: dict[str, str] = {}
+    for key, value in obj.items():
+        if key.startswith("_") or key == "comment":
+            continue
+        if key not in allowed:
+            raise ConstraintError(f"unknown field for type {kind!r}; expected one of {sorted(allowed)}", field=key)
+        attr = keys.get(key)
+        if attr is None:
+            continue
+        if attr in written:
+            raise ConstraintError(f"given twice (also as {written[attr]!r})", field=key)
+        written[attr] = key
+        if attr == "joint":
+            if not isinstance(value, str):
+                raise ConstraintError(f"expected a joint name, got {json.dumps(value)}", field=key)
+            if joint and value != joint:
+                raise ConstraintError(f"type {kind!r} already fixes the joint to {joint!r}", field=key)
+            kwargs[attr] = value
+        elif attr == "dense":
+            if not isinstance(value, bool):
+                raise ConstraintError(f"expected true or false, got {json.dumps(value)}", field=key)
+            kwargs[attr] = value
+        else:
+            kwargs[attr] = _array(value, key, allow_bool=canonical == "foot-contact")
+    if joint:
+        kwargs["joint"] = joint
+    elif canonical == "end-effector" and "joint" not in kwargs:
+        raise ConstraintError("missing required field", field="joint")
+    for key in ("frame_indices", "times"):
+        if key in obj:
+            kwargs[key] = _int_list(obj[key], key) if key == "frame_indices" else _time_list(obj[key])
+    if canonical == "fullbody" and "bvh" in obj:
+        return _fullbody_from_json(obj, kwargs, base_dirs, skeleton, fps)
+    for key in BVH_KEYS[1:]:
+        if key in obj:
+            raise ConstraintError("only used together with 'bvh'", field=key)
+    return CONSTRAINT_TYPES[canonical](**kwargs)
+
+
+def _time_list(value) -> list[float]:
+    if not isinstance(value, list) or any(isinstance(t, bool) or not isinstance(t, int | float) for t in value):
+        raise ConstraintError(f"expected a list of times in seconds, got {json.dumps(value)}", field="times")
+    return [float(t) for t in value]
+
+
+def _fullbody_from_json(obj: dict, kwargs: dict, base_dirs, skeleton, fps) -> FullBodyConstraint:
+    for key in ("local_joints_rot", "local_rotations", "root_positions"):
+        if key in obj:
+            raise ConstraintError(f"give either 'bvh' or 'local_joints_rot' + 'root_positions', not both "
+                                  f"('{key}' given)", field="bvh")
+    if skeleton is None or fps is None:
+        raise ConstraintError("reading poses from a BVH file needs the model skeleton and fps", field="bvh")
+    if not isinstance(obj["bvh"], str):
+        raise ConstraintError(f"expected a file path, got {json.dumps(obj['bvh'])}", field="bvh")
+    if "source_frames" not in obj:
+        raise ConstraintError("missing required field (frames of the BVH clip to take)", field="source_frames")
+    source = _int_list(obj["source_frames"], "source_frames")
+    recenter = obj.get("recenter", False)
+    if not isinstance(recenter, bool):
+        raise ConstraintError(f"expected true or false, got {json.dumps(recenter)}", field="recenter")
+    path = _resolve_file(obj["bvh"], base_dirs)
+    rots, root = poses_from_bvh(path, source, skeleton=skeleton, fps=fps, scale=obj.get("scale", 1.0),
+                                recenter=recenter)
+    if "frame_indices" not in kwargs and "times" not in kwargs:
+        kwargs["frame_indices"] = source
+    return FullBodyConstraint(local_rotations=rots, root_positions=root, **kwargs)
+
+
+def load_constraints(path_or_obj, skeleton: Skeleton, fps: float, num_frames: int | None = None, *,
+                     base_dir: str | os.PathLike | None = None) -> list[Constraint]:
+    """Read and validate constraints from a JSON file (path) or an already parsed JSON list.
+
+    ``num_frames`` is the motion length at ``fps`` (None: no upper bound is checked). Relative
+    ``bvh`` paths are looked up in ``base_dir`` if given, else in the file's folder then the current
+    directory. Raises `ConstraintError` (``file: constraint i (type): field 'f': reason``).
+    """
+    source = None
+    if isinstance(path_or_obj, str | os.PathLike):
+        path = Path(path_or_obj)
+        source = str(path_or_obj)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise ConstraintError("file not found", source=source) from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise ConstraintError(f"cannot read the file ({err})", source=source) from None
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as err:
+            raise ConstraintError(f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}",
+                                  source=source) from None
+        base_dirs = [Path(base_dir)] if base_dir is not None else [path.parent, Path.cwd()]
+    else:
+        data = path_or_obj
+        base_dirs = [Path(base_dir) if base_dir is not None else Path.cwd()]
+    if not isinstance(data, list):
+        raise ConstraintError(f"expected a JSON list of constraint objects, got {type(data).__name__}",
+                              source=source)
+    out = []
+    for i, obj in enumerate(data):
+        kind = obj.get("type") if isinstance(obj, dict) else None
+        kind = kind if isinstance(kind, str) else None
+        try:
+            c = parse_constraint(obj, base_dirs=base_dirs, skeleton=skeleton, fps=fps)
+            c.check(skeleton, fps, num_frames)
+        except ConstraintError as err:
+            rename = {}
+            if isinstance(obj, dict) and kind is not None:
+                canon = "end-effector" if kind in EFFECTOR_SHORTHANDS else kind
+                keys = KEYS.get(canon, {})
+                rename = {a: k for k, a in reversed(keys.items())}  # canonical key by default
+                rename.update({a: k for k, a in keys.items() if k in obj})  # the key the user wrote
+            raise err.at(index=i, kind=kind, source=source, rename=rename) from None
+        out.append(c)
+    return out
+
+
+# ---------------------------------------------------------------------------- writing
+def constraint_to_json(c: Constraint) -> dict:
+    """A constraint as a JSON-ready dict with the canonical keys (arrays as nested lists)."""
+    kind = c.kind
+    out: dict = {"type": kind}
+    if c.frame_indices is not None:
+        out["frame_indices"] = [int(f) for f in c.frame_indices]
+    if c.times is not None:
+        out["times"] = [float(t) for t in c.times]
+    written = set()
+    for key, attr in KEYS[kind].items():
+        if attr in written:
+            continue
+        written.add(attr)
+        value = getattr(c, attr)
+        if attr == "dense":
+            if value:
+                out[key] = True
+        elif isinstance(value, torch.Tensor):
+            out[key] = value.tolist()
+        elif value is not None:
+            out[key] = value
+    if isinstance(c, EndEffectorConstraint) and c.joint == "":
+        raise ConstraintError("missing required field", field="joint", kind=kind)
+    return out
+
+
+def dumps_constraints(constraints: Sequence[Constraint]) -> str:
+    """JSON text: one key per line, arrays on one line each (readable and diff-friendly)."""
+    blocks = []
+    for i, c in enumerate(constraints):
+        try:
+            d = constraint_to_json(c)
+            lines = [f"    {json.dumps(k)}: {json.dumps(v, allow_nan=False)}" for k, v in d.items()]
+        except ValueError:
+            raise ConstraintError("contains NaN or inf; nothing written", index=i, kind=c.kind) from None
+        except ConstraintError as err:
+            raise err.at(index=i) from None
+        blocks.append("  {\n" + ",\n".join(lines) + "\n  }")
+    return "[\n" + ",\n".join(blocks) + "\n]\n"
+
+
+def save_constraints(constraints: Sequence[Constraint], path: str | os.PathLike) -> Path:
+    """Write constraints as JSON atomically (temp file + rename); `load_constraints` reads it back."""
+    from kinema.io.npz import atomic_write_bytes
+
+    text = dumps_constraints(constraints)
+    atomic_write_bytes(Path(path), text.encode("utf-8"))
+    return Path(path)

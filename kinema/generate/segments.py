@@ -1,0 +1,104 @@
+"""Per-segment targets for generation: user constraints split over a timeline plus the joins.
+
+Frames of user constraints refer to the whole output. Segment k covers output frames
+``[start_k, end_k)`` and is generated with ``overlap`` extra leading frames that re-play the end of the
+motion so far (dense full-body keyframes: positions, velocities, rotations, root and heading).
+Every segment is sampled in a local frame whose first root sits over the origin, as in training; the
+shift is added back afterwards. Shapes: ``x_tgt``/``mask`` ``(T, D)``, ``world_xz (T, J, 2)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from kinema.motion.core import Motion
+from kinema.motion.features import FeatureLayout, motion_to_features
+
+
+@dataclass
+class PlannedSegment:
+    prompt: str
+    start: int  # first new output frame
+    end: int  # one past the last output frame
+    overlap: int  # leading frames shared with the previous segment
+
+    @property
+    def num_frames(self) -> int:
+        return self.end - self.start + self.overlap
+
+
+@dataclass
+class SegmentPlan:
+    """Everything needed to generate a timeline once the constraints are encoded."""
+
+    model: object  # KinemaModel (typed loosely to avoid an import cycle)
+    segments: list[PlannedSegment]
+    total_frames: int
+    x_tgt: torch.Tensor
+    mask: torch.Tensor
+    world_xz: torch.Tensor | None
+    world_mask: torch.Tensor | None
+    constraints: list = field(default_factory=list)
+    reports: list[dict] = field(default_factory=list)
+
+    @property
+    def layout(self) -> FeatureLayout:
+        return self.model.loaded.layout
+
+    def segment_targets(self, k: int, motion: Motion | None, heading: float):
+        """(x_tgt, mask, world_xz, world_mask, c_dir, shift_xz) for segment k in its local frame."""
+        seg = self.segments[k]
+        lo = seg.start - seg.overlap
+        x_tgt = self.x_tgt[lo : seg.end].clone()
+        mask = self.mask[lo : seg.end].clone()
+        wxz = None if self.world_xz is None else self.world_xz[lo : seg.end].clone()
+        wm = None if self.world_mask is None else self.world_mask[lo : seg.end].clone()
+        sl = self.layout.slices
+        if motion is None:
+            shift = torch.zeros(2)
+            c_dir = torch.tensor([math.cos(heading), math.sin(heading)])
+            hd = mask[0, sl["heading"]]
+            if bool(hd.all()):  # a heading constraint on the first frame wins
+                c_dir = x_tgt[0, sl["heading"]].float()
+        else:
+            prev = motion_to_features(motion).float()
+            join = prev[motion.num_frames - seg.overlap :]
+            shift = join[0, [0, 2]].clone()
+            c_dir = join[0, sl["heading"]].clone()
+            channels = torch.zeros(self.layout.dim, dtype=torch.bool)
+            for name in ("root_pos", "heading", "joint_pos", "joint_vel", "joint_rot"):
+                channels[sl[name]] = True
+            x_tgt[: seg.overlap, channels] = join[:, channels]
+            mask[: seg.overlap, channels] = 1.0
+        root = sl["root_pos"]
+        x_tgt[:, root.start] -= shift[0]
+        x_tgt[:, root.start + 2] -= shift[1]
+        if wxz is not None:
+            wxz = wxz - shift
+        return x_tgt, mask, wxz, wm, c_dir, shift
+
+    def postprocess(self, motion: Motion) -> Motion:
+        from kinema.generate.targets import run_postprocess
+
+        motion, report = run_postprocess(motion, self.constraints, self.model)
+        self.reports.append(report)
+        return motion
+
+
+def plan_segments(model, segments, constraints, total_frames: int) -> SegmentPlan:
+    """Frame ranges for every segment and the encoded user constraints for the whole output."""
+    from kinema.generate.targets import encode_user_constraints
+
+    fps = model.fps
+    overlap = max(1, round(0.5 * fps))
+    planned, start = [], 0
+    for i, s in enumerate(segments):
+        n = max(1, round(s.seconds * fps))
+        ov = 0 if i == 0 else min(overlap, start)
+        planned.append(PlannedSegment(s.prompt, start, start + n, ov))
+        start += n
+    cons, x_tgt, mask, wxz, wm = encode_user_constraints(model, constraints, total_frames)
+    return SegmentPlan(model, planned, total_frames, x_tgt, mask, wxz, wm, cons)

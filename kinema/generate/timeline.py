@@ -1,0 +1,91 @@
+"""Multi-prompt timelines (Kimodo Sec. 4.4): segments generated in sequence, joined by overlaps.
+
+Each new segment starts with ``overlap`` frames copied from the end of the previous motion and
+constrained as dense full-body keyframes (positions, rotations, root and heading), so the model
+continues the pose with consistent velocities; afterwards the shared frames are cross-faded
+(root lerp, rotation slerp with raised-cosine weights) so the join has no seam.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
+from kinema.motion.core import Motion
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One prompt held for ``seconds``."""
+
+    prompt: str
+    seconds: float
+
+
+def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
+    """Segments from a JSON list of ``{"prompt": str, "seconds": float}`` (or ``[prompt, seconds]``)."""
+    if isinstance(obj, (str, Path)) and Path(obj).suffix.lower() == ".json":
+        path = Path(obj)
+        if not path.exists():
+            raise KinemaError(f"{path}: no such timeline file")
+        try:
+            obj = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise KinemaError(f"{path}:{err.lineno}: not valid JSON ({err.msg})") from None
+        source = str(path)
+    if not isinstance(obj, list) or not obj:
+        raise KinemaError(f"{source}: a timeline is a non-empty JSON list of {{'prompt', 'seconds'}} objects")
+    out = []
+    for i, item in enumerate(obj):
+        if isinstance(item, Segment):
+            out.append(item)
+            continue
+        if isinstance(item, (list, tuple)) and len(item) == 2:
+            item = {"prompt": item[0], "seconds": item[1]}
+        if not isinstance(item, dict):
+            raise KinemaError(f"{source}: segment {i}: expected an object with 'prompt' and 'seconds'")
+        prompt, seconds = item.get("prompt"), item.get("seconds")
+        if not isinstance(prompt, str):
+            raise KinemaError(f"{source}: segment {i}: field 'prompt' must be a string")
+        if not isinstance(seconds, (int, float)) or not math.isfinite(seconds) or seconds <= 0:
+            raise KinemaError(f"{source}: segment {i}: field 'seconds' must be a positive number, got {seconds!r}")
+        out.append(Segment(prompt, float(seconds)))
+    return out
+
+
+def split_long(prompt: str, seconds: float, max_seconds: float) -> list[Segment]:
+    """A single prompt longer than the model's window becomes equal segments of the same prompt."""
+    n = max(1, math.ceil(seconds / max_seconds - 1e-9))
+    return [Segment(prompt, seconds / n)] * n
+
+
+def crossfade(prev: Motion, new: Motion, overlap: int) -> Motion:
+    """``prev`` followed by ``new`` whose first ``overlap`` frames re-play prev's last ``overlap`` frames.
+
+    The shared frames are blended from prev (weight 1 at the start) to new (weight 1 at the end)."""
+    if overlap <= 0:
+        return prev.concatenate(new)
+    head = prev.crop(0, prev.num_frames - overlap)
+    a = prev.crop(prev.num_frames - overlap)
+    b = new.crop(0, overlap)
+    w = 0.5 - 0.5 * torch.cos(math.pi * (torch.arange(overlap, dtype=a.dtype) + 1) / (overlap + 1))
+    qa = quat_make_continuous(a.local_rotations, dim=0)
+    qb = b.local_rotations
+    # align hemispheres frame by frame before slerp
+    sign = torch.where((qa * qb).sum(-1, keepdim=True) < 0, -1.0, 1.0).to(qb.dtype)
+    rots = quat_slerp(qa, qb * sign, w[:, None])
+    root = a.root_translation * (1 - w[:, None]) + b.root_translation * w[:, None]
+    contacts = None
+    if a.foot_contacts is not None and b.foot_contacts is not None:
+        contacts = torch.where(w[:, None] < 0.5, a.foot_contacts, b.foot_contacts)
+    blended = Motion(prev.skeleton, prev.fps, root, quat_normalize(rots), contacts)
+    out = head.concatenate(blended) if head.num_frames else blended
+    if new.num_frames > overlap:
+        out = out.concatenate(new.crop(overlap))
+    return out

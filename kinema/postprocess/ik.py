@@ -1,0 +1,274 @@
+"""Analytic two-bone IK (batched over frames) and the correction-blending helper of post-processing.
+
+A two-bone chain is three joints ``a -> b -> c`` where ``b``'s parent is ``a`` and ``c``'s parent is
+``b`` (hip-knee-ankle, upper_arm-elbow-hand). Given a target for ``c`` on every frame, the solver
+(all in float64, then cast back):
+
+1. bends ``b`` about its current hinge axis so that ``|c - a|`` equals the (clamped) target distance
+   (law of cosines; the hinge axis is the current bend normal, so the knee keeps its bend sense),
+2. swings the chain at ``a`` (shortest arc) so that ``c`` lies on the line from ``a`` to the target,
+3. twists the chain about that line so that ``b`` points to the bend side: the current knee/elbow
+   position by default (the bend plane is kept), or a pole point when given.
+
+Targets beyond reach land on the segment from ``a`` towards the target at the full chain length (or
+at ``|l1 - l2|`` when too close). ``weight`` moves the target from ``c``'s current position
+(weight 0: frame untouched, bit for bit) to the given target (weight 1: reached exactly).
+
+``spread_corrections`` turns corrections known on a few frames into a smooth per-frame field that is
+exact on those frames and fades out with a raised cosine: foot locking and the exact-constraint
+pass both blend their edits with it so nothing pops.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.geometry.rotations import (
+    axis_angle_to_quat,
+    quat_between,
+    quat_identity,
+    quat_inverse,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+    quat_slerp,
+)
+from kinema.kinematics import forward_kinematics
+from kinema.motion.core import Motion
+from kinema.skeleton import Skeleton
+
+_LIMBS = {"leg": ("hip", "knee", "ankle"), "arm": ("upper_arm", "elbow", "hand")}
+
+
+def _unit(v: torch.Tensor, eps: float = 1e-12) -> torch.Tensor:
+    return v / v.norm(dim=-1, keepdim=True).clamp_min(eps)
+
+
+def _dot(u: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    return (u * v).sum(-1, keepdim=True)
+
+
+def _any_perpendicular(v: torch.Tensor) -> torch.Tensor:
+    """A unit vector perpendicular to each ``v (..., 3)`` (deterministic, for degenerate fallbacks)."""
+    basis = torch.nn.functional.one_hot(v.abs().argmin(-1), 3).to(v.dtype)
+    return _unit(torch.linalg.cross(v, basis, dim=-1))
+
+
+def limb_chain(skeleton: Skeleton, limb: str) -> tuple[int, int, int]:
+    """Joint indices ``(a, b, c)`` of ``left_leg``/``right_leg`` (hip, knee, ankle) or arms (upper arm,
+    elbow, hand), found through the skeleton's roles."""
+    side, _, kind = limb.partition("_")
+    if side not in ("left", "right") or kind not in _LIMBS:
+        raise KinemaError(f"unknown limb {limb!r}: use left_leg, right_leg, left_arm or right_arm")
+    roles = skeleton.require_roles([f"{side}_{r}" for r in _LIMBS[kind]])
+    chain = tuple(roles[f"{side}_{r}"] for r in _LIMBS[kind])
+    check_chain(skeleton, chain)
+    return chain  # type: ignore[return-value]
+
+
+def chain_for_joint(skeleton: Skeleton, joint: int | str) -> tuple[int, int, int]:
+    """The two-bone chain ending at ``joint``: (grandparent, parent, joint)."""
+    c = skeleton.index(joint) if isinstance(joint, str) else int(joint)
+    b = skeleton.parents[c]
+    a = skeleton.parents[b] if b >= 0 else -1
+    if a < 0:
+        raise KinemaError(f"joint {skeleton.names[c]!r} is too close to the root for a two-bone chain")
+    return a, b, c
+
+
+def check_chain(skeleton: Skeleton, chain: Sequence[int]) -> None:
+    a, b, c = chain
+    if skeleton.parents[b] != a or skeleton.parents[c] != b:
+        names = [skeleton.names[j] for j in chain]
+        raise KinemaError(f"{names} is not a parent -> child -> grandchild chain")
+
+
+def _axis_angle_quat(axis: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    return axis_angle_to_quat(_unit(axis) * angle)
+
+
+def two_bone_ik(
+    local_rotations: torch.Tensor,
+    root_translation: torch.Tensor,
+    skeleton: Skeleton,
+    chain: Sequence[int],
+    target: torch.Tensor,
+    weight: torch.Tensor | None = None,
+    pole: torch.Tensor | None = None,
+    fallback_bend: torch.Tensor | None = None,
+    end_rotation: torch.Tensor | None = None,
+    keep_end_rotation: bool = True,
+) -> torch.Tensor:
+    """New local rotations ``(T, J, 4)`` moving joint ``c`` of ``chain = (a, b, c)`` onto ``target``.
+
+    ``target (T, 3)`` world metres; ``weight (T,)`` in [0, 1] (default 1); ``pole (T, 3)`` optional
+    world points the middle joint should point towards (default: its current position, which keeps
+    the bend plane); ``fallback_bend (T, 3)`` or ``(3,)`` a world direction used only where the limb is
+    straight and the bend side is otherwise undefined; ``end_rotation (T, 4)`` optional global rotation
+    for ``c`` (slerped in by ``weight``); without it ``c`` keeps its global rotation when
+    ``keep_end_rotation`` (feet stay flat, hands keep their orientation), else rides along with ``b``.
+    Only the local rotations of ``a``, ``b`` and ``c`` change.
+    """
+    check_chain(skeleton, chain)
+    a, b, c = chain
+    dtype = local_rotations.dtype
+    L = local_rotations.to(torch.float64)
+    T = L.shape[0]
+    G, P = forward_kinematics(L, root_translation.to(torch.float64), skeleton.offsets, skeleton.parents)
+    pa, pb, pc = P[:, a], P[:, b], P[:, c]
+    w = torch.ones(T, dtype=torch.float64) if weight is None else torch.as_tensor(weight).to(torch.float64)
+    w = w.clamp(0.0, 1.0)
+    tgt = pc + w[:, None] * (torch.as_tensor(target).to(torch.float64) - pc)
+    l1, l2 = skeleton.offsets[b].norm().item(), skeleton.offsets[c].norm().item()
+
+    # target direction and clamped distance
+    d = tgt - pa
+    D = d.norm(dim=-1, keepdim=True)
+    dhat = torch.where(D > 1e-9, d / D.clamp_min(1e-12), _unit(pc - pa))
+    Dc = D.clamp(abs(l1 - l2), l1 + l2)
+
+    # bend side: perpendicular part of the pole (current middle joint by default)
+    hint = (pb if pole is None else torch.as_tensor(pole).to(torch.float64)) - pa
+    fb = _any_perpendicular(dhat) if fallback_bend is None else torch.as_tensor(fallback_bend).to(torch.float64)
+    fb = fb.expand_as(dhat)
+    fb_perp = _unit(fb - _dot(fb, dhat) * dhat)
+    perp = hint - _dot(hint, dhat) * dhat
+    bend = _unit(perp + 1e-10 * fb_perp)  # the fallback only decides where perp vanishes
+
+    # 1. knee angle about the current hinge axis (theta = angle between ab and bc, 0 when straight)
+    ab, bc = pb - pa, pc - pb
+    n0 = torch.linalg.cross(ab, bc, dim=-1)
+    s0 = n0.norm(dim=-1, keepdim=True)
+    straight_axis = torch.linalg.cross(bend, ab, dim=-1)  # bends bc towards -bend, knee towards +bend
+    straight_axis = torch.where(straight_axis.norm(dim=-1, keepdim=True) > 1e-9, straight_axis, _any_perpendicular(ab))
+    n0 = torch.where(s0 > 1e-9 * l1 * l2, n0, straight_axis)
+    theta0 = torch.atan2(s0, _dot(ab, bc))
+    cos1 = ((Dc**2 - l1 * l1 - l2 * l2) / (2 * l1 * l2)).clamp(-1.0, 1.0)
+    q_knee = _axis_angle_quat(n0, torch.acos(cos1) - theta0)
+    c1 = pb + quat_rotate(q_knee, bc)
+
+    # 2. swing at a so that c lies along the target direction
+    q_swing = quat_between(c1 - pa, dhat)
+    # 3. twist about the target line so the middle joint points to the bend side
+    kb = quat_rotate(q_swing, ab)
+    kperp = kb - _dot(kb, dhat) * dhat
+    kn = kperp.norm(dim=-1, keepdim=True)
+    phi = torch.atan2(_dot(dhat, torch.linalg.cross(kperp, bend, dim=-1)), _dot(kperp, bend))
+    phi = phi * (kn / (0.01 * l1)).clamp(max=1.0)  # undefined when the solved limb is straight: fade it out
+    q_twist = _axis_angle_quat(dhat, phi)
+
+    q_a = quat_mul(q_twist, q_swing)
+    Ga_new = quat_mul(q_a, G[:, a])
+    Gb_new = quat_mul(q_a, quat_mul(q_knee, G[:, b]))
+    if end_rotation is not None:
+        Gc_new = quat_slerp(G[:, c], torch.as_tensor(end_rotation).to(torch.float64), w)
+    elif keep_end_rotation:
+        Gc_new = G[:, c]
+    else:
+        Gc_new = quat_mul(q_a, quat_mul(q_knee, G[:, c]))
+    pa_idx = skeleton.parents[a]
+    Gpa = G[:, pa_idx] if pa_idx >= 0 else quat_identity(T, dtype=torch.float64)
+
+    out = L.clone()
+    out[:, a] = quat_normalize(quat_mul(quat_inverse(Gpa), Ga_new))
+    out[:, b] = quat_normalize(quat_mul(quat_inverse(Ga_new), Gb_new))
+    out[:, c] = quat_normalize(quat_mul(quat_inverse(Gb_new), Gc_new))
+    active = (w > 0)[:, None, None]
+    return torch.where(active, out, L).to(dtype)
+
+
+def forward_direction(motion: Motion) -> torch.Tensor:
+    """Per-frame facing direction ``(T, 3)`` from the hips (world +Z where the rig has no hip roles)."""
+    roles = motion.skeleton.roles
+    T = motion.num_frames
+    if "left_hip" not in roles or "right_hip" not in roles:
+        return torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).expand(T, 3)
+    P = motion.positions.to(torch.float64)
+    v = P[:, roles["right_hip"]] - P[:, roles["left_hip"]]
+    fwd = torch.stack([v[:, 2], torch.zeros_like(v[:, 0]), -v[:, 0]], dim=-1)  # +Y cross (right - left)
+    return _unit(fwd)
+
+
+def solve_ik(
+    motion: Motion,
+    joint_or_chain: int | str | Sequence[int],
+    target: torch.Tensor,
+    weight: torch.Tensor | None = None,
+    end_rotation: torch.Tensor | None = None,
+    pole: torch.Tensor | None = None,
+    keep_end_rotation: bool = True,
+) -> Motion:
+    """``two_bone_ik`` on a Motion: the chain is given, a limb name, or the joint it ends at.
+
+    Straight limbs bend forward (knees) or backward (elbows) relative to the hips' facing.
+    """
+    skel = motion.skeleton
+    if isinstance(joint_or_chain, str) and joint_or_chain.endswith(("_leg", "_arm")):
+        chain = limb_chain(skel, joint_or_chain)
+    elif isinstance(joint_or_chain, int | str):
+        chain = chain_for_joint(skel, joint_or_chain)
+    else:
+        chain = tuple(int(j) for j in joint_or_chain)
+    hands = {skel.roles.get("left_hand"), skel.roles.get("right_hand")}
+    elbows = {skel.roles.get("left_elbow"), skel.roles.get("right_elbow")}
+    fwd = forward_direction(motion)
+    fallback = -fwd if (chain[2] in hands or chain[1] in elbows) else fwd
+    rots = two_bone_ik(
+        motion.local_rotations, motion.root_translation, skel, chain, target, weight, pole, fallback,
+        end_rotation, keep_end_rotation,
+    )
+    return Motion(skel, motion.fps, motion.root_translation, rots, motion.foot_contacts)
+
+
+# ----------------------------------------------------------------------------- correction blending
+
+
+def raised_cosine(x: torch.Tensor) -> torch.Tensor:
+    """``0.5 (1 + cos(pi x))`` for ``|x| < 1``, else 0: 1 at the centre, flat ends, no kink at 0."""
+    x = x.abs()
+    return torch.where(x < 1, 0.5 * (1 + torch.cos(math.pi * x.clamp(max=1.0))), torch.zeros_like(x))
+
+
+def spread_corrections(
+    frames: torch.Tensor, values: torch.Tensor, num_frames: int, radius: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-frame field ``(T, C)`` and envelope ``(T,)`` from corrections ``values (K, C)`` at ``frames``.
+
+    The field equals ``values[k]`` exactly on ``frames[k]``, eases between neighbouring corrected
+    frames (raised-cosine interpolation) and fades to zero within ``radius`` frames of the nearest
+    one (raised-cosine envelope), so edits blend in and out without a step. Repeated frames keep the
+    last value.
+    """
+    frames = torch.as_tensor(frames, dtype=torch.long).reshape(-1)
+    values = torch.as_tensor(values)
+    T = num_frames
+    if frames.numel() == 0:
+        return values.new_zeros(T, values.shape[-1]), values.new_zeros(T)
+    # sort and keep the last occurrence of repeated frames
+    order = torch.argsort(frames, stable=True)
+    f, v = frames[order], values[order]
+    keep = torch.ones_like(f, dtype=torch.bool)
+    keep[:-1] = f[1:] != f[:-1]
+    f, v = f[keep], v[keep]
+    K = f.numel()
+    t = torch.arange(T)
+    iR = torch.searchsorted(f, t)  # first corrected frame >= t
+    iL = iR - 1
+    hasL, hasR = iL >= 0, iR < K
+    fL, fR = f[iL.clamp(min=0)], f[iR.clamp(max=K - 1)]
+    r = max(float(radius), 1e-6)
+    rampL = torch.where(hasL, raised_cosine((t - fL).to(v.dtype) / r), torch.zeros((), dtype=v.dtype))
+    rampR = torch.where(hasR, raised_cosine((fR - t).to(v.dtype) / r), torch.zeros((), dtype=v.dtype))
+    env = torch.maximum(rampL, rampR)
+    s = torch.where(
+        hasL & hasR,
+        (t - fL).to(v.dtype) / (fR - fL).clamp(min=1).to(v.dtype),
+        torch.where(hasL, 0.0, 1.0).to(v.dtype),
+    )
+    h = (0.5 - 0.5 * torch.cos(math.pi * s))[:, None]
+    field = ((1 - h) * v[iL.clamp(min=0)] + h * v[iR.clamp(max=K - 1)]) * env[:, None]
+    return field, env
