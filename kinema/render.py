@@ -97,7 +97,9 @@ class _Scene:
         spans = np.linalg.norm(shown.max(1) - shown.min(1), axis=-1)
         self.span = max(float(np.median(spans)), 0.2)  # ~1.5 m for an adult standing
         self.head = roles.get("head")
-        self.neck = roles.get("neck", sk.parents[self.head] if self.head is not None else None)
+        self.neck = roles.get("neck", sk.parents[self.head] if self.head is not None else -1)
+        if self.head is None or self.neck < 0 or self.head in hidden:
+            self.head = None  # no head joint (or no joint below it): no head circle, no nose
         self.head_r = 0.065 * self.span
         self.contacts, self.contact_joints = None, []
         if motion.foot_contacts is not None:
@@ -293,7 +295,8 @@ def _legend(fig, scene: _Scene, title: str | None, top: float, rows: int = 1) ->
 
     y_title = 1 - top / (2 * rows)
     if title:
-        fig.text(0.01, y_title, title, ha="left", va="center", fontsize=10, weight="bold")
+        fig.text(0.01, y_title, title, ha="left", va="center", fontsize=10 if len(title) <= 40 else 8,
+                 weight="bold")
     keys = [Line2D([], [], color=SIDE_COLOURS["L"], lw=3, label="left"),
             Line2D([], [], color=SIDE_COLOURS["R"], lw=3, label="right")]
     if scene.contacts is not None:
@@ -330,6 +333,7 @@ def _check_out(path, suffix: str) -> Path:
 def render_filmstrip(motion, path, frames: int = 8, targets=None, title: str | None = None) -> Path:
     """Draw ``frames`` evenly spaced poses side by side into a PNG at ``path`` (written atomically)."""
     from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
     path = _check_out(path, ".png")
     if not 1 <= int(frames) <= 48:
@@ -347,8 +351,6 @@ def render_filmstrip(motion, path, frames: int = 8, targets=None, title: str | N
         rect = [(x0 + gap + k * (pw + gap)) / fig.get_figwidth(), gap / fh, pw / fig.get_figwidth(), ph / fh]
         ax = fig.add_axes(rect)
         _Panel(scene, ax, True, aspect, tol, lw=2.6).update(int(t))
-        from matplotlib.patches import Rectangle
-
         ax.add_patch(Rectangle((0, 0), 1, 1, transform=ax.transAxes, fill=False, ec="#d5d9df", lw=0.8, zorder=10))
     _legend(fig, scene, title, top / fh)
     buf = io.BytesIO()

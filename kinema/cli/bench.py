@@ -22,6 +22,7 @@ def register(sub) -> None:
     targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
     _register_bvh(targets)
     _register_train(targets)
+    _register_generate(targets)
 
 
 def _positive_int(text: str) -> int:
@@ -158,4 +159,32 @@ def _run_train(args: argparse.Namespace) -> int:
             for c in tqdm(args.configs, desc="bench train")]
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     print(format_table(rows))
+    return 0
+
+
+# ----------------------------------------------------------------------------- bench generate
+
+
+def _register_generate(targets) -> None:
+    p = targets.add_parser("generate", help="seconds per motion vs DDIM steps, constraints, post-processing")
+    p.add_argument("--model", default="default", help="'default' or a run/checkpoint folder")
+    p.add_argument("--steps", type=_positive_int, nargs="+", default=[10, 25, 50, 100])
+    p.add_argument("--seconds", type=float, default=5.0)
+    p.add_argument("--repeats", type=_positive_int, default=2)
+    p.add_argument("--no-cold-start", action="store_true")
+    p.add_argument("--threads", type=_positive_int, default=None)
+    p.set_defaults(func=_run_generate)
+
+
+def _run_generate(args: argparse.Namespace) -> int:
+    import torch
+
+    from kinema.bench.generate import bench_generate, cold_start, format_table
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    rows = bench_generate(args.model, args.steps, args.seconds, args.repeats)
+    cold = None if args.no_cold_start else cold_start(args.model, seconds=args.seconds)
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, model {args.model}")
+    print(format_table(rows, cold, args.seconds))
     return 0

@@ -27,6 +27,7 @@ from kinema.constraints.types import (
     ConstraintError,
     EndEffectorConstraint,
     FullBodyConstraint,
+    frames_from_times,
 )
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_inverse, quat_mul, quat_normalize, quat_to_axis_angle
@@ -43,7 +44,7 @@ KEYS: dict[str, dict[str, str]] = {
     "foot-contact": {"contacts": "contacts", "foot_contacts": "contacts"},
 }
 COMMON_KEYS = ("type", "frame_indices", "times")
-BVH_KEYS = ("bvh", "source_frames", "scale", "recenter")
+BVH_KEYS = ("bvh", "source_frames", "source_times", "scale", "recenter")
 #: Bone-length ratio (BVH / model) outside [1/LIMIT, LIMIT] means a wrong ``scale``.
 SCALE_RATIO_LIMIT = 4.0
 
@@ -85,13 +86,15 @@ def _resolve_file(path: str, base_dirs: Sequence[Path]) -> Path:
 
 
 # ---------------------------------------------------------------------------- poses from BVH
-def poses_from_bvh(path, source_frames: Sequence[int], *, skeleton: Skeleton, fps: float, scale: float = 1.0,
-                   recenter: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skeleton, fps: float,
+                   scale: float = 1.0, recenter: bool = False,
+                   source_times: Sequence[float] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Poses of a BVH clip on the model skeleton: ``(local axis-angle (K, J, 3), root position (K, 3))``.
 
     The file is read with `kinema.io.bvh.read_bvh` (lengths times ``scale``), joints the model lacks
     are pruned (Bandai's static ``joint_Root`` above ``Hips`` included), the clip is resampled to
-    ``fps`` and ``source_frames`` index that resampled clip. Joints are matched by name; the model's
+    ``fps`` and ``source_frames`` index that resampled clip (or ``source_times``: seconds into the clip,
+    frame ``floor(t * fps + 0.5)``). Joints are matched by name; the model's
     joints missing from the file are an error naming them. Global rotations are kept exactly and
     turned into local rotations with the model's parents. ``recenter`` shifts the poses horizontally
     so that the first one's root is above the origin (where the model's training clips start).
@@ -124,6 +127,13 @@ def poses_from_bvh(path, source_frames: Sequence[int], *, skeleton: Skeleton, fp
         raise ConstraintError(
             f"the BVH skeleton is {ratio:.3g} times the model skeleton's size: wrong scale? "
             "(use 0.01 for centimetre files such as Bandai Namco's)", field="scale")
+    if (source_frames is None) == (source_times is None):
+        raise ConstraintError("give exactly one of 'source_frames' and 'source_times'", field="source_frames")
+    if source_times is not None:
+        times = _time_list(list(source_times), "source_times")
+        if any(not math.isfinite(t) or t < 0 for t in times):
+            raise ConstraintError(f"times must be finite and not negative, got {times}", field="source_times")
+        source_frames = frames_from_times(times, fps)
     frames = _int_list(list(source_frames), "source_frames")
     T = motion.num_frames
     frames = [int(f) if isinstance(f, numbers.Integral) and not isinstance(f, bool) else f for f in frames]
@@ -202,9 +212,9 @@ def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton 
     return CONSTRAINT_TYPES[canonical](**kwargs)
 
 
-def _time_list(value) -> list[float]:
-    if not isinstance(value, list) or any(isinstance(t, bool) or not isinstance(t, int | float) for t in value):
-        raise ConstraintError(f"expected a list of times in seconds, got {json.dumps(value)}", field="times")
+def _time_list(value, key: str = "times") -> list[float]:
+    if not isinstance(value, list) or any(isinstance(t, bool) or not isinstance(t, numbers.Real) for t in value):
+        raise ConstraintError(f"expected a list of times in seconds, got {value!r}", field=key)
     return [float(t) for t in value]
 
 
@@ -217,17 +227,22 @@ def _fullbody_from_json(obj: dict, kwargs: dict, base_dirs, skeleton, fps) -> Fu
         raise ConstraintError("reading poses from a BVH file needs the model skeleton and fps", field="bvh")
     if not isinstance(obj["bvh"], str):
         raise ConstraintError(f"expected a file path, got {json.dumps(obj['bvh'])}", field="bvh")
-    if "source_frames" not in obj:
-        raise ConstraintError("missing required field (frames of the BVH clip to take)", field="source_frames")
-    source = _int_list(obj["source_frames"], "source_frames")
+    if ("source_frames" in obj) == ("source_times" in obj):
+        raise ConstraintError("give exactly one of 'source_frames' and 'source_times' (the poses of the BVH "
+                              "clip to take)", field="source_frames")
+    source = _int_list(obj["source_frames"], "source_frames") if "source_frames" in obj else None
+    source_times = _time_list(obj["source_times"], "source_times") if "source_times" in obj else None
     recenter = obj.get("recenter", False)
     if not isinstance(recenter, bool):
         raise ConstraintError(f"expected true or false, got {json.dumps(recenter)}", field="recenter")
     path = _resolve_file(obj["bvh"], base_dirs)
     rots, root = poses_from_bvh(path, source, skeleton=skeleton, fps=fps, scale=obj.get("scale", 1.0),
-                                recenter=recenter)
+                                recenter=recenter, source_times=source_times)
     if "frame_indices" not in kwargs and "times" not in kwargs:
-        kwargs["frame_indices"] = source
+        if source is not None:
+            kwargs["frame_indices"] = source
+        else:
+            kwargs["times"] = source_times
     return FullBodyConstraint(local_rotations=rots, root_positions=root, **kwargs)
 
 

@@ -184,7 +184,9 @@ def resolve_joint(skeleton: Skeleton, joint: str) -> int:
     try:
         return skeleton.index(joint)
     except SkeletonError:
-        roles = sorted(skeleton.roles)
+        roles = set(skeleton.roles)
+        roles |= {f"{side}_foot" for side in ("left", "right") if f"{side}_ankle" in roles}
+        roles = sorted(roles)
         raise ConstraintError(
             f"unknown joint or role {joint!r} (roles: {roles}; joints: {list(skeleton.names)})", field="joint"
         ) from None
@@ -210,20 +212,22 @@ class FullBodyConstraint(Constraint):
     smooth_root_2d: torch.Tensor | None = None
 
     @classmethod
-    def from_bvh(cls, path, source_frames: Sequence[int], frames: Sequence[int] | None = None, *,
+    def from_bvh(cls, path, source_frames: Sequence[int] | None, frames: Sequence[int] | None = None, *,
                  skeleton: Skeleton, fps: float, scale: float = 1.0, times: Sequence[float] | None = None,
-                 recenter: bool = False) -> FullBodyConstraint:
+                 source_times: Sequence[float] | None = None, recenter: bool = False) -> FullBodyConstraint:
         """Poses taken from a BVH file (the in-betweening workflow); see kinema.constraints.io.poses_from_bvh.
 
-        ``source_frames`` index the clip *after* resampling to ``fps``; the poses go to ``frames``
-        (or ``times``; default: the same frame numbers). Joints are matched by name.
+        ``source_frames`` index the clip *after* resampling to ``fps`` (or ``source_times``, seconds);
+        the poses go to ``frames`` (or ``times``; default: the same frames/times as the source). Joints
+        are matched by name; ``scale`` multiplies the file's lengths (0.01 for centimetres).
         """
         from kinema.constraints.io import poses_from_bvh
 
         rots, root = poses_from_bvh(path, source_frames, skeleton=skeleton, fps=fps, scale=scale,
-                                    recenter=recenter)
+                                    recenter=recenter, source_times=source_times)
         if frames is None and times is None:
-            frames = list(source_frames)
+            frames = None if source_frames is None else list(source_frames)
+            times = None if source_times is None else list(source_times)
         return cls(frame_indices=frames, times=times, local_rotations=rots, root_positions=root)
 
 

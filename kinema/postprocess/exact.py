@@ -1,0 +1,365 @@
+"""Hitting kinematic constraints exactly (Kimodo Sec. 4.4: "a short optimization on the output motion
+to ensure it *exactly* hits the kinematic constraints").
+
+Two stages:
+
+(a) ``optimise``: Adam on per-frame axis-angle deltas of every local rotation (post-multiplied) and on
+    root translation offsets, minimising constraint residuals + closeness to the input + the
+    acceleration of the change in joint positions (so the edit is smooth, the input's own motion is
+    not penalised). Deltas are multiplied by a raised-cosine envelope around the constrained frames,
+    so frames far from every constraint stay bit-for-bit unchanged.
+(b) ``exact_pass``: sets what is constrained, in an order where later steps cannot undo earlier ones:
+    1. full-body keyframes (rotation targets for every joint): exact local rotations and root
+       translation, the corrections blended into neighbouring frames (kinema.postprocess.ik
+       ``spread_corrections``, raised cosine over ``blend_seconds``);
+    2. smoothed-root x/z waypoints: a smooth displacement of the root's x/z (minimum squared
+       acceleration, exactly zero outside the Gaussian's reach of the waypoints) chosen so the
+       smoothed pelvis passes through every waypoint while keyframe frames stay pinned;
+    3. end effectors: two-bone IK on the joint's chain for positions (toes move their foot rigidly via
+       the leg chain), the joint's global rotation for rotations; not applied on keyframe frames,
+       and never touching the pelvis, so steps 1-2 stay exact.
+
+``hit_constraints`` runs both and reports residuals before/after per constraint kind.
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+
+import torch
+
+from kinema.geometry.rotations import (
+    axis_angle_to_quat,
+    quat_inverse,
+    quat_mul,
+    quat_normalize,
+    quat_to_axis_angle,
+)
+from kinema.kinematics import forward_kinematics
+from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
+from kinema.postprocess import PostTargets
+from kinema.postprocess.ik import limb_chain, raised_cosine, solve_ik, spread_corrections
+
+
+def smoothing_matrix(num_frames: int, sigma_frames: float) -> torch.Tensor:
+    """``(T, T)`` float64 matrix S with ``S @ x == smooth_time(x, sigma_frames)`` (the op is linear)."""
+    return smooth_time(torch.eye(num_frames, dtype=torch.float64), sigma_frames)
+
+
+def _angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> torch.Tensor:
+    rel = quat_mul(quat_inverse(q_target), q)
+    return torch.rad2deg(2 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs()))
+
+
+def _stats(x: torch.Tensor) -> dict:
+    return {"mean": float(x.mean()), "max": float(x.max()), "count": int(x.numel())}
+
+
+def constraint_residuals(motion: Motion, targets: PostTargets) -> dict:
+    """Residuals per constraint kind: full-body / end-effector positions (cm) and rotations (deg),
+    smoothed-root x/z (cm), and the horizontal skate (cm/s) of joints flagged as planted."""
+    G, P = motion.to(torch.float64).global_transforms()
+    fb = set(targets.full_body_frames(motion.num_joints).tolist())
+    errs: dict[str, list[torch.Tensor]] = {}
+    for kind, table, err in (
+        ("position_cm", targets.joint_positions, lambda f, j, v: (P[f, j] - v).norm(dim=-1) * 100),
+        ("rotation_deg", targets.joint_rotations, lambda f, j, v: _angle_deg(G[f, j], v)),
+    ):
+        for j, (f, v) in table.items():
+            on_fb = torch.tensor([int(k) in fb for k in f.tolist()], dtype=torch.bool)
+            e = err(f, j, v)
+            errs.setdefault("full_body_" + kind, []).append(e[on_fb])
+            errs.setdefault(kind, []).append(e[~on_fb])
+    out = {k: _stats(torch.cat(v)) for k, v in errs.items() if sum(x.numel() for x in v)}
+    if targets.root_xz is not None and targets.root_xz[0].numel():
+        f, xz = targets.root_xz
+        pelvis = motion.skeleton.require_roles(["pelvis"])["pelvis"]
+        smooth = smooth_time(P[:, pelvis][:, [0, 2]], targets.root_sigma * motion.fps)
+        out["root_xz_cm"] = _stats((smooth[f] - xz).norm(dim=-1) * 100)
+    if targets.contacts is not None and targets.contacts[0].numel():
+        from kinema.motion.contacts import contact_joints
+
+        planted = torch.zeros(motion.num_frames, 4, dtype=torch.bool)
+        planted[targets.contacts[0]] = targets.contacts[1] > 0.5
+        both = planted[1:] & planted[:-1]
+        xz = P[:, contact_joints(motion.skeleton)][..., [0, 2]]
+        speed = (xz[1:] - xz[:-1]).norm(dim=-1) * motion.fps * 100
+        if both.any():
+            out["contact_skate_cm_s"] = _stats(speed[both])
+    return out
+
+
+@contextmanager
+def _single_thread():
+    """Run tiny-tensor loops on one intra-op thread: with (T, J)-sized ops, thread hand-offs cost far
+    more than they save, and on a busy machine spinning worker threads slow them down many times."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _envelope(frames: torch.Tensor, num_frames: int, radius: float) -> torch.Tensor:
+    if frames.numel() == 0:
+        return torch.zeros(num_frames, dtype=torch.float64)
+    t = torch.arange(num_frames, dtype=torch.float64)
+    d = (t[:, None] - frames.to(torch.float64)[None]).abs().min(dim=1).values
+    return raised_cosine(d / max(radius, 1e-6))
+
+
+def _support(targets: PostTargets, T: int, blend: float, root_reach: float) -> torch.Tensor:
+    """(T,) envelope in [0, 1] of frames the optimisation may touch."""
+    frames = [f for table in (targets.joint_positions, targets.joint_rotations) for f, _ in table.values()]
+    if targets.contacts is not None:
+        frames.append(targets.contacts[0])
+    env = _envelope(torch.cat(frames) if frames else torch.zeros(0, dtype=torch.long), T, blend + 1)
+    if targets.root_xz is not None:
+        env = torch.maximum(env, _envelope(targets.root_xz[0], T, root_reach + blend + 1))
+    return env
+
+
+def optimise(
+    motion: Motion,
+    targets: PostTargets,
+    iterations: int = 80,
+    lr: float = 0.01,
+    blend_seconds: float = 0.3,
+    closeness: float = 1e-3,
+    smoothness: float = 0.3,
+) -> tuple[Motion, dict]:
+    """Stage (a): a short Adam optimisation pulling the motion towards the targets (float64 in/out)."""
+    skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
+    sigma = targets.root_sigma * fps
+    env = _support(targets, T, blend_seconds * fps, math.ceil(3 * sigma))
+    L0, r0 = motion.local_rotations, motion.root_translation
+    _, P0 = motion.global_transforms()
+    pos = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_positions.items()]
+    rot = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_rotations.items()]
+    pf, pj, pv = (torch.cat(x) for x in zip(*pos, strict=True)) if pos else (None, None, None)
+    qf, qj, qv = (torch.cat(x) for x in zip(*rot, strict=True)) if rot else (None, None, None)
+    pelvis = skel.roles.get("pelvis", 0)
+    S_rows = None
+    if targets.root_xz is not None:
+        S_rows = smoothing_matrix(T, sigma)[targets.root_xz[0]]
+    planted = None
+    if targets.contacts is not None:
+        from kinema.motion.contacts import contact_joints
+
+        planted = torch.zeros(T, 4, dtype=torch.bool)
+        planted[targets.contacts[0]] = targets.contacts[1] > 0.5
+        planted = planted[1:] & planted[:-1]
+        cj = contact_joints(skel)
+
+    aa = torch.zeros(T, skel.num_joints, 3, dtype=torch.float64, requires_grad=True)
+    dr = torch.zeros(T, 3, dtype=torch.float64, requires_grad=True)
+    opt = torch.optim.Adam([aa, dr], lr=lr)
+    cm = 0.01
+    history = []
+
+    def loss_fn() -> torch.Tensor:
+        L = quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None]))
+        r = r0 + 0.1 * dr * env[:, None]
+        G, P = forward_kinematics(L, r, skel.offsets, skel.parents)
+        loss = P.new_zeros(())
+        if pf is not None:
+            loss = loss + (((P[pf, pj] - pv) / cm) ** 2).sum()
+        if qf is not None:
+            dot = (G[qf, qj] * qv).sum(-1)
+            loss = loss + (4 * (1 - dot**2) / math.radians(1.0) ** 2).sum()
+        if S_rows is not None:
+            loss = loss + (((S_rows @ P[:, pelvis][:, [0, 2]] - targets.root_xz[1]) / cm) ** 2).sum()
+        if planted is not None and T > 1:
+            xz = P[:, cj][..., [0, 2]]
+            loss = loss + (((xz[1:] - xz[:-1]) / cm) ** 2).sum(-1)[planted].sum()
+        change = P - P0
+        if T > 2:
+            acc = change[2:] - 2 * change[1:-1] + change[:-2]
+            loss = loss + smoothness * ((acc / cm) ** 2).sum()
+        loss = loss + closeness * (((aa * env[:, None, None]) / math.radians(1.0)) ** 2).sum()
+        loss = loss + closeness * (((0.1 * dr * env[:, None]) / cm) ** 2).sum()
+        return loss
+
+    with _single_thread():
+        for _ in range(iterations):
+            opt.zero_grad()
+            loss = loss_fn()
+            loss.backward()
+            opt.step()
+            history.append(float(loss.detach()))
+    with torch.no_grad():
+        L = quat_normalize(quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None])))
+        r = r0 + 0.1 * dr * env[:, None]
+        final = float(loss_fn()) if iterations else 0.0
+    info = {"iterations": iterations, "loss_start": history[0] if history else 0.0, "loss_end": final}
+    return Motion(skel, fps, r, L, motion.foot_contacts), info
+
+
+def _lookup(pair, frames: torch.Tensor) -> torch.Tensor:
+    """Values of a (frames, values) target at ``frames`` (each must be present)."""
+    index = {int(k): i for i, k in enumerate(pair[0].tolist())}
+    return pair[1][torch.tensor([index[int(k)] for k in frames.tolist()], dtype=torch.long)]
+
+
+def _keep_out(frames: torch.Tensor, values: torch.Tensor, blocked: torch.Tensor):
+    keep = ~blocked[frames]
+    return frames[keep], values[keep]
+
+
+def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3) -> Motion:
+    """Stage (b): set constrained quantities exactly, blending the edits into neighbouring frames."""
+    skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
+    radius = max(blend_seconds * fps, 1.0)
+    L, r = motion.local_rotations.clone(), motion.root_translation.clone()
+    J, root = skel.num_joints, 0
+    parents = [max(p, 0) for p in skel.parents]
+    F = targets.full_body_frames(J)
+
+    # 1. full-body keyframes and root-joint positions
+    if F.numel():
+        Gt = torch.stack([_lookup(targets.joint_rotations[j], F) for j in range(J)], dim=1)  # (K, J, 4)
+        Lt = quat_mul(quat_inverse(Gt[:, parents]), Gt)
+        Lt[:, root] = Gt[:, root]
+        corr = quat_to_axis_angle(quat_mul(quat_inverse(L[F]), Lt))
+        field, _ = spread_corrections(F, corr.reshape(F.numel(), -1), T, radius)
+        L = quat_normalize(quat_mul(L, axis_angle_to_quat(field.reshape(T, J, 3))))
+    pinned = torch.zeros(T, dtype=torch.bool)
+    pinned[F] = True
+    root_frames, root_shift = F, torch.zeros(F.numel(), 3, dtype=torch.float64)
+    if root in targets.joint_positions:
+        f, v = targets.joint_positions[root]
+        root_frames, root_shift = torch.cat([root_frames, f]), torch.cat([root_shift, v - r[f]])
+        pinned[f] = True
+    if root_frames.numel():
+        shift, _ = spread_corrections(root_frames, root_shift, T, radius)
+        r = r + shift
+
+    # 2. smoothed-root waypoints: minimum-acceleration x/z displacement of the root
+    if targets.root_xz is not None and targets.root_xz[0].numel():
+        r = _root_waypoints(skel, L, r, targets, fps, radius, pinned)
+
+    # 3. end effectors (never on keyframe frames, never the root translation)
+    m = Motion(skel, fps, r, L, motion.foot_contacts)
+    roles = skel.roles
+    toes = {roles.get(f"{s}_toe"): s for s in ("left", "right")}
+    for j in sorted(set(targets.joint_positions) | set(targets.joint_rotations), key=lambda j: skel.depths[j]):
+        G, P = m.global_transforms()
+        mask = (~pinned)[:, None].to(torch.float64)
+        rot_field = rot_env = None
+        if j in targets.joint_rotations:
+            f, q = _keep_out(*targets.joint_rotations[j], pinned)
+            if f.numel():
+                rc = quat_to_axis_angle(quat_mul(q, quat_inverse(G[f, j])))
+                rot_field, rot_env = spread_corrections(f, rc, T, radius)
+                rot_field, rot_env = rot_field * mask, rot_env * mask[:, 0]
+        pos = _keep_out(*targets.joint_positions[j], pinned) if j in targets.joint_positions else None
+        if pos is not None and pos[0].numel() and j != root and (j in toes or skel.depths[j] >= 2):
+            f, v = pos
+            shift, env = spread_corrections(f, v - P[f, j], T, radius)
+            shift, env = shift * mask, env * mask[:, 0]
+            end_rot = None
+            if rot_field is not None:
+                env = torch.maximum(env, rot_env)
+                end_rot = quat_mul(axis_angle_to_quat(rot_field), G[:, j])
+            if j in toes:  # move the whole foot: the ankle takes the toe's shift, foot rotation kept
+                chain = limb_chain(skel, f"{toes[j]}_leg")
+                target = P[:, chain[2]] + shift
+                m = solve_ik(m, chain, target, weight=(env > 0).to(torch.float64))
+                if end_rot is not None:
+                    m = _set_global_rotation(m, j, end_rot, rot_env)
+            else:
+                m = solve_ik(m, j, P[:, j] + shift, weight=(env > 0).to(torch.float64), end_rotation=end_rot)
+        elif rot_field is not None:
+            m = _set_global_rotation(m, j, quat_mul(axis_angle_to_quat(rot_field), G[:, j]), rot_env)
+    return m
+
+
+def _set_global_rotation(m: Motion, j: int, G_new: torch.Tensor, env: torch.Tensor) -> Motion:
+    """Set joint ``j``'s global rotation where ``env > 0`` (its descendants follow)."""
+    G = m.global_rotations
+    p = m.skeleton.parents[j]
+    L = m.local_rotations.clone()
+    local = G_new if p < 0 else quat_mul(quat_inverse(G[:, p]), G_new)
+    L[:, j] = torch.where((env > 0)[:, None], quat_normalize(local), L[:, j])
+    return Motion(m.skeleton, m.fps, m.root_translation, L, m.foot_contacts)
+
+
+def _root_waypoints(skel, L, r, targets: PostTargets, fps: float, radius: float, pinned) -> torch.Tensor:
+    """Root translation whose smoothed pelvis x/z passes through the waypoints (pinned frames fixed).
+
+    The displacement ``d`` of the root x/z is zero outside the frames that can influence a waypoint
+    (Gaussian reach + blend radius) and, inside, minimises ``|second difference of d|^2 + tiny |d|^2``
+    subject to ``S d = residual`` at waypoints and ``d = 0`` on pinned frames (a linear KKT solve).
+    """
+    T = r.shape[0]
+    sigma = targets.root_sigma * fps
+    S = smoothing_matrix(T, sigma)
+    pelvis = skel.roles.get("pelvis", 0)
+    _, P = forward_kinematics(L, r, skel.offsets, skel.parents)
+    f, xz = targets.root_xz
+    # dedupe repeated frames (last wins)
+    last = {int(k): i for i, k in enumerate(f.tolist())}
+    f, xz = torch.tensor(list(last)), xz[torch.tensor(list(last.values()))]
+    resid = xz - (S @ P[:, pelvis][:, [0, 2]])[f]
+    free = _envelope(f, T, math.ceil(3 * sigma) + radius + 1) > 0
+    idx = torch.nonzero(free).flatten()
+    n = idx.numel()
+    D2 = torch.zeros(max(T - 2, 0), T, dtype=torch.float64)
+    if T > 2:
+        i = torch.arange(T - 2)
+        D2[i, i], D2[i, i + 1], D2[i, i + 2] = 1.0, -2.0, 1.0
+    D2 = D2[:, idx]
+    ell = max(radius, 1.0)  # correlation length (frames) of the displacement
+    Q = D2.T @ D2 + torch.eye(n, dtype=torch.float64) / ell**4
+    pin = torch.nonzero(pinned[idx]).flatten()
+    A = torch.cat([S[f][:, idx], torch.eye(n, dtype=torch.float64)[pin]])
+    b = torch.cat([resid, torch.zeros(pin.numel(), 2, dtype=torch.float64)])
+    X = torch.linalg.solve(Q, A.T)
+    M = A @ X
+    M = M + 1e-12 * M.diagonal().abs().max().clamp_min(1e-12) * torch.eye(M.shape[0], dtype=torch.float64)
+    d = X @ torch.linalg.solve(M, b)
+    r = r.clone()
+    r[idx, 0] += d[:, 0]
+    r[idx, 2] += d[:, 1]
+    return r
+
+
+def hit_constraints(
+    motion: Motion,
+    targets: PostTargets,
+    iterations: int = 80,
+    lr: float = 0.01,
+    blend_seconds: float = 0.3,
+    closeness: float = 1e-3,
+    smoothness: float = 0.3,
+) -> tuple[Motion, dict]:
+    """Short optimisation then exact pass; returns the motion (input dtype) and a report with
+    ``before``/``after`` residuals (see ``constraint_residuals``), the optimisation losses, and the
+    largest joint displacement (cm) on unconstrained frames and outside every blend window."""
+    targets = targets.validate(motion)
+    m0 = motion.to(torch.float64)
+    before = constraint_residuals(m0, targets)
+    m, info = optimise(m0, targets, iterations, lr, blend_seconds, closeness, smoothness)
+    m = exact_pass(m, targets, blend_seconds)
+    after = constraint_residuals(m, targets)
+    T = m0.num_frames
+    constrained = torch.zeros(T, dtype=torch.bool)
+    for table in (targets.joint_positions, targets.joint_rotations):
+        for f, _ in table.values():
+            constrained[f] = True
+    if targets.root_xz is not None:
+        constrained[targets.root_xz[0]] = True
+    change = (m.positions - m0.positions).norm(dim=-1).max(dim=-1).values * 100  # (T,) cm
+    outside = _support(targets, T, blend_seconds * m0.fps, math.ceil(3 * targets.root_sigma * m0.fps)) == 0
+    report = {
+        "before": before,
+        "after": after,
+        "optimisation": info,
+        "max_change_unconstrained_cm": float(change[~constrained].max()) if (~constrained).any() else 0.0,
+        "max_change_outside_blend_cm": float(change[outside].max()) if outside.any() else 0.0,
+    }
+    out = Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, motion.foot_contacts)
+    return out.to(motion.dtype), report
