@@ -157,12 +157,13 @@ def optimise(
     aa = torch.zeros(T, skel.num_joints, 3, dtype=torch.float64, requires_grad=True)
     dr = torch.zeros(T, 3, dtype=torch.float64, requires_grad=True)
     opt = torch.optim.Adam([aa, dr], lr=lr)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1 + math.cos(math.pi * i / max(iterations, 1))))
     cm = 0.01
     history = []
 
     def loss_fn() -> torch.Tensor:
         L = quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None]))
-        r = r0 + 0.1 * dr * env[:, None]
+        r = r0 + dr * env[:, None]
         G, P = forward_kinematics(L, r, skel.offsets, skel.parents)
         loss = P.new_zeros(())
         if pf is not None:
@@ -180,7 +181,7 @@ def optimise(
             acc = change[2:] - 2 * change[1:-1] + change[:-2]
             loss = loss + smoothness * ((acc / cm) ** 2).sum()
         loss = loss + closeness * (((aa * env[:, None, None]) / math.radians(1.0)) ** 2).sum()
-        loss = loss + closeness * (((0.1 * dr * env[:, None]) / cm) ** 2).sum()
+        loss = loss + closeness * (((dr * env[:, None]) / cm) ** 2).sum()
         return loss
 
     with _single_thread():
@@ -189,10 +190,11 @@ def optimise(
             loss = loss_fn()
             loss.backward()
             opt.step()
+            sched.step()
             history.append(float(loss.detach()))
     with torch.no_grad():
         L = quat_normalize(quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None])))
-        r = r0 + 0.1 * dr * env[:, None]
+        r = r0 + dr * env[:, None]
         final = float(loss_fn()) if iterations else 0.0
     info = {"iterations": iterations, "loss_start": history[0] if history else 0.0, "loss_end": final}
     return Motion(skel, fps, r, L, motion.foot_contacts), info
