@@ -25,7 +25,6 @@ Two stages:
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 
 import torch
 
@@ -40,7 +39,7 @@ from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess import PostTargets
-from kinema.postprocess.ik import limb_chain, raised_cosine, solve_ik, spread_corrections
+from kinema.postprocess.ik import limb_chain, raised_cosine, single_thread, solve_ik, spread_corrections
 
 
 def smoothing_matrix(num_frames: int, sigma_frames: float) -> torch.Tensor:
@@ -91,18 +90,6 @@ def constraint_residuals(motion: Motion, targets: PostTargets) -> dict:
     return out
 
 
-@contextmanager
-def _single_thread():
-    """Run tiny-tensor loops on one intra-op thread: with (T, J)-sized ops, thread hand-offs cost far
-    more than they save, and on a busy machine spinning worker threads slow them down many times."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
-
-
 def _envelope(frames: torch.Tensor, num_frames: int, radius: float) -> torch.Tensor:
     if frames.numel() == 0:
         return torch.zeros(num_frames, dtype=torch.float64)
@@ -129,12 +116,13 @@ def optimise(
     lr: float = 0.01,
     blend_seconds: float = 0.3,
     closeness: float = 1e-3,
-    smoothness: float = 0.3,
+    smoothness: float = 0.1,
 ) -> tuple[Motion, dict]:
     """Stage (a): a short Adam optimisation pulling the motion towards the targets (float64 in/out)."""
     skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
     sigma = targets.root_sigma * fps
     env = _support(targets, T, blend_seconds * fps, math.ceil(3 * sigma))
+    param_sigma = max(blend_seconds * fps / 4, 0.5)
     L0, r0 = motion.local_rotations, motion.root_translation
     _, P0 = motion.global_transforms()
     pos = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_positions.items()]
@@ -161,9 +149,17 @@ def optimise(
     cm = 0.01
     history = []
 
+    J = skel.num_joints
+
+    def deltas() -> tuple[torch.Tensor, torch.Tensor]:
+        # smooth by construction: Adam's per-coordinate steps would otherwise leave jagged edits
+        d_rot = smooth_time(aa.reshape(T, J * 3), param_sigma).reshape(T, J, 3) * env[:, None, None]
+        return d_rot, smooth_time(dr, param_sigma) * env[:, None]
+
     def loss_fn() -> torch.Tensor:
-        L = quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None]))
-        r = r0 + dr * env[:, None]
+        d_rot, d_root = deltas()
+        L = quat_mul(L0, axis_angle_to_quat(d_rot))
+        r = r0 + d_root
         G, P = forward_kinematics(L, r, skel.offsets, skel.parents)
         loss = P.new_zeros(())
         if pf is not None:
@@ -180,11 +176,11 @@ def optimise(
         if T > 2:
             acc = change[2:] - 2 * change[1:-1] + change[:-2]
             loss = loss + smoothness * ((acc / cm) ** 2).sum()
-        loss = loss + closeness * (((aa * env[:, None, None]) / math.radians(1.0)) ** 2).sum()
-        loss = loss + closeness * (((dr * env[:, None]) / cm) ** 2).sum()
+        loss = loss + closeness * ((d_rot / math.radians(1.0)) ** 2).sum()
+        loss = loss + closeness * ((d_root / cm) ** 2).sum()
         return loss
 
-    with _single_thread():
+    with single_thread():
         for _ in range(iterations):
             opt.zero_grad()
             loss = loss_fn()
@@ -193,8 +189,9 @@ def optimise(
             sched.step()
             history.append(float(loss.detach()))
     with torch.no_grad():
-        L = quat_normalize(quat_mul(L0, axis_angle_to_quat(aa * env[:, None, None])))
-        r = r0 + dr * env[:, None]
+        d_rot, d_root = deltas()
+        L = quat_normalize(quat_mul(L0, axis_angle_to_quat(d_rot)))
+        r = r0 + d_root
         final = float(loss_fn()) if iterations else 0.0
     info = {"iterations": iterations, "loss_start": history[0] if history else 0.0, "loss_end": final}
     return Motion(skel, fps, r, L, motion.foot_contacts), info
@@ -336,17 +333,18 @@ def hit_constraints(
     lr: float = 0.01,
     blend_seconds: float = 0.3,
     closeness: float = 1e-3,
-    smoothness: float = 0.3,
+    smoothness: float = 0.1,
 ) -> tuple[Motion, dict]:
     """Short optimisation then exact pass; returns the motion (input dtype) and a report with
     ``before``/``after`` residuals (see ``constraint_residuals``), the optimisation losses, and the
     largest joint displacement (cm) on unconstrained frames and outside every blend window."""
     targets = targets.validate(motion)
     m0 = motion.to(torch.float64)
-    before = constraint_residuals(m0, targets)
-    m, info = optimise(m0, targets, iterations, lr, blend_seconds, closeness, smoothness)
-    m = exact_pass(m, targets, blend_seconds)
-    after = constraint_residuals(m, targets)
+    with single_thread():
+        before = constraint_residuals(m0, targets)
+        m, info = optimise(m0, targets, iterations, lr, blend_seconds, closeness, smoothness)
+        m = exact_pass(m, targets, blend_seconds)
+        after = constraint_residuals(m, targets)
     T = m0.num_frames
     constrained = torch.zeros(T, dtype=torch.bool)
     for table in (targets.joint_positions, targets.joint_rotations):

@@ -29,7 +29,7 @@ from kinema.geometry.rotations import (
 from kinema.motion.contacts import contact_joints
 from kinema.motion.contacts import foot_contacts as estimate_contacts
 from kinema.motion.core import Motion
-from kinema.postprocess.ik import limb_chain, solve_ik, spread_corrections
+from kinema.postprocess.ik import limb_chain, single_thread, solve_ik, spread_corrections
 
 
 def contact_segments(flags: torch.Tensor) -> list[tuple[int, int]]:
@@ -101,6 +101,11 @@ def foot_lock(
     ``skate_after`` (cm/s), the number of locked segments and the largest remaining distance
     (cm) between a locked ankle and its target (non-zero only where the leg could not reach).
     """
+    with single_thread():
+        return _foot_lock(motion, contacts, threshold, blend_seconds, floor, max_gap_seconds, min_seconds)
+
+
+def _foot_lock(motion, contacts, threshold, blend_seconds, floor, max_gap_seconds, min_seconds):
     if contacts is None:
         contacts = motion.foot_contacts
     if contacts is None:

@@ -22,7 +22,8 @@ pass both blend their edits with it so nothing pops.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
 import torch
 
@@ -225,6 +226,18 @@ def solve_ik(
 
 
 # ----------------------------------------------------------------------------- correction blending
+
+
+@contextmanager
+def single_thread() -> Iterator[None]:
+    """Run tiny-tensor loops on one intra-op thread: with (T, J)-sized ops, thread hand-offs cost far
+    more than they save, and on a busy machine spinning worker threads slow them down many times."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 def raised_cosine(x: torch.Tensor) -> torch.Tensor:
