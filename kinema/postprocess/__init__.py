@@ -9,7 +9,8 @@ last so constraints win over foot locks where they disagree.
 Constraints are described by ``PostTargets`` (frames are LongTensors ``(K,)``; positions in metres,
 world frame; rotations global wxyz quaternions; ``root_xz`` targets the *smoothed* root, i.e. the
 Gaussian-smoothed pelvis x/z, see kinema.motion.smoothing). A full-body keyframe is a frame with
-position and rotation targets for every joint.
+position and rotation targets for every joint (positions alone also work: rotations are then derived
+by aiming every bone at its child's target).
 """
 
 from __future__ import annotations
@@ -76,11 +77,14 @@ class PostTargets:
         )
 
     def full_body_frames(self, num_joints: int) -> torch.Tensor:
-        """Frames (sorted LongTensor) where every joint has a rotation target: full-body keyframes."""
-        if len(self.joint_rotations) < num_joints:
-            return torch.zeros(0, dtype=torch.long)
-        sets = [set(torch.as_tensor(self.joint_rotations[j][0]).tolist()) for j in range(num_joints)]
-        return torch.tensor(sorted(set.intersection(*sets)), dtype=torch.long)
+        """Frames (sorted LongTensor) where every joint has a rotation target or every joint has a
+        position target: full-body keyframes, set as a whole pose by the exact pass."""
+        frames: set[int] = set()
+        for table in (self.joint_rotations, self.joint_positions):
+            if all(j in table for j in range(num_joints)):
+                sets = [set(torch.as_tensor(table[j][0]).tolist()) for j in range(num_joints)]
+                frames |= set.intersection(*sets)
+        return torch.tensor(sorted(frames), dtype=torch.long)
 
     @classmethod
     def from_motion(

@@ -17,7 +17,8 @@ Two stages:
        smoothed pelvis passes through every waypoint while keyframe frames stay pinned;
     3. end effectors: two-bone IK on the joint's chain for positions (toes move their foot rigidly via
        the leg chain), the joint's global rotation for rotations; not applied on keyframe frames,
-       and never touching the pelvis, so steps 1-2 stay exact.
+       and never touching the pelvis, so steps 1-2 stay exact. (Positions of joints directly below
+       the root have no two-bone chain: only the optimisation moves them.)
 
 ``hit_constraints`` runs both and reports residuals before/after per constraint kind.
 """
@@ -30,9 +31,12 @@ import torch
 
 from kinema.geometry.rotations import (
     axis_angle_to_quat,
+    matrix_to_quat,
+    quat_between,
     quat_inverse,
     quat_mul,
     quat_normalize,
+    quat_rotate,
     quat_to_axis_angle,
 )
 from kinema.kinematics import forward_kinematics
@@ -74,7 +78,7 @@ def constraint_residuals(motion: Motion, targets: PostTargets) -> dict:
     out = {k: _stats(torch.cat(v)) for k, v in errs.items() if sum(x.numel() for x in v)}
     if targets.root_xz is not None and targets.root_xz[0].numel():
         f, xz = targets.root_xz
-        pelvis = motion.skeleton.require_roles(["pelvis"])["pelvis"]
+        pelvis = motion.skeleton.roles.get("pelvis", 0)
         smooth = smooth_time(P[:, pelvis][:, [0, 2]], targets.root_sigma * motion.fps)
         out["root_xz_cm"] = _stats((smooth[f] - xz).norm(dim=-1) * 100)
     if targets.contacts is not None and targets.contacts[0].numel():
@@ -146,10 +150,7 @@ def optimise(
     dr = torch.zeros(T, 3, dtype=torch.float64, requires_grad=True)
     opt = torch.optim.Adam([aa, dr], lr=lr)
     sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1 + math.cos(math.pi * i / max(iterations, 1))))
-    cm = 0.01
-    history = []
-
-    J = skel.num_joints
+    cm, J, history = 0.01, skel.num_joints, []
 
     def deltas() -> tuple[torch.Tensor, torch.Tensor]:
         # smooth by construction: Adam's per-coordinate steps would otherwise leave jagged edits
@@ -197,10 +198,14 @@ def optimise(
     return Motion(skel, fps, r, L, motion.foot_contacts), info
 
 
-def _lookup(pair, frames: torch.Tensor) -> torch.Tensor:
-    """Values of a (frames, values) target at ``frames`` (each must be present)."""
+def _lookup(pair, frames: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Values ``(K, C)`` of a (frames, values) target at ``frames`` and whether each is present
+    (missing ones are zero; the last value wins for repeated frames)."""
     index = {int(k): i for i, k in enumerate(pair[0].tolist())}
-    return pair[1][torch.tensor([index[int(k)] for k in frames.tolist()], dtype=torch.long)]
+    rows = torch.tensor([index.get(int(k), -1) for k in frames.tolist()], dtype=torch.long)
+    present = rows >= 0
+    values = pair[1][rows.clamp(min=0)] if pair[1].shape[0] else pair[1].new_zeros(len(rows), pair[1].shape[1])
+    return torch.where(present[:, None], values, torch.zeros_like(values)), present
 
 
 def _keep_out(frames: torch.Tensor, values: torch.Tensor, blocked: torch.Tensor):
@@ -219,7 +224,7 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
 
     # 1. full-body keyframes and root-joint positions
     if F.numel():
-        Gt = torch.stack([_lookup(targets.joint_rotations[j], F) for j in range(J)], dim=1)  # (K, J, 4)
+        Gt = _keyframe_rotations(skel, motion.global_rotations[F], targets, F)  # (K, J, 4)
         Lt = quat_mul(quat_inverse(Gt[:, parents]), Gt)
         Lt[:, root] = Gt[:, root]
         corr = quat_to_axis_angle(quat_mul(quat_inverse(L[F]), Lt))
@@ -274,6 +279,36 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
         elif rot_field is not None:
             m = _set_global_rotation(m, j, quat_mul(axis_angle_to_quat(rot_field), G[:, j]), rot_env)
     return m
+
+
+def _keyframe_rotations(skel, G_now: torch.Tensor, targets: PostTargets, F: torch.Tensor) -> torch.Tensor:
+    """Global rotations ``(K, J, 4)`` of full-body keyframes ``F``: the rotation target where one is
+    given, else derived from position targets by turning the joint (from its current rotation
+    ``G_now``) so its bones point at its children's targets: shortest arc for one child (keeps the
+    current twist), a least-squares fit (Kabsch) for several; otherwise the current rotation."""
+    rots = G_now.clone()
+    for j in range(skel.num_joints):
+        kids = list(skel.children[j])
+        pos_ok = torch.zeros(F.numel(), dtype=torch.bool)
+        if kids and all(c in targets.joint_positions for c in [j, *kids]):
+            pj, pos_ok = _lookup(targets.joint_positions[j], F)
+            want = [_lookup(targets.joint_positions[c], F) for c in kids]
+            for _, ok in want:
+                pos_ok = pos_ok & ok
+            want = torch.stack([v - pj for v, _ in want], dim=1)  # (K, C, 3)
+            have = quat_rotate(G_now[:, j, None], skel.offsets[kids].to(want.dtype))  # (K, C, 3)
+            if len(kids) == 1:
+                turn = quat_between(have[:, 0], want[:, 0])
+            else:
+                U, _, Vh = torch.linalg.svd(want.transpose(1, 2) @ have)  # sum of want have^T
+                d = torch.sign(torch.linalg.det(U @ Vh))
+                D = torch.diag_embed(torch.stack([torch.ones_like(d), torch.ones_like(d), d], dim=-1))
+                turn = matrix_to_quat(U @ D @ Vh)
+            rots[:, j] = torch.where(pos_ok[:, None], quat_normalize(quat_mul(turn, G_now[:, j])), rots[:, j])
+        if j in targets.joint_rotations:
+            q, ok = _lookup(targets.joint_rotations[j], F)
+            rots[:, j] = torch.where(ok[:, None], q, rots[:, j])
+    return rots
 
 
 def _set_global_rotation(m: Motion, j: int, G_new: torch.Tensor, env: torch.Tensor) -> Motion:

@@ -82,6 +82,7 @@ def chain_for_joint(skeleton: Skeleton, joint: int | str) -> tuple[int, int, int
 
 
 def check_chain(skeleton: Skeleton, chain: Sequence[int]) -> None:
+    """Raise unless ``chain`` is (a, b, c) with ``parent(b) == a`` and ``parent(c) == b``."""
     a, b, c = chain
     if skeleton.parents[b] != a or skeleton.parents[c] != b:
         names = [skeleton.names[j] for j in chain]
@@ -253,8 +254,9 @@ def spread_corrections(
 
     The field equals ``values[k]`` exactly on ``frames[k]``, eases between neighbouring corrected
     frames (raised-cosine interpolation) and fades to zero within ``radius`` frames of the nearest
-    one (raised-cosine envelope), so edits blend in and out without a step. Repeated frames keep the
-    last value.
+    one (raised-cosine envelope), so edits blend in and out without a step. Gaps up to ``radius``
+    between corrected frames are bridged at full strength (fading out as the gap grows to twice the
+    radius), so dense corrections do not wobble. Repeated frames keep the last value.
     """
     frames = torch.as_tensor(frames, dtype=torch.long).reshape(-1)
     values = torch.as_tensor(values)
@@ -276,7 +278,10 @@ def spread_corrections(
     r = max(float(radius), 1e-6)
     rampL = torch.where(hasL, raised_cosine((t - fL).to(v.dtype) / r), torch.zeros((), dtype=v.dtype))
     rampR = torch.where(hasR, raised_cosine((fR - t).to(v.dtype) / r), torch.zeros((), dtype=v.dtype))
-    env = torch.maximum(rampL, rampR)
+    # close corrections are bridged (no dip between them); the bridge fades as the gap grows to 2 radii
+    gap = (fR - fL).to(v.dtype)
+    bridge = torch.where(hasL & hasR, raised_cosine(((gap - r) / r).clamp(min=0)), torch.zeros((), dtype=v.dtype))
+    env = torch.maximum(torch.maximum(rampL, rampR), bridge)
     s = torch.where(
         hasL & hasR,
         (t - fL).to(v.dtype) / (fR - fL).clamp(min=1).to(v.dtype),

@@ -1,0 +1,72 @@
+"""`kinema evaluate`: score a model on the Kimodo-style test suite (docs/evaluation.md)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("evaluate", help="score a model on the evaluation suite (report.md, report.json, plots)")
+    p.add_argument("--model", required=True, help="'default' (shipped) or a run/checkpoint folder")
+    p.add_argument("--data", type=Path, default=Path("cache/bandai20"), help="dataset build (default cache/bandai20)")
+    p.add_argument("--split", default="test", choices=("train", "val", "test"), help="clips to draw cases from")
+    p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
+    p.add_argument("--seed", type=int, default=0, help="suite and generation seed")
+    p.add_argument("--steps", type=int, help="DDIM steps (default: the model's setting)")
+    p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
+    p.add_argument("--suite", type=Path,
+                   help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it")
+    p.add_argument("--retrieval", default="default",
+                   help="retrieval model folder for R@k/FID ('default' = shipped, 'none' = skip)")
+    p.add_argument("--modes", choices=("both", "raw", "post"), default="both", help="post-processing modes")
+    p.add_argument("--mm", type=int, nargs=2, default=(3, 4), metavar=("PROMPTS", "SAMPLES"),
+                   help="multimodality: prompts x samples (default 3 4; SAMPLES < 2 skips it)")
+    p.add_argument("--filmstrips", type=int, default=4, help="rendered cases (default 4)")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    from kinema.errors import KinemaError
+    from kinema.evaluate.report import format_table, write_report
+    from kinema.evaluate.runner import run_suite
+    from kinema.evaluate.suite import build_suite, load_suite, save_suite
+    from kinema.generate.api import load_model
+
+    t0 = time.perf_counter()
+    if args.cases < 1:
+        raise KinemaError("--cases must be at least 1")
+    if args.steps is not None and args.steps < 1:
+        raise KinemaError("--steps must be at least 1")
+    if args.filmstrips < 0 or args.mm[0] < 0:
+        raise KinemaError("--filmstrips and --mm PROMPTS must not be negative")
+    model = load_model(args.model, text_cache=Path("cache/text"))
+    out = args.out or Path("out/eval") / (Path(str(args.model)).resolve().name or "model")
+    if out.exists() and not out.is_dir():
+        raise KinemaError(f"{out}: exists and is not a folder")
+    if args.suite is not None and args.suite.exists():
+        cases = load_suite(args.suite)
+        print(f"suite: {len(cases)} cases from {args.suite}")
+    else:
+        if not args.data.is_dir():
+            raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
+        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed)
+        if args.suite is not None:
+            save_suite(cases, args.suite)
+        print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
+    save_suite(cases, out / "suite.json")
+    modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
+    results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,
+                        progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
+                        mm_samples=args.mm[1], text_cache=Path("cache/text"))
+    data = write_report(results, out, filmstrips=args.filmstrips)
+    print()
+    print(format_table(data))
+    for w in data["warnings"]:
+        print(f"warning: {w}")
+    print(f"wrote {out / 'report.md'}, {out / 'report.json'}, {out / 'suite.json'} and {out / 'plots'}/")
+    print(f"wall time {time.perf_counter() - t0:.1f} s")
+    return 0

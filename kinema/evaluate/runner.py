@@ -1,0 +1,327 @@
+"""Run a model over an evaluation suite and score it (Kimodo paper Sec. 6.1, Tables 1-2).
+
+``run_suite(model, cases)`` generates every case once per post-processing mode (``raw`` model output
+and ``post``-processed), scores each motion with kinema.evaluate.metrics, scores the ground-truth
+motions the same way, and computes the text metrics (R-precision, FID, diversity, multimodality) in
+the embedding space of the retrieval model. The post-processed motion of a case is the raw one run
+through the same post-processing ``generate(postprocess=True)`` applies, so both modes share the
+sample. The returned :class:`EvalResults` carries the JSON-ready ``data`` (docs/evaluation.md) and
+the motions (for plots); kinema.evaluate.report writes them out.
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.evaluate import metrics as M
+from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
+from kinema.motion.core import Motion
+from kinema.motion.features import motion_to_features
+
+MODE_NAMES = {False: "raw", True: "post"}
+ROWS = ("ground_truth", "raw", "post")
+#: summary columns, in the order of the report table (docs/evaluation.md documents each)
+COLUMNS = ("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality", "foot_skate_cm_s",
+           "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm", "pelvis_p95_cm", "jerk")
+CASE_METRICS = ("foot_skate_cm_s", "contact_acc", "jerk", "jitter", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
+                "root2d_pos_cm", "pelvis_p95_cm")
+R_BATCH = 32
+
+
+@dataclass
+class EvalResults:
+    """``data``: the JSON-ready results (report.json without the plot list); ``motions``: case id ->
+    {"ground_truth" | "raw" | "post": Motion}."""
+
+    data: dict
+    motions: dict[str, dict[str, Motion]] = field(default_factory=dict)
+    cases: list[dict] = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------- per motion
+def _weighted(pairs: list[tuple[float, int]]) -> float | None:
+    n = sum(w for _, w in pairs)
+    return None if n == 0 else sum(v * w for v, w in pairs) / n
+
+
+def score_motion(motion: Motion, targets: dict) -> tuple[dict, list[float]]:
+    """(metrics of one motion against a case's targets, its pelvis deviations in cm).
+
+    Constraint errors are averaged over every constrained (frame, joint) of the case; a type the case
+    does not constrain is None."""
+    skate, count = M.foot_skate_with_count(motion)
+    out = {"foot_skate_cm_s": skate, "foot_skate_samples": count, "contact_acc": M.contact_accuracy(motion),
+           "jerk": M.jerk(motion), "jitter": M.jitter(motion)}
+    fb = [(M.fullbody_position_error(motion, f, p), len(f)) for f, p in targets["fullbody"]]
+    eep = [(M.end_effector_position_error(motion, j, f, p), len(f)) for j, f, p, _ in targets["end_effector"]
+           if p is not None]
+    eer = [(M.end_effector_rotation_error(motion, j, f, q), len(f)) for j, f, _, q in targets["end_effector"]
+           if q is not None]
+    r2 = [(M.root2d_error(motion, f, xz), len(f)) for f, xz in targets["root2d"]]
+    dev = [float(d) for f, xz in targets["root2d"] for d in M.pelvis_deviations(motion, f, xz)]
+    out.update(fullbody_pos_cm=_weighted(fb), ee_pos_cm=_weighted(eep), ee_rot_deg=_weighted(eer),
+               root2d_pos_cm=_weighted(r2), pelvis_p95_cm=_p95(dev))
+    return out, dev
+
+
+def _p95(values: list[float]) -> float | None:
+    return None if not values else float(torch.quantile(torch.tensor(values, dtype=torch.float64), 0.95))
+
+
+def _mean(values) -> float | None:
+    vals = [v for v in values if v is not None]
+    return None if not vals else float(sum(vals) / len(vals))
+
+
+# ----------------------------------------------------------------------------- retrieval
+def _load_retrieval(retrieval, warn: list[str]):
+    """The retrieval model, or None (with a warning recorded) when it is missing or disabled."""
+    if retrieval is None or retrieval == "none":
+        warn.append("text metrics skipped: no retrieval model requested")
+        return None
+    if not isinstance(retrieval, (str, Path)):
+        return retrieval
+    from kinema.evaluate.retrieval import default_retrieval_path, load_retrieval
+
+    path = default_retrieval_path() if retrieval == "default" else Path(retrieval)
+    try:
+        return load_retrieval(path)
+    except KinemaError as err:
+        warn.append(f"text metrics skipped (R-precision, FID, diversity, multimodality): {err}")
+        return None
+
+
+def _retrieval_name(retrieval) -> str:
+    if retrieval == "default":
+        from kinema.evaluate.retrieval import default_retrieval_path
+
+        return str(default_retrieval_path())
+    return str(retrieval) if isinstance(retrieval, (str, Path)) else type(retrieval).__name__
+
+
+def _embed(model, motions: list[Motion]) -> torch.Tensor:
+    clips = []
+    for m in motions:
+        if abs(m.fps - model.fps) > 1e-6:
+            m = m.resample(model.fps)
+        clips.append(motion_to_features(m.to(torch.float32)))
+    return model.encode_clips(clips)
+
+
+def text_metrics(retrieval, captions: list[str], motions: dict[str, list[Motion]], mm: dict[str, list[list[Motion]]],
+                 seed: int, warn: list[str], text_cache=None) -> dict:
+    """Per row: R@1/R@3 over the whole text set, R@3 in batches of 32, FID against the GT embeddings,
+    diversity, multimodality (None where undefined)."""
+    from kinema.evaluate import distribution as D
+
+    N = len(captions)
+    out = {row: dict.fromkeys(("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality"))
+           for row in motions}
+    if N == 0:
+        return out
+    with torch.no_grad():
+        text = retrieval.encode_captions(captions, cache_dir=text_cache)
+        emb = {row: _embed(retrieval, ms) for row, ms in motions.items()}
+    if N < R_BATCH:
+        warn.append(f"R@3 (batch {R_BATCH}) skipped: only {N} text cases")
+    if N < 2:
+        warn.append("FID and diversity skipped: they need at least 2 text cases")
+    for row, e in emb.items():
+        r = D.r_precision(text, e, ks=(1, 3))
+        out[row].update(r1_whole=r[1], r3_whole=r[3])
+        if N >= R_BATCH:
+            g = torch.Generator().manual_seed(seed)
+            out[row]["r3_batch32"] = D.r_precision(text, e, ks=(3,), batch_size=R_BATCH, generator=g)[3]
+        if N >= 2:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                out[row]["fid"] = D.fid(emb["ground_truth"], e)
+            warn += [f"FID ({row}): {w.message}" for w in caught]
+            out[row]["diversity"] = D.diversity(e, pairs=min(300, N), generator=torch.Generator().manual_seed(seed))
+        groups = mm.get(row) or []
+        if groups:
+            with torch.no_grad():
+                g_emb = [_embed(retrieval, grp) for grp in groups]
+            out[row]["multimodality"] = D.multimodality(g_emb, generator=torch.Generator().manual_seed(seed))
+    return out
+
+
+# ----------------------------------------------------------------------------- the run
+def _post(model, motion: Motion, case: dict) -> Motion:
+    from kinema.constraints import load_constraints
+    from kinema.generate.targets import run_postprocess
+
+    cons = load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames) \
+        if case["constraints"] else []
+    return run_postprocess(motion, cons, model)[0]
+
+
+def _bar(total: int, progress: bool, desc: str):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, disable=not progress, unit="gen")
+
+
+def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: int | None = None, seed: int = 0,
+              progress: bool = True, retrieval="default", mm_prompts: int = 3, mm_samples: int = 4,
+              guidance=None, text_cache=None, datasets: dict | None = None) -> EvalResults:
+    """Generate and score every case; returns :class:`EvalResults` (see docs/evaluation.md).
+
+    ``retrieval``: "default" (the shipped weights), a folder, a loaded ``RetrievalModel`` or None; when
+    it cannot be loaded the text metrics are None and the reason is in ``data["warnings"]``.
+    ``mm_prompts`` x ``mm_samples`` extra text-only samples measure multimodality. Case ``i`` is
+    generated with seed ``seed * 100003 + i``."""
+    modes = [MODE_NAMES[bool(p)] for p in postprocess_modes]
+    if not modes or len(set(modes)) != len(modes):
+        raise KinemaError(f"postprocess_modes must list False and/or True once each, got {postprocess_modes}")
+    if not cases:
+        raise KinemaError("the suite has no cases")
+    t_start = time.perf_counter()
+    warn: list[str] = []
+    datasets = {} if datasets is None else datasets
+    rows = ["ground_truth", *modes]
+    records, motions, devs = [], {}, {r: [] for r in rows}
+    gen_seconds = 0.0
+    text_ids: list[int] = []
+    bar = _bar(len(cases) + (mm_prompts * (1 if mm_samples > 1 else 0)), progress, "evaluate")
+    for i, case in enumerate(cases):
+        if case["kind"] not in CASE_KINDS:
+            raise KinemaError(f"case {case.get('id')}: unknown kind {case['kind']!r}")
+        if abs(float(case["fps"]) - model.fps) > 1e-6:
+            raise KinemaError(f"case {case['id']} is at {case['fps']:g} fps but the model runs at {model.fps:g} fps")
+        src = case["source"]
+        key = (src["data"], src["split"])
+        if key not in datasets:
+            from kinema.data.dataset import MotionDataset
+
+            datasets[key] = MotionDataset(src["data"], src["split"])
+        gt = case_ground_truth(case, datasets[key])
+        targets = case_targets(case, model.skeleton)
+        t0 = time.perf_counter()
+        raw = model.generate(case["prompt"], seconds=case["seconds"], constraints=case["constraints"] or None,
+                             samples=1, steps=steps, guidance=guidance, seed=seed * 100003 + i,
+                             postprocess=False, heading=case["heading"])[0]
+        out = {"ground_truth": gt}
+        if "raw" in modes:
+            out["raw"] = raw
+        if "post" in modes:
+            out["post"] = _post(model, raw, case)
+        gen_seconds += time.perf_counter() - t0
+        scored = {}
+        for row, m in out.items():
+            scored[row], d = score_motion(m, targets)
+            devs[row] += d
+        motions[case["id"]] = out
+        if case["kind"] == "text":
+            text_ids.append(i)
+        records.append({k: case[k] for k in ("id", "kind", "parts", "clip_id", "prompt", "with_text", "perturbed",
+                                             "seconds", "num_keyframes")} | {"metrics": scored})
+        bar.update(1)
+    mm: dict[str, list[list[Motion]]] = {r: [] for r in modes}
+    if mm_samples > 1:
+        for k, i in enumerate(text_ids[:mm_prompts]):
+            case = cases[i]
+            t0 = time.perf_counter()
+            group = model.generate(case["prompt"], seconds=case["seconds"], samples=mm_samples, steps=steps,
+                                   guidance=guidance, seed=seed * 100003 + 7919 * (k + 1), postprocess=False)
+            if "raw" in modes:
+                mm["raw"].append(group)
+            if "post" in modes:
+                mm["post"].append([_post(model, m, case) for m in group])
+            gen_seconds += time.perf_counter() - t0
+            bar.update(1)
+    bar.close()
+    summary = _summarize(records, rows, devs)
+    ret = _load_retrieval(retrieval, warn)
+    text_info = {"cases": len(text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm.get(modes[0], [])),
+                 "mm_samples": mm_samples, "retrieval": None}
+    if ret is not None:
+        text_info["retrieval"] = _retrieval_name(retrieval)
+        caps = [cases[i]["prompt"] for i in text_ids]
+        tm = text_metrics(ret, caps, {r: [motions[cases[i]["id"]][r] for i in text_ids] for r in rows}, mm,
+                          seed, warn, text_cache)
+        for r in rows:
+            summary[r].update(tm[r])
+    wall = time.perf_counter() - t_start
+    data = {
+        "format": "kinema-eval-report", "version": 1,
+        "meta": {"model": str(getattr(getattr(model, "loaded", None), "path", model)), "fps": model.fps,
+                 "num_cases": len(cases), "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
+                 "modes": modes, "steps": steps, "seed": seed, "data": sorted({c["source"]["data"] for c in cases}),
+                 "split": sorted({c["source"]["split"] for c in cases}), "torch_threads": torch.get_num_threads(),
+                 "machine": platform.platform()},
+        "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds,
+                   "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples)},
+        "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},
+        "text": text_info,
+        "by_kind": _by_kind(records, rows),
+        "by_keyframes": _by_keyframes(records, rows),
+        "cases": records,
+        "warnings": warn,
+    }
+    return EvalResults(_finite(data), motions, list(cases))
+
+
+def _summarize(records: list[dict], rows: list[str], devs: dict) -> dict:
+    """Table values per row: quality over text cases (pooled skate), constraint errors over cases."""
+    out = {}
+    text = [r for r in records if r["kind"] == "text"]
+    for row in rows:
+        mets = [r["metrics"][row] for r in text]
+        out[row] = {
+            "foot_skate_cm_s": _weighted([(m["foot_skate_cm_s"], m["foot_skate_samples"]) for m in mets]),
+            "contact_acc": _mean(m["contact_acc"] for m in mets),
+            "jerk": _mean(m["jerk"] for m in mets),
+            **{k: _mean(r["metrics"][row][k] for r in records)
+               for k in ("fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm")},
+            "pelvis_p95_cm": _p95(devs[row]),
+        }
+    return out
+
+
+def _by_kind(records: list[dict], rows: list[str]) -> dict:
+    out = {}
+    for row in rows:
+        out[row] = {}
+        for kind in CASE_KINDS:
+            sel = [r["metrics"][row] for r in records if r["kind"] == kind]
+            if sel:
+                out[row][kind] = {"cases": len(sel)} | {k: _mean(m[k] for m in sel) for k in CASE_METRICS}
+    return out
+
+
+def _by_keyframes(records: list[dict], rows: list[str]) -> dict:
+    """kind -> row -> list of {num_keyframes, cases, error} (fullbody cm, end-effector cm, root 2D cm)."""
+    metric = {"fullbody_sparse": "fullbody_pos_cm", "inbetween": "fullbody_pos_cm", "end_effector": "ee_pos_cm",
+              "waypoints": "root2d_pos_cm"}
+    out: dict = {}
+    for kind, key in metric.items():
+        sel = [r for r in records if r["kind"] == kind and r["num_keyframes"]]
+        if not sel:
+            continue
+        out[kind] = {"metric": key}
+        for row in rows:
+            ks = sorted({r["num_keyframes"] for r in sel})
+            out[kind][row] = [{"num_keyframes": k, "cases": sum(r["num_keyframes"] == k for r in sel),
+                               "error": _mean(r["metrics"][row][key] for r in sel if r["num_keyframes"] == k)}
+                              for k in ks]
+    return out
+
+
+def _finite(x):
+    """NaN/inf -> None so that report.json is strict JSON."""
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
