@@ -137,8 +137,12 @@ def test_stats_cover_the_train_split_only(build, records):
     assert torch.isfinite(stats.std).all() and (stats.std > 0).all() and torch.isfinite(stats.mean).all()
     feats = load_file(str(build / "features.safetensors"))["features"]
     train = [feats[r["start"] : r["start"] + r["length"]] for r in records if r["split"] == "train"]
-    expect = NormStats.compute(train)
+    from kinema.motion.transform import canonicalize_start
+
+    layout = FeatureLayout(21)
+    expect = NormStats.compute((canonicalize_start(f, layout) for f in train), xz_pairs=layout.xz_pairs())
     torch.testing.assert_close(stats.mean, expect.mean)
+    assert stats.mean[layout.slices["heading"]].abs().max() == 0  # isotropic: any heading is equally likely
     torch.testing.assert_close(stats.std, expect.std)
 
 
