@@ -105,3 +105,65 @@ def test_cli_bad_input_one_line(tiny_checkpoint, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and "constraint 0" in err[2]
     assert not (tmp_path / "y.bvh").exists()
+
+
+# ---------------------------------------------------------------------------- constraints are met
+def _gen(model, constraints, seconds=3.0):
+    return model.generate("A person walks forward.", seconds=seconds, constraints=constraints, steps=5, seed=3)[0]
+
+
+def _smooth(m, lo, hi) -> bool:
+    """No frame-to-frame jump outside the post-processing windows: speeds stay finite and bounded."""
+    s = _joint_speed(m)[lo:hi]
+    return bool(torch.isfinite(s).all()) and float(s.max()) < 50.0
+
+
+def test_root2d_waypoints_met_within_a_millimetre(model):
+    from kinema.evaluate.metrics import root2d_error
+
+    cons = [{"type": "root2d", "frame_indices": [20, 40], "smooth_root_2d": [[0.3, 1.0], [0.6, 2.0]]}]
+    m = _gen(model, cons)
+    assert root2d_error(m, [20, 40], torch.tensor([[0.3, 1.0], [0.6, 2.0]])) < 0.1
+    assert _smooth(m, 0, 59)
+
+
+def test_end_effector_position_and_rotation_met(model):
+    from kinema.evaluate.metrics import end_effector_position_error, end_effector_rotation_error
+    from kinema.geometry.rotations import axis_angle_to_quat
+
+    cons = [{"type": "right-hand", "frame_indices": [30], "positions": [[-0.3, 1.1, 0.6]],
+             "rotations": [[0.0, 0.5, 0.8]], "smooth_root_2d": [[0.0, 0.5]]},
+            {"type": "left-foot", "frame_indices": [45], "positions": [[0.1, 0.1, 1.0]]}]
+    m = _gen(model, cons)
+    hand = m.skeleton.index("right_hand")
+    assert end_effector_position_error(m, hand, [30], torch.tensor([[-0.3, 1.1, 0.6]])) < 0.1
+    q = axis_angle_to_quat(torch.tensor([[0.0, 0.5, 0.8]], dtype=torch.float64))
+    assert end_effector_rotation_error(m, hand, [30], q) < 0.1
+    foot = m.skeleton.index("left_foot")
+    assert end_effector_position_error(m, foot, [45], torch.tensor([[0.1, 0.1, 1.0]])) < 0.1
+    assert _smooth(m, 0, 59)
+
+
+def test_fullbody_keyframes_met(model, bandai_root):
+    from kinema.evaluate.metrics import fullbody_position_error
+    from kinema.io.bvh import read_bvh
+
+    clip = bandai_root / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
+    ref = read_bvh(clip, scale=0.01).prune(["joint_Root"]).resample(20)
+    root = ref.root_translation[[10, 40]] - ref.root_translation[10] * torch.tensor([1.0, 0.0, 1.0])
+    cons = [{"type": "fullbody", "frame_indices": [10, 40],
+             "local_joints_rot": __import__("kinema.geometry.rotations", fromlist=["x"]).quat_to_axis_angle(
+                 ref.local_rotations[[10, 40]]).tolist(),
+             "root_positions": root.tolist()}]
+    m = _gen(model, cons)
+    from kinema.motion.core import Motion
+
+    target = Motion(ref.skeleton, 20, root, ref.local_rotations[[10, 40]]).positions
+    assert fullbody_position_error(m, [10, 40], target) < 0.1
+    assert _smooth(m, 0, 59)
+
+
+def test_foot_contacts_are_imputed(model):
+    cons = [{"type": "foot-contact", "frame_indices": [15, 16, 17], "contacts": [[1, 1, 0, 0]] * 3}]
+    m = model.generate("A person walks forward.", seconds=2.0, constraints=cons, steps=5, postprocess=False)[0]
+    assert torch.equal(m.foot_contacts[15:18], torch.tensor([[1.0, 1.0, 0.0, 0.0]] * 3))

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     from kinema.evaluate.report import format_table, write_report
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
-    from kinema.generate.api import load_model
+    from kinema.generate.api import load_model, resolve_model_path
 
     t0 = time.perf_counter()
     if args.cases < 1:
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError("--steps must be at least 1")
     if args.filmstrips < 0 or args.mm[0] < 0:
         raise KinemaError("--filmstrips and --mm PROMPTS must not be negative")
-    model = load_model(args.model, text_cache=Path("cache/text"))
+    resolve_model_path(args.model)  # fail early on a missing model, before building anything
     out = args.out or Path("out/eval") / (Path(str(args.model)).resolve().name or "model")
     if out.exists() and not out.is_dir():
         raise KinemaError(f"{out}: exists and is not a folder")
@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         if args.suite is not None:
             save_suite(cases, args.suite)
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
+    model = load_model(args.model, text_cache=Path("cache/text"))
     save_suite(cases, out / "suite.json")
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,

@@ -60,6 +60,7 @@ class RetrievalConfig:
     text_dim: int = 384
     text_hidden: int = 512
     temperature: float = 0.07
+    frames_per_token: int = 2  # consecutive frames concatenated into one token: 10 tokens/s at 20 fps
     min_frames: int = 40  # training crops: 2 s at 20 fps ...
     max_frames: int = 200  # ... to 10 s; evaluation uses a centred crop of at most this length
 
@@ -114,7 +115,7 @@ class RetrievalModel(nn.Module):
         self.info: dict[str, Any] = dict(info or {})
         self.register_buffer("mean", stats.mean.clone().float(), persistent=False)
         self.register_buffer("std", stats.std.clone().float(), persistent=False)
-        self.input = nn.Linear(layout.dim, c.width)
+        self.input = nn.Linear(c.frames_per_token * layout.dim, c.width)
         self.cls = nn.Parameter(torch.randn(c.width) * 0.02)
         layer = nn.TransformerEncoderLayer(c.width, c.heads, c.ff_mult * c.width, c.dropout, activation="gelu",
                                            batch_first=True, norm_first=True)
@@ -132,20 +133,45 @@ class RetrievalModel(nn.Module):
         x = canonicalize_start(features.float(), self.layout, angle=0.0)
         return (x - self.mean) / self.std
 
-    def encode_motion(self, features: torch.Tensor, lengths: torch.Tensor | None = None) -> torch.Tensor:
-        """(B, E) unit embeddings of unnormalised features (B, T, D); ``lengths`` (B,) marks real frames."""
+    def encode_motion(self, features: torch.Tensor, lengths: torch.Tensor | None = None,
+                      chunk: int = 32) -> torch.Tensor:
+        """(B, E) unit embeddings of unnormalised features (B, T, D); ``lengths`` (B,) marks real frames.
+
+        Frames past a clip's length are ignored (masked). For speed the batch is sorted by length and
+        encoded in chunks of ``chunk`` clips, each trimmed to its own longest clip, which spends little
+        time on padding without changing the result beyond float rounding."""
         if features.ndim != 3 or features.shape[-1] != self.layout.dim:
             raise KinemaError(f"expected features (B, T, {self.layout.dim}), got {tuple(features.shape)}")
         B, T, _ = features.shape
-        if lengths is None:
-            lengths = torch.full((B,), T)
-        lengths = torch.as_tensor(lengths, device=features.device)
-        x = self.input(self.prepare(features)) + sinusoidal_positions(T, self.config.width).to(features.device)
-        x = torch.cat([self.cls.expand(B, 1, -1), x], dim=1)
-        frame = torch.arange(T, device=features.device)[None, :]
-        pad = torch.cat([torch.zeros(B, 1, dtype=torch.bool, device=features.device),
-                         frame >= lengths[:, None]], dim=1)
-        h = self.encoder(x, src_key_padding_mask=pad)
+        lengths = torch.full((B,), T) if lengths is None else torch.as_tensor(lengths).cpu()
+        if int(lengths.min()) < 1 or int(lengths.max()) > T:
+            raise KinemaError(f"lengths must lie in [1, {T}], got {lengths.tolist()}")
+        x = self.prepare(features)
+        if B <= chunk:
+            return self._encode(x[:, : int(lengths.max())], lengths)
+        order = torch.argsort(lengths, stable=True)
+        parts = []
+        for k in range(0, B, chunk):
+            idx = order[k : k + chunk]
+            parts.append(self._encode(x[idx, : int(lengths[idx].max())], lengths[idx]))
+        return torch.cat(parts)[torch.argsort(order)]
+
+    def _encode(self, x: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """Transformer pass over normalised (B, T, D) frames: tokens of ``frames_per_token`` frames."""
+        B, T, D = x.shape
+        f = self.config.frames_per_token
+        last = x[torch.arange(B), lengths.to(x.device) - 1]  # frames past the end repeat the last real one,
+        x = torch.where(torch.arange(T, device=x.device)[None, :, None] < lengths.to(x.device)[:, None, None],
+                        x, last[:, None])  # so what padding holds never matters
+        if T % f:  # whole tokens only
+            x = torch.cat([x, x[:, -1:].expand(B, f - T % f, D)], dim=1)
+        x = x.reshape(B, -1, f * D)
+        n = x.shape[1]
+        h = self.input(x) + sinusoidal_positions(n, self.config.width).to(x.device)
+        h = torch.cat([self.cls.expand(B, 1, -1), h], dim=1)
+        tokens = (lengths.to(x.device) + f - 1) // f
+        pad = torch.arange(n + 1, device=x.device)[None, :] > tokens[:, None]  # CLS at 0 never masked
+        h = self.encoder(h, src_key_padding_mask=pad)
         return F.normalize(self.motion_head(h[:, 0]), dim=-1)
 
     def encode_text(self, text_emb: torch.Tensor) -> torch.Tensor:

@@ -178,7 +178,7 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     ``retrieval``: "default" (the shipped weights), a folder, a loaded ``RetrievalModel`` or None; when
     it cannot be loaded the text metrics are None and the reason is in ``data["warnings"]``.
     ``mm_prompts`` x ``mm_samples`` extra text-only samples measure multimodality. Case ``i`` is
-    generated with seed ``seed * 100003 + i``."""
+    generated with seed ``seed * 100003 + i``, multimodality prompt ``k`` with ``seed * 100003 + 50021 + k``."""
     modes = [MODE_NAMES[bool(p)] for p in postprocess_modes]
     if not modes or len(set(modes)) != len(modes):
         raise KinemaError(f"postprocess_modes must list False and/or True once each, got {postprocess_modes}")
@@ -191,7 +191,9 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     records, motions, devs = [], {}, {r: [] for r in rows}
     gen_seconds = 0.0
     text_ids: list[int] = []
-    bar = _bar(len(cases) + (mm_prompts * (1 if mm_samples > 1 else 0)), progress, "evaluate")
+    ret = _load_retrieval(retrieval, warn)
+    n_mm = min(mm_prompts, sum(c["kind"] == "text" for c in cases)) if ret is not None and mm_samples > 1 else 0
+    bar = _bar(len(cases) + n_mm, progress, "evaluate")
     for i, case in enumerate(cases):
         if case["kind"] not in CASE_KINDS:
             raise KinemaError(f"case {case.get('id')}: unknown kind {case['kind']!r}")
@@ -226,12 +228,12 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
                                              "seconds", "num_keyframes")} | {"metrics": scored})
         bar.update(1)
     mm: dict[str, list[list[Motion]]] = {r: [] for r in modes}
-    if mm_samples > 1:
-        for k, i in enumerate(text_ids[:mm_prompts]):
+    if n_mm:
+        for k, i in enumerate(text_ids[:n_mm]):
             case = cases[i]
             t0 = time.perf_counter()
             group = model.generate(case["prompt"], seconds=case["seconds"], samples=mm_samples, steps=steps,
-                                   guidance=guidance, seed=seed * 100003 + 7919 * (k + 1), postprocess=False)
+                                   guidance=guidance, seed=seed * 100003 + 50021 + k, postprocess=False)
             if "raw" in modes:
                 mm["raw"].append(group)
             if "post" in modes:
@@ -240,7 +242,6 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             bar.update(1)
     bar.close()
     summary = _summarize(records, rows, devs)
-    ret = _load_retrieval(retrieval, warn)
     text_info = {"cases": len(text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm.get(modes[0], [])),
                  "mm_samples": mm_samples, "retrieval": None}
     if ret is not None:

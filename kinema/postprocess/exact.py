@@ -44,6 +44,7 @@ from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess import PostTargets
 from kinema.postprocess.ik import limb_chain, raised_cosine, single_thread, solve_ik, spread_corrections
+from kinema.postprocess.reach import reach_shift
 
 
 def smoothing_matrix(num_frames: int, sigma_frames: float) -> torch.Tensor:
@@ -240,6 +241,10 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
     if root_frames.numel():
         shift, _ = spread_corrections(root_frames, root_shift, T, radius)
         r = r + shift
+
+    # 1b. targets beyond a limb's reach: move the body towards them (kinema.postprocess.reach)
+    if targets.joint_positions:
+        r = r + reach_shift(Motion(skel, fps, r, L), targets.joint_positions, pinned, radius)
 
     # 2. smoothed-root waypoints: minimum-acceleration x/z displacement of the root
     if targets.root_xz is not None and targets.root_xz[0].numel():
