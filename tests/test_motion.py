@@ -137,3 +137,22 @@ def test_invalid_motion_and_files(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(KinemaError, match="junk.npz"):
         load_motion(tmp_path / "junk.npz")
+
+
+def test_rebase_rest_pose_keeps_positions_and_writes_a_clean_rest(tmp_path):
+    from kinema.motion.rest import clean_skeleton, rebase_rest_pose
+    from kinema.skeleton import Skeleton
+
+    m = random_motion(T=10)
+    rest = m.local_rotations[3]
+    skel = Skeleton(m.skeleton.names, m.skeleton.parents, m.skeleton.offsets, rest_rotations=rest)
+    m = Motion(skel, m.fps, m.root_translation, m.local_rotations)
+    r = rebase_rest_pose(m)
+    assert torch.allclose(r.positions, m.positions, atol=1e-9)
+    # the clean skeleton's identity pose is the chosen rest pose (up to where the root stands)
+    clean = clean_skeleton(skel, rest)
+    ident = Motion(clean, 30, m.root_translation[3:4], torch.tensor([1.0, 0, 0, 0]).expand(1, skel.num_joints, 4))
+    posed = Motion(skel, 30, m.root_translation[3:4], rest[None])
+    assert torch.allclose(ident.positions, posed.positions.to(ident.dtype), atol=1e-6)
+    path = m.save(tmp_path / "clean.bvh")
+    assert (load_motion(path).positions - m.positions).abs().max() < 5e-4  # 6-digit Euler degrees

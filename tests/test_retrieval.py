@@ -29,6 +29,15 @@ from kinema.motion.transform import rotate_features, translate_features
 TINY = RetrievalConfig(width=32, layers=2, heads=2, embed_dim=32, text_hidden=64, dropout=0.0)
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _one_thread():
+    """One torch thread: on a shared, busy 2-core machine two threads made training ~30x slower."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
 @pytest.fixture(scope="module")
 def trained(tiny_data, tmp_path_factory):
     """A tiny model trained briefly on the tiny build's train clips (hash text encoder)."""

@@ -151,6 +151,23 @@ def _shared_skeleton(records: list[dict]) -> tuple[Skeleton, float]:
     return Skeleton(names, parents, offsets, name="bandai-namco"), worst
 
 
+def with_clean_rest_pose(skeleton: Skeleton, feats: list, records: list[dict], fps: float) -> Skeleton:
+    """The skeleton with ``rest_rotations`` = a natural standing pose (first frame of the first normal
+    raise-up-both-hands clip, which starts standing still, or of the first clip), turned to face +Z.
+    BVH export re-bases onto it so the exported rest pose is clean (kinema.motion.rest) instead of
+    Bandai's pose lying along +X."""
+    from kinema.motion.features import features_to_motion
+    from kinema.motion.rest import standing_rest_pose
+
+    order = sorted(range(len(records)), key=lambda i: (records[i]["mirrored"], records[i]["content"] != "raise-up-both-hands",
+                                                       records[i]["style"] != "normal", records[i]["clip_id"]))
+    f = torch.from_numpy(np.asarray(feats[order[0]])).double()
+    motion = features_to_motion(f, skeleton, fps)
+    rest = standing_rest_pose(motion, 0)
+    return Skeleton(skeleton.names, skeleton.parents, skeleton.offsets, rest, skeleton.end_sites,
+                    skeleton.role_overrides, skeleton.name)
+
+
 def _prepare_out(out_dir: Path) -> None:
     """Refuse to replace anything but an empty folder or an earlier build (never e.g. a home dir)."""
     if out_dir.exists():
@@ -232,6 +249,7 @@ def build_dataset(
             raise DataError(f"{rec['path']}: features of shape {f.shape}, expected (T, {layout.dim})")
         rec["start"] = start
         start += rec["length"]
+    skeleton = with_clean_rest_pose(skeleton, feats, records, float(fps))
     train = [torch.from_numpy(f) for f, r in zip(feats, records, strict=True) if r["split"] == "train"]
     if not train:
         raise DataError("no clip of the selection is in the train split; use a larger --limit")

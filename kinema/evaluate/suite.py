@@ -211,7 +211,8 @@ def build_suite(data_dir, split: str = "test", num_cases: int = 100, seed: int =
     n_text = max(1, min(len(ds), round(num_cases * text_fraction))) if long_enough else num_cases
     n_text = min(n_text, num_cases)
     if num_cases > n_text and not long_enough:
-        raise KinemaError(f"{data_dir}: no clip of split {split!r} lasts {MIN_SECONDS:g} s (needed for constrained cases)")
+        raise KinemaError(f"{data_dir}: no clip of split {split!r} lasts {MIN_SECONDS:g} s "
+                          "(needed for constrained cases)")
     cases: list[dict] = []
     for k in range(n_text):
         i = order[k % len(order)]

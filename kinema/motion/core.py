@@ -189,14 +189,18 @@ class Motion:
         return mirror_motion(self)
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | Path, **kwargs) -> Path:
-        """Write ``.bvh`` / ``.bvh.gz`` (see kinema.io.bvh_writer) or ``.npz`` (see docs/formats.md)."""
+    def save(self, path: str | Path, clean_rest: bool = True, **kwargs) -> Path:
+        """Write ``.bvh`` / ``.bvh.gz`` (see kinema.io.bvh_writer) or ``.npz`` (see docs/formats.md).
+
+        BVH output of a skeleton that carries ``rest_rotations`` is re-based so that its rest pose is that
+        clean standing pose (kinema.motion.rest); joint positions are unchanged."""
         path = Path(path)
         name = path.name.lower()
         if name.endswith(".bvh") or name.endswith(".bvh.gz"):
             from kinema.io.bvh_writer import write_bvh
+            from kinema.motion.rest import rebase_rest_pose
 
-            write_bvh(self, path, **kwargs)
+            write_bvh(rebase_rest_pose(self) if clean_rest else self, path, **kwargs)
         elif name.endswith(".npz"):
             from kinema.io.npz import save_npz
 
