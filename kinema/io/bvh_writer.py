@@ -94,6 +94,7 @@ def format_bvh(data: BVHData, *, precision: int = 6) -> str:
         return " ".join(num.format(round(float(x), precision) + 0.0) for x in v)
 
     out = ["HIERARCHY"]
+    visit: list[int] = []  # joints in the order the hierarchy is written (depth-first)
     # iterative depth-first walk: ("open", joint, depth) or ("close", None, depth)
     todo: list[tuple[str, int | None, int]] = [("open", 0, 0)]
     while todo:
@@ -102,6 +103,7 @@ def format_bvh(data: BVHData, *, precision: int = 6) -> str:
         if kind == "close":
             out.append(pad + "}")
             continue
+        visit.append(j)
         out.append(f"{pad}{'ROOT' if depth == 0 else 'JOINT'} {data.names[j]}")
         out.append(pad + "{")
         out.append(f"{pad}\tOFFSET {vec(data.offsets[j])}")
@@ -111,6 +113,11 @@ def format_bvh(data: BVHData, *, precision: int = 6) -> str:
             out += [f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {vec(site)}", f"{pad}\t}}"]
         todo.append(("close", None, depth))
         todo.extend(("open", c, depth + 1) for c in reversed(children[j]))
+    # motion columns follow the written hierarchy, which differs from the joint order when the skeleton
+    # lists joints breadth-first or otherwise non-depth-first
+    starts = np.cumsum([0] + [len(c) for c in data.channels])
+    columns = np.concatenate([np.arange(starts[j], starts[j + 1]) for j in visit]).astype(np.int64)
+    values = values[:, columns]
     out += ["MOTION", f"Frames: {values.shape[0]}", f"Frame Time: {data.frame_time:.10g}"]
     row = " ".join([f"%.{precision}f"] * values.shape[1])
     out += [row % tuple(r) for r in values.tolist()]
