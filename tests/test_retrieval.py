@@ -133,6 +133,7 @@ def test_metrics_on_known_rankings():
     assert res["strict"]["m2t"]["R@1"] == pytest.approx((0.5 + 0.5 + 1 + 1) / 4)  # ties broken at random
     assert res["label_aware"]["t2m"]["R@1"] == 1.0 and res["label_aware"]["m2t"]["R@1"] == 1.0
     assert res["strict"]["chance"]["R@1"] == pytest.approx(0.25)
+    assert res["strict"]["ceiling"]["R@1"] == pytest.approx(0.75) and res["strict"]["ceiling"]["R@3"] == 1.0
     assert res["label_aware"]["chance"]["R@1"] == pytest.approx((0.5 + 0.5 + 0.25 + 0.25) / 4)
     assert res["label_aware"]["chance"]["R@3"] == pytest.approx((1 + 1 + 0.75 + 0.75) / 4)
 

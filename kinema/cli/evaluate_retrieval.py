@@ -1,7 +1,8 @@
 """`kinema retrieval`: train the text-motion retrieval model and measure its retrieval accuracy.
 
-    kinema retrieval train --data DIR --out DIR [--steps 1800] [--batch-size 128] [--lr 5e-4] [--seed 0]
+    kinema retrieval train --data DIR --out DIR [--steps 1000] [--batch-size 128] [--lr 5e-4] [--seed 0]
                            [--text-encoder minilm-l6-v2] [--cache-dir cache/text] [--half] [--threads N]
+                           [--max-minutes M] [--eval-split test|none]
     kinema retrieval eval --data DIR [--model DIR] [--split test] [--json FILE] [--threads N]
 
 The model is the embedding used for R-precision and FID (Kimodo Sec. 6.1); ``--model`` defaults to the
@@ -25,7 +26,7 @@ def register(sub) -> None:
     t = rsub.add_parser("train", help="train a retrieval model on the train split of a build")
     t.add_argument("--data", type=Path, required=True, help="dataset folder from `kinema data build`")
     t.add_argument("--out", type=Path, required=True, help="folder for model.safetensors + config.json")
-    t.add_argument("--steps", type=_positive_int, default=1800, help="optimisation steps (default 1800)")
+    t.add_argument("--steps", type=_positive_int, default=1000, help="optimisation steps (default 1000)")
     t.add_argument("--batch-size", type=_positive_int, default=128, help="clips per batch (default 128)")
     t.add_argument("--lr", type=float, default=5e-4, help="peak learning rate (default 5e-4)")
     t.add_argument("--seed", type=int, default=0)
@@ -33,6 +34,7 @@ def register(sub) -> None:
     t.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     t.add_argument("--half", action="store_true", help="store float16 weights (half the size)")
     t.add_argument("--eval-split", default="test", help="split evaluated after training ('none' to skip)")
+    t.add_argument("--max-minutes", type=float, default=None, help="safety stop after this much training time")
     t.add_argument("--no-progress", action="store_true")
     _common(t)
     t.set_defaults(func=_train)
@@ -75,9 +77,10 @@ def _train(args) -> int:
     command = "kinema " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["retrieval"] else None
     model = train_retrieval(args.data, args.out, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
                             seed=args.seed, text_encoder=args.text_encoder, cache_dir=args.cache_dir,
-                            half=args.half, progress=not args.no_progress, command=command)
+                            half=args.half, progress=not args.no_progress, command=command,
+                            max_seconds=None if args.max_minutes is None else 60 * args.max_minutes)
     info = model.info
-    print(f"wrote {args.out}: {info['steps']} steps in {info['wall_seconds']:.0f} s, "
+    print(f"wrote {args.out}: {info['steps_done']} of {info['steps']} steps in {info['wall_seconds']:.0f} s, "
           f"final loss {info['loss_curve'][-1][1]:.3f}")
     if args.eval_split != "none":
         print(format_metrics(evaluate_retrieval(model, args.data, args.eval_split, cache_dir=args.cache_dir)))

@@ -159,8 +159,11 @@ def with_clean_rest_pose(skeleton: Skeleton, feats: list, records: list[dict], f
     from kinema.motion.features import features_to_motion
     from kinema.motion.rest import standing_rest_pose
 
-    order = sorted(range(len(records)), key=lambda i: (records[i]["mirrored"], records[i]["content"] != "raise-up-both-hands",
-                                                       records[i]["style"] != "normal", records[i]["clip_id"]))
+    def preference(i: int):
+        r = records[i]
+        return r["mirrored"], r["content"] != "raise-up-both-hands", r["style"] != "normal", r["clip_id"]
+
+    order = sorted(range(len(records)), key=preference)
     f = torch.from_numpy(np.asarray(feats[order[0]])).double()
     motion = features_to_motion(f, skeleton, fps)
     rest = standing_rest_pose(motion, 0)

@@ -102,12 +102,15 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
                     lr: float = 5e-4, seed: int = 0, text_encoder: str = "minilm-l6-v2", *,
                     config: RetrievalConfig | None = None, cache_dir: str | Path | None = None,
                     warmup: int = 100, weight_decay: float = 0.01, half: bool = False, progress: bool = True,
-                    log_every: int = 50, command: str | None = None) -> RetrievalModel:
+                    log_every: int = 50, max_seconds: float | None = None,
+                    command: str | None = None) -> RetrievalModel:
     """Train on the ``train`` split of a build and save the model into ``out_dir``; returns the model.
 
     Deterministic for a seed (batches come from :func:`step_generator`, dropout from a seeded global
-    RNG) on a given machine and thread count. ``half`` stores float16 weights. The config's ``info``
-    records the settings, wall time and the loss curve (mean loss per ``log_every`` steps)."""
+    RNG) on a given machine and thread count. ``half`` stores float16 weights. ``max_seconds`` is a safety
+    stop: training ends early (keeping the schedule planned for ``steps``) once it has run that long.
+    The config's ``info`` records the settings, steps done, wall time and the loss curve (mean loss
+    per ``log_every`` steps)."""
     from tqdm.auto import tqdm
 
     if steps < 1 or batch_size < 2:
@@ -128,7 +131,7 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
     opt = torch.optim.AdamW([{"params": decay, "weight_decay": weight_decay}, {"params": other, "weight_decay": 0.0}],
                             lr=lr, betas=(0.9, 0.98))
     model.train()
-    curve, window, t0 = [], [], time.time()
+    curve, window, t0, done = [], [], time.time(), 0
     bar = tqdm(range(steps), desc="retrieval", disable=not progress, dynamic_ncols=True)
     for step in bar:
         g = step_generator(seed, 0, step)
@@ -142,17 +145,22 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
         opt.step()
         window.append(float(loss.detach()))
-        if len(window) == log_every or step == steps - 1:
-            curve.append([step + 1, round(sum(window) / len(window), 4)])
+        done = step + 1
+        out_of_time = max_seconds is not None and time.time() - t0 > max_seconds
+        if len(window) == log_every or done == steps or out_of_time:
+            curve.append([done, round(sum(window) / len(window), 4)])
             window = []
             bar.set_postfix(loss=f"{curve[-1][1]:.3f}")
+        if out_of_time:
+            break
+    bar.close()
     wall = time.time() - t0
     model.eval()
     model.info = {
         "data": str(data_dir), "train_clips": len(ds), "caption_groups": len(sampler.members),
-        "steps": steps, "batch_size": batch_size, "lr": lr, "warmup": warmup, "weight_decay": weight_decay,
-        "seed": seed, "torch_threads": torch.get_num_threads(), "wall_seconds": round(wall, 1),
-        "loss_curve": curve, "command": command,
+        "steps": steps, "steps_done": done, "batch_size": batch_size, "lr": lr, "warmup": warmup,
+        "weight_decay": weight_decay, "seed": seed, "torch_threads": torch.get_num_threads(),
+        "wall_seconds": round(wall, 1), "loss_curve": curve, "command": command,
     }
     model.save(out_dir, half=half)
     return model
@@ -190,12 +198,21 @@ def _chance(labels: torch.Tensor, ks=KS) -> dict:
     return out
 
 
+def _ceiling(labels: torch.Tensor, ks=KS) -> dict:
+    """Best possible strict R@k: a caption shared by m clips cannot single one out, so min(1, k/m)."""
+    m = (labels[:, None] == labels[None, :]).sum(1).float()
+    return {f"R@{k}": float((k / m).clamp(max=1).mean()) for k in ks}
+
+
 def retrieval_metrics(motion: torch.Tensor, text: torch.Tensor, labels: torch.Tensor, ks=KS) -> dict:
-    """Text->motion and motion->text R@k (strict and label-aware) of paired (N, E) embeddings, plus chance."""
+    """Text->motion and motion->text R@k (strict and label-aware) of paired (N, E) embeddings, plus
+    chance and, for strict, the ceiling that duplicate captions impose."""
     sim = text @ motion.T
     t2m, m2t = _recalls(sim, labels, ks), _recalls(sim.T.contiguous(), labels, ks)
     chance = _chance(labels, ks)
-    return {kind: {"t2m": t2m[kind], "m2t": m2t[kind], "chance": chance[kind]} for kind in ("strict", "label_aware")}
+    out = {kind: {"t2m": t2m[kind], "m2t": m2t[kind], "chance": chance[kind]} for kind in ("strict", "label_aware")}
+    out["strict"]["ceiling"] = _ceiling(labels, ks)
+    return out
 
 
 def _mean_dicts(ds: list[dict]) -> dict:
@@ -240,7 +257,10 @@ def format_metrics(res: dict) -> str:
         name = f"whole {res['split']} split ({res['clips']} clips)" if proto == "full" else \
             f"batches of {proto[5:]} ({res[proto]['batches']} batches)"
         for kind in ("strict", "label_aware"):
-            for d, dname in (("t2m", "text->motion"), ("m2t", "motion->text"), ("chance", "chance")):
+            for d, dname in (("t2m", "text->motion"), ("m2t", "motion->text"), ("ceiling", "best possible"),
+                             ("chance", "chance")):
+                if d not in res[proto][kind]:
+                    continue
                 vals = " | ".join(f"{100 * res[proto][kind][d][k]:.1f}" for k in ks)
                 lines.append(f"| {name} | {kind.replace('_', '-')} | {dname} | {vals} |")
     return "\n".join(lines)

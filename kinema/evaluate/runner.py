@@ -189,7 +189,7 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     datasets = {} if datasets is None else datasets
     rows = ["ground_truth", *modes]
     records, motions, devs = [], {}, {r: [] for r in rows}
-    gen_seconds = 0.0
+    gen_seconds = post_seconds = 0.0
     text_ids: list[int] = []
     ret = _load_retrieval(retrieval, warn)
     n_mm = min(mm_prompts, sum(c["kind"] == "text" for c in cases)) if ret is not None and mm_samples > 1 else 0
@@ -215,7 +215,9 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         if "raw" in modes:
             out["raw"] = raw
         if "post" in modes:
+            t1 = time.perf_counter()
             out["post"] = _post(model, raw, case)
+            post_seconds += time.perf_counter() - t1
         gen_seconds += time.perf_counter() - t0
         scored = {}
         for row, m in out.items():
@@ -237,7 +239,9 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             if "raw" in modes:
                 mm["raw"].append(group)
             if "post" in modes:
+                t1 = time.perf_counter()
                 mm["post"].append([_post(model, m, case) for m in group])
+                post_seconds += time.perf_counter() - t1
             gen_seconds += time.perf_counter() - t0
             bar.update(1)
     bar.close()
@@ -259,7 +263,7 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
                  "modes": modes, "steps": steps, "seed": seed, "data": sorted({c["source"]["data"] for c in cases}),
                  "split": sorted({c["source"]["split"] for c in cases}), "torch_threads": torch.get_num_threads(),
                  "machine": platform.platform()},
-        "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds,
+        "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds, "postprocess_seconds": post_seconds,
                    "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples)},
         "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},
         "text": text_info,
