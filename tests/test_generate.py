@@ -163,7 +163,13 @@ def test_fullbody_keyframes_met(model, bandai_root):
     assert _smooth(m, 0, 59)
 
 
-def test_foot_contacts_are_imputed(model):
-    cons = [{"type": "foot-contact", "frame_indices": [15, 16, 17], "contacts": [[1, 1, 0, 0]] * 3}]
-    m = model.generate("A person walks forward.", seconds=2.0, constraints=cons, steps=5, postprocess=False)[0]
-    assert torch.equal(m.foot_contacts[15:18], torch.tensor([[1.0, 1.0, 0.0, 0.0]] * 3))
+def test_foot_contact_constraint_plants_the_foot(model):
+    cons = [{"type": "foot-contact", "frame_indices": [15, 16, 17, 18], "contacts": [[1, 1, 0, 0]] * 4}]
+    m = model.generate("A person walks forward.", seconds=2.0, constraints=cons, steps=5)[0]
+    raw = model.generate("A person walks forward.", seconds=2.0, constraints=cons, steps=5, postprocess=False)[0]
+    for role in ("left_ankle", "left_toe"):
+        j = m.skeleton.index(role)
+        slide = (m.positions[15:19, j, [0, 2]] - m.positions[15, j, [0, 2]]).norm(dim=-1).max()
+        slide_raw = (raw.positions[15:19, j, [0, 2]] - raw.positions[15, j, [0, 2]]).norm(dim=-1).max()
+        # planted: no horizontal slide over the constrained frames (measured 0.4 / 1.1 mm here, 13 cm raw)
+        assert slide < 0.005 and slide <= slide_raw + 1e-6
