@@ -9,8 +9,8 @@ kinema trains its own (see :mod:`kinema.evaluate.retrieval_train`) and ships the
   build or produced by the generator. They are canonicalised (first-frame root over the origin and
   first-frame heading turned to 0, :func:`canonicalize_start`) so the embedding ignores where the
   motion is placed and which way it starts facing, then normalised with the dataset statistics, and
-  read by a small pre-norm transformer with a learned CLS token, sinusoidal positions and a padding
-  mask. The CLS output is projected to ``embed_dim`` and L2-normalised.
+  read by a small pre-norm transformer (two frames per token) with a learned CLS token, sinusoidal
+  positions and a padding mask. The CLS output is projected to ``embed_dim`` and L2-normalised.
 * **Text side**: the frozen sentence embedding of the text encoder recorded in the config
   (MiniLM, 384-d) goes through a two-layer MLP and is L2-normalised.
 
@@ -22,6 +22,7 @@ reject a weights file that does not belong to its config. No pickle.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -199,12 +200,13 @@ class RetrievalModel(nn.Module):
 
     @torch.no_grad()
     def encode_captions(self, texts: list[str], cache_dir: str | Path | None = None) -> torch.Tensor:
-        """(N, E) embeddings of raw captions through this model's text encoder (optionally cached)."""
-        from kinema.text import get_text_encoder
+        """(N, E) embeddings of raw captions through this model's text encoder (optionally cached).
 
+        The encoder is built once per (id, cache_dir) and kept, since MiniLM loads its weights on first use."""
         was_training = self.training
         self.eval()
-        out = self.encode_text(get_text_encoder(self.text_encoder_id, cache_dir=cache_dir).encode(texts))
+        out = self.encode_text(_text_encoder(self.text_encoder_id, None if cache_dir is None else str(cache_dir))
+                               .encode(texts))
         self.train(was_training)
         return out
 
@@ -231,6 +233,7 @@ class RetrievalModel(nn.Module):
         try:
             save_file(state, tmp, metadata={"format": FORMAT})
             digest = _sha256(Path(tmp))
+            os.chmod(tmp, 0o644)  # mkstemp creates 0600; saved models are meant to be shared
             os.replace(tmp, path / WEIGHTS_FILE)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
@@ -238,6 +241,13 @@ class RetrievalModel(nn.Module):
         payload = self.config_dict() | {"weights_dtype": str(dtype).removeprefix("torch."), "weights_sha256": digest}
         _write_text_atomic(path / CONFIG_FILE, json.dumps(payload, indent=1) + "\n")
         return path
+
+
+@functools.lru_cache(maxsize=4)
+def _text_encoder(name: str, cache_dir: str | None):
+    from kinema.text import get_text_encoder
+
+    return get_text_encoder(name, cache_dir=cache_dir)
 
 
 def _sha256(path: Path) -> str:
@@ -255,6 +265,7 @@ def _write_text_atomic(path: Path, text: str) -> None:
             fh.write(text)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
