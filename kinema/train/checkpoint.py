@@ -37,6 +37,9 @@ KEEP_LAST = 2
 
 def _write_text_atomic(path: Path, text: str) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
     with os.fdopen(fd, "w") as fh:
         fh.write(text)
         fh.flush()
@@ -91,6 +94,9 @@ def save_checkpoint(
             payload["optimizer_param_groups"] = groups
         payload["step"] = step
         (tmp / "checkpoint.json").write_text(json.dumps(payload, indent=1))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a checkpoint folder is an ordinary folder
         if final.exists():
             shutil.rmtree(final)
         os.replace(tmp, final)
