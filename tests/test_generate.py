@@ -173,3 +173,15 @@ def test_foot_contact_constraint_plants_the_foot(model):
         slide_raw = (raw.positions[15:19, j, [0, 2]] - raw.positions[15, j, [0, 2]]).norm(dim=-1).max()
         # planted: no horizontal slide over the constrained frames (measured 0.4 / 1.1 mm here, 13 cm raw)
         assert slide < 0.005 and slide <= slide_raw + 1e-6
+
+
+def test_bench_all_writes_a_report(tiny_checkpoint, tmp_path):
+    import json as _json
+
+    rc = main(["bench", "all", "--model", str(tiny_checkpoint), "--out", str(tmp_path / "bench"),
+               "--steps", "2", "--repeats", "1"])
+    assert rc == 0
+    rep = _json.loads((tmp_path / "bench" / "report.json").read_text())
+    assert {r["config"] for r in rep["train"]} == {"tiny", "small", "small-1stage"}
+    assert len(rep["generate"]) == 4 and rep["cold_start_s"] > 0
+    assert "Generation latency" in (tmp_path / "bench" / "report.md").read_text()

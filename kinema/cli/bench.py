@@ -23,6 +23,7 @@ def register(sub) -> None:
     _register_bvh(targets)
     _register_train(targets)
     _register_generate(targets)
+    _register_all(targets)
 
 
 def _positive_int(text: str) -> int:
@@ -187,4 +188,26 @@ def _run_generate(args: argparse.Namespace) -> int:
     cold = None if args.no_cold_start else cold_start(args.model, seconds=args.seconds)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, model {args.model}")
     print(format_table(rows, cold, args.seconds))
+    return 0
+
+
+# ----------------------------------------------------------------------------- bench all
+
+
+def _register_all(targets) -> None:
+    p = targets.add_parser("all", help="training and generation benchmarks into one report (report.md/json)")
+    p.add_argument("--model", default=None, help="model for the generation part ('default' or a run folder)")
+    p.add_argument("--out", type=Path, default=Path("out/bench"), help="report folder (default out/bench)")
+    p.add_argument("--steps", type=_positive_int, nargs="+", default=[10, 25, 50, 100])
+    p.add_argument("--repeats", type=_positive_int, default=2)
+    p.set_defaults(func=_run_all)
+
+
+def _run_all(args: argparse.Namespace) -> int:
+    from kinema.bench.report import run_all, write_bench_report
+
+    result = run_all(args.model, steps=args.steps, repeats=args.repeats)
+    path = write_bench_report(result, args.out)
+    print(path.read_text())
+    print(f"wrote {path} and {path.with_name('report.json')}")
     return 0
