@@ -70,12 +70,13 @@ def _markdown(data: dict) -> str:
         "constraint errors average over the cases with that constraint type; pelvis p95 pools every root-2D "
         "keyframe. FID is not scaled (Kimodo prints FID x 100).", "",
         "## Distribution", "",
-        "| Method | Diversity | Multimodality |", "|---|---:|---:|",
+        "| Method | Diversity | Multimodality | Coverage AUC | Novelty AUC |", "|---|---:|---:|---:|---:|",
     ]
     for row in rows:
         v = data["table"][row]
         out.append(f"| {ROW_LABELS.get(row, row)} | {_fmt(v.get('diversity'), 1, 3)} | "
-                   f"{_fmt(v.get('multimodality'), 1, 3)} |")
+                   f"{_fmt(v.get('multimodality'), 1, 3)} | {_fmt(v.get('coverage_auc'), 1, 3)} | "
+                   f"{_fmt(v.get('novelty_auc'), 1, 3)} |")
     out += ["", "## By case kind", "",
             "| Kind | Method | Cases | Skate (cm/s) | Contact | Full-body (cm) | EE pos (cm) | EE rot (deg) | "
             "Root 2D (cm) | Pelvis p95 (cm) |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]

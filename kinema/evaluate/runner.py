@@ -29,7 +29,8 @@ from kinema.motion.features import motion_to_features
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")
 #: summary columns, in the order of the report table (docs/evaluation.md documents each)
-COLUMNS = ("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality", "foot_skate_cm_s",
+COLUMNS = ("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality", "coverage_auc", "novelty_auc",
+           "foot_skate_cm_s",
            "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm", "pelvis_p95_cm", "jerk")
 CASE_METRICS = ("foot_skate_cm_s", "contact_acc", "jerk", "jitter", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
                 "root2d_pos_cm", "pelvis_p95_cm")
@@ -116,14 +117,28 @@ def _embed(model, motions: list[Motion]) -> torch.Tensor:
     return model.encode_clips(clips)
 
 
+def train_embeddings(retrieval, data_dir, limit: int = 2000) -> torch.Tensor | None:
+    """Retrieval embeddings of (up to ``limit``, evenly spread) train-split clips, for novelty."""
+    from kinema.data.dataset import MotionDataset
+
+    ds = MotionDataset(data_dir, "train")
+    if len(ds) == 0:
+        return None
+    idx = torch.linspace(0, len(ds) - 1, min(limit, len(ds))).round().long().unique().tolist()
+    with torch.no_grad():
+        return retrieval.encode_clips([ds[i]["features"] for i in idx])
+
+
 def text_metrics(retrieval, captions: list[str], motions: dict[str, list[Motion]], mm: dict[str, list[list[Motion]]],
-                 seed: int, warn: list[str], text_cache=None) -> dict:
+                 seed: int, warn: list[str], text_cache=None, train_emb: torch.Tensor | None = None) -> dict:
     """Per row: R@1/R@3 over the whole text set, R@3 in batches of 32, FID against the GT embeddings,
-    diversity, multimodality (None where undefined)."""
+    diversity, multimodality, and coverage/novelty AUC (Dragon App. C: coverage of the GT test motions,
+    novelty against the train clips; needs ``train_emb``) — None where undefined."""
     from kinema.evaluate import distribution as D
 
     N = len(captions)
-    out = {row: dict.fromkeys(("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality"))
+    out = {row: dict.fromkeys(("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality",
+                               "coverage_auc", "novelty_auc"))
            for row in motions}
     if N == 0:
         return out
@@ -146,6 +161,9 @@ def text_metrics(retrieval, captions: list[str], motions: dict[str, list[Motion]
                 out[row]["fid"] = D.fid(emb["ground_truth"], e)
             warn += [f"FID ({row}): {w.message}" for w in caught]
             out[row]["diversity"] = D.diversity(e, pairs=min(300, N), generator=torch.Generator().manual_seed(seed))
+        if train_emb is not None:
+            cn = D.coverage_novelty_auc(e, train_emb, emb["ground_truth"])
+            out[row].update(coverage_auc=float(cn.coverage_auc), novelty_auc=float(cn.novelty_auc))
         groups = mm.get(row) or []
         if groups:
             with torch.no_grad():
@@ -251,8 +269,14 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     if ret is not None:
         text_info["retrieval"] = _retrieval_name(retrieval)
         caps = [cases[i]["prompt"] for i in text_ids]
+        train_emb = None
+        try:
+            src = cases[text_ids[0]]["source"]["data"] if text_ids else None
+            train_emb = train_embeddings(ret, src) if src else None
+        except (KinemaError, OSError, KeyError) as err:
+            warn.append(f"coverage/novelty skipped: no train split to compare with ({err})")
         tm = text_metrics(ret, caps, {r: [motions[cases[i]["id"]][r] for i in text_ids] for r in rows}, mm,
-                          seed, warn, text_cache)
+                          seed, warn, text_cache, train_emb)
         for r in rows:
             summary[r].update(tm[r])
     wall = time.perf_counter() - t_start
