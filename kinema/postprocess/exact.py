@@ -214,6 +214,10 @@ def _keep_out(frames: torch.Tensor, values: torch.Tensor, blocked: torch.Tensor)
     return frames[keep], values[keep]
 
 
+#: alternations of reach shift and waypoint displacement in the exact pass
+REACH_ROUNDS = 4
+
+
 def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3) -> Motion:
     """Stage (b): set constrained quantities exactly, blending the edits into neighbouring frames."""
     skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
@@ -242,13 +246,16 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
         shift, _ = spread_corrections(root_frames, root_shift, T, radius)
         r = r + shift
 
-    # 1b. targets beyond a limb's reach: move the body towards them (kinema.postprocess.reach)
-    if targets.joint_positions:
-        r = r + reach_shift(Motion(skel, fps, r, L), targets.joint_positions, pinned, radius)
-
-    # 2. smoothed-root waypoints: minimum-acceleration x/z displacement of the root
-    if targets.root_xz is not None and targets.root_xz[0].numel():
-        r = _root_waypoints(skel, L, r, targets, fps, radius, pinned)
+    # 1b + 2. targets beyond a limb's reach move the body towards them (a narrow bump of the root,
+    # kinema.postprocess.reach); smoothed-root waypoints then get a broad minimum-acceleration x/z
+    # displacement. A bump shifts the smoothed root a little, so the two alternate a few rounds: with
+    # both a waypoint and an end effector on one frame, this converges to a pose satisfying both.
+    has_root = targets.root_xz is not None and targets.root_xz[0].numel()
+    for _ in range(REACH_ROUNDS if has_root else 1):
+        if targets.joint_positions:
+            r = r + reach_shift(Motion(skel, fps, r, L), targets.joint_positions, pinned, radius)
+        if has_root:
+            r = _root_waypoints(skel, L, r, targets, fps, radius, pinned)
 
     # 3. end effectors (never on keyframe frames, never the root translation)
     m = Motion(skel, fps, r, L, motion.foot_contacts)
