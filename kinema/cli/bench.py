@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from kinema.cli._args import positive_int
 from kinema.errors import DataError
 
 
@@ -26,11 +27,7 @@ def register(sub) -> None:
     _register_all(targets)
 
 
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text}")
-    return value
+_positive_int = positive_int
 
 
 # ----------------------------------------------------------------------------- bench bvh

@@ -8,9 +8,10 @@ See docs/dataset.md for what a build contains and how splits, mirroring and ``--
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections import defaultdict
+
+from kinema.cli._args import positive_int
 
 DATASETS = ("bandai-namco",)
 
@@ -47,14 +48,7 @@ def register(sub) -> None:
     s.set_defaults(func=_stats)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
-    return n
+_positive_int = positive_int
 
 
 def _build(args) -> int:

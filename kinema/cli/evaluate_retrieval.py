@@ -16,6 +16,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from kinema.cli._args import positive_int
+
 
 def register(sub) -> None:
     """Add the `retrieval` sub-command (with `train` and `eval`) to the top-level parser."""
@@ -53,14 +55,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=_positive_int, help="torch CPU threads (default: torch's choice)")
 
 
-def _positive_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
-    return n
+_positive_int = positive_int
 
 
 def _threads(args) -> None:
