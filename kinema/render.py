@@ -30,7 +30,7 @@ import numpy as np
 
 from kinema import naming
 from kinema.errors import KinemaError, SkeletonError
-from kinema.io.npz import atomic_write_bytes
+from kinema.io.atomic import atomic_write_bytes
 
 SIDE_COLOURS = {"L": "#1f6fd1", "R": "#e0452b", None: "#3c3c3c"}
 CONTACT_COLOUR, TARGET_COLOUR, WAYPOINT_COLOUR = "#14a05a", "#c0158c", "#b26b00"
@@ -311,16 +311,6 @@ def _legend(fig, scene: _Scene, title: str | None, top: float, rows: int = 1) ->
                handlelength=1.6, columnspacing=1.2, handletextpad=0.5)
 
 
-def _write(path: Path, data: bytes) -> None:
-    """Atomic write (temp file + rename), then the usual permissions (mkstemp creates files 0600)."""
-    import os
-
-    atomic_write_bytes(path, data)
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(path, 0o666 & ~mask)
-
-
 def _check_out(path, suffix: str) -> Path:
     path = Path(path)
     if path.suffix.lower() != suffix:
@@ -355,7 +345,7 @@ def render_filmstrip(motion, path, frames: int = 8, targets=None, title: str | N
     _legend(fig, scene, title, top / fh)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", facecolor="white")
-    _write(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
@@ -389,5 +379,5 @@ def render_gif(motion, path, fps: float | None = None, targets=None, title: str 
     with tempfile.TemporaryDirectory(prefix="kinema-render-") as tmp:
         out = Path(tmp) / "anim.gif"
         anim.save(out, writer=PillowWriter(fps=fps), dpi=80)
-        _write(path, out.read_bytes())
+        atomic_write_bytes(path, out.read_bytes())
     return path

@@ -21,9 +21,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import io
 import os
 import re
-import tempfile
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -31,6 +31,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
+
+from kinema.io.atomic import atomic_write_bytes
 
 from .errors import KinemaError
 
@@ -277,15 +279,9 @@ class CachedEncoder:
         """Atomically store one vector: write a temp file in the same folder, then rename it."""
         path = self._path(key)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npy", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, np.ascontiguousarray(vec, dtype=np.float32), allow_pickle=False)
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        buf = io.BytesIO()
+        np.save(buf, np.ascontiguousarray(vec, dtype=np.float32), allow_pickle=False)
+        atomic_write_bytes(path, buf.getvalue())
 
     def encode(self, texts: list[str]) -> torch.Tensor:
         """Embed ``texts``, computing (once each) only the texts not already on disk."""

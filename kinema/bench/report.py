@@ -20,7 +20,7 @@ from kinema.bench.generate import bench_generate, cold_start
 from kinema.bench.generate import format_table as generate_table
 from kinema.bench.train import bench_config
 from kinema.bench.train import format_table as train_table
-from kinema.io.npz import atomic_write_bytes
+from kinema.io.atomic import atomic_write_bytes
 
 
 def run_all(model: str | None, configs=("tiny", "small", "small-1stage"), steps=(10, 25, 50, 100),

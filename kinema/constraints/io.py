@@ -339,7 +339,7 @@ def dumps_constraints(constraints: Sequence[Constraint]) -> str:
 
 def save_constraints(constraints: Sequence[Constraint], path: str | os.PathLike) -> Path:
     """Write constraints as JSON atomically (temp file + rename); `load_constraints` reads it back."""
-    from kinema.io.npz import atomic_write_bytes
+    from kinema.io.atomic import atomic_write_bytes
 
     text = dumps_constraints(constraints)
     atomic_write_bytes(Path(path), text.encode("utf-8"))

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kinema.io.npz import atomic_write_bytes
+from kinema.io.atomic import atomic_write_bytes
 
 ROW_LABELS = {"ground_truth": "Ground truth", "raw": "Model (raw)", "post": "Model (post-processed)"}
 #: (column key, header, scale, decimals) of the main table, in Kimodo Table 1 order

@@ -26,8 +26,6 @@ import functools
 import hashlib
 import json
 import math
-import os
-import tempfile
 from dataclasses import asdict, dataclass, fields
 from importlib import resources
 from pathlib import Path
@@ -35,10 +33,12 @@ from typing import Any
 
 import torch
 import torch.nn.functional as F
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file
+from safetensors.torch import save as save_safetensors_bytes
 from torch import nn
 
 from kinema.errors import KinemaError
+from kinema.io.atomic import atomic_write_bytes, atomic_write_text
 from kinema.motion.features import FeatureLayout
 from kinema.motion.stats import NormStats
 from kinema.motion.transform import canonicalize_start
@@ -228,18 +228,11 @@ class RetrievalModel(nn.Module):
         path.mkdir(parents=True, exist_ok=True)
         dtype = torch.float16 if half else torch.float32
         state = {k: v.detach().cpu().to(dtype).contiguous() for k, v in self.state_dict().items()}
-        fd, tmp = tempfile.mkstemp(prefix=f".{WEIGHTS_FILE}.", suffix=".tmp", dir=path)
-        os.close(fd)
-        try:
-            save_file(state, tmp, metadata={"format": FORMAT})
-            digest = _sha256(Path(tmp))
-            os.chmod(tmp, 0o644)  # mkstemp creates 0600; saved models are meant to be shared
-            os.replace(tmp, path / WEIGHTS_FILE)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        data = save_safetensors_bytes(state, metadata={"format": FORMAT})
+        digest = hashlib.sha256(data).hexdigest()
+        atomic_write_bytes(path / WEIGHTS_FILE, data)
         payload = self.config_dict() | {"weights_dtype": str(dtype).removeprefix("torch."), "weights_sha256": digest}
-        _write_text_atomic(path / CONFIG_FILE, json.dumps(payload, indent=1) + "\n")
+        atomic_write_text(path / CONFIG_FILE, json.dumps(payload, indent=1) + "\n")
         return path
 
 
@@ -256,20 +249,6 @@ def _sha256(path: Path) -> str:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
-
-
-def _write_text_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def default_retrieval_path() -> Path:

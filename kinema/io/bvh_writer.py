@@ -9,11 +9,9 @@ BVH importer (scale 1.0) brings in at the right size; ``scale=100`` writes centi
 
 from __future__ import annotations
 
-import contextlib
 import gzip
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,6 +19,7 @@ import numpy as np
 import torch
 
 from kinema.errors import KinemaError
+from kinema.io.atomic import atomic_write_bytes
 from kinema.io.bvh import BVHData
 
 if TYPE_CHECKING:
@@ -137,20 +136,5 @@ def write_bvh(
     payload = text.encode("utf-8")
     if path.name.lower().endswith(".gz"):
         payload = gzip.compress(payload, compresslevel=6, mtime=0)
-    _atomic_write(path, payload)
+    atomic_write_bytes(path, payload)
     return path
-
-
-def _atomic_write(path: Path, payload: bytes) -> None:
-    """Write via a temp file next to ``path`` and ``os.replace``; the temp file never survives."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise

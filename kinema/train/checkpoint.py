@@ -30,21 +30,10 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from kinema.errors import KinemaError
+from kinema.io.atomic import atomic_write_text
 from kinema.model.loading import find_checkpoint
 
 KEEP_LAST = 2
-
-
-def _write_text_atomic(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
 
 
 def _contiguous(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -103,7 +92,7 @@ def save_checkpoint(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    _write_text_atomic(run_dir / "latest", final.name + "\n")
+    atomic_write_text(run_dir / "latest", final.name + "\n")
     old = sorted(p for p in run_dir.glob("ckpt-*") if p.is_dir() and p != final)
     for p in old[: max(0, len(old) - (KEEP_LAST - 1))]:
         shutil.rmtree(p, ignore_errors=True)
