@@ -10,7 +10,7 @@ def register(sub) -> None:
     p = sub.add_parser("train", help="train a motion diffusion model (also: `kinema train plot RUN`)")
     p.add_argument("action", nargs="?", default="run", choices=["run", "plot"],
                    help="'plot' writes loss curves of an existing run (give the run folder with --out)")
-    p.add_argument("--config", default="small", help="model preset: tiny, small, small-1stage, paper")
+    p.add_argument("--config", help="model preset: tiny, small (default), small-1stage, paper")
     p.add_argument("--data", type=Path, help="dataset folder from `kinema data build`")
     p.add_argument("--out", type=Path, required=True, help="run folder, e.g. runs/NAME")
     p.add_argument("--steps", type=int, help="total optimisation steps (both phases)")
@@ -45,7 +45,7 @@ def _config_from_args(args: argparse.Namespace):
     if args.resume and saved.exists():
         base = TrainConfig.from_dict(json.loads(saved.read_text()))
         clash = {k: v for k, v in overrides.items() if v is not None and k != "steps" and getattr(base, k) != v}
-        if clash and clash != {"model": args.config} or (clash.get("model") and args.config != "small"):
+        if clash:
             raise KinemaError(f"--resume keeps the run's settings; these differ from {saved}: {sorted(clash)}")
         if args.steps is not None:
             base.steps = args.steps
