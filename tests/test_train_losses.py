@@ -114,6 +114,30 @@ def test_positive_for_different_prediction_and_weights() -> None:
     assert total2.item() == pytest.approx(total.item() - 5.0 * terms["fk"].item(), rel=1e-5)
 
 
+def test_constraint_term_pulls_only_on_constrained_entries() -> None:
+    target, mask = _batch()
+    cmask = torch.zeros_like(target)
+    cmask[0, [3, 10], :3] = 1.0  # root position on two frames of clip 0
+    cmask[1, 30:, :] = 1.0  # padded frames of clip 1: must not count
+    pred = target.clone()
+    pred[0, 3, 0] += 1.0  # one constrained entry off by 1 std (linear region: 1 - beta / 2)
+    pred[0, 5, 0] += 1.0  # an unconstrained entry off: no constraint loss
+    pred = pred.requires_grad_()
+    w = LossWeights()
+    total, terms = _loss(pred, target, mask, constraint_mask=cmask)
+    assert terms["constraint"].item() == pytest.approx((1.0 - w.constraint_beta / 2) / 6, rel=1e-5)
+    _, plain = _loss(pred, target, mask)
+    base = sum(getattr(w, k) * plain[k].item() for k in TERMS)
+    assert total.item() == pytest.approx(base + w.constraint * terms["constraint"].item(), rel=1e-5)
+    total.backward()
+    no_constr = torch.autograd.grad(_loss(pred, target, mask)[0], pred)[0]
+    extra = pred.grad - no_constr
+    assert extra[0, 3, 0].item() == pytest.approx(w.constraint / 6, rel=1e-4)
+    assert extra[0, 5].abs().max().item() < 1e-6
+    with pytest.raises(ValueError, match="constraint_mask"):
+        _loss(pred, target, mask, constraint_mask=cmask[:, :, :5])
+
+
 def test_padding_is_ignored_even_with_nan() -> None:
     target, mask = _batch()
     pred = target + 0.2 * torch.randn(target.shape, generator=torch.Generator().manual_seed(1))

@@ -14,6 +14,8 @@ def register(sub) -> None:
     p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
     p.add_argument("--seed", type=int, default=0, help="suite and generation seed")
     p.add_argument("--steps", type=int, help="DDIM steps (default: the model's setting)")
+    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="separated guidance weights (default: the model's setting)")
     p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
     p.add_argument("--suite", type=Path,
                    help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it")
@@ -62,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,
                         progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
-                        mm_samples=args.mm[1], text_cache=Path("cache/text"))
+                        mm_samples=args.mm[1], text_cache=Path("cache/text"),
+                        guidance=tuple(args.guidance) if args.guidance else None)
     data = write_report(results, out, filmstrips=args.filmstrips)
     print()
     print(format_table(data))

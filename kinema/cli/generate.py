@@ -15,7 +15,8 @@ def register(sub) -> None:
     p.add_argument("--samples", type=int, default=1, help="number of motions (different noise)")
     p.add_argument("--steps", type=int, help="DDIM steps (default: the model's setting)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"), help="default 2 2")
+    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="separated guidance weights (default: the model's setting)")
     p.add_argument("--heading", type=float, default=0.0, help="first-frame facing in degrees about +Y (0 = +Z)")
     p.add_argument("--model", default="default", help="'default' (shipped) or a run/checkpoint folder")
     p.add_argument("--out", type=Path, default=Path("out/motion.bvh"), help=".bvh, .bvh.gz or .npz")

@@ -30,6 +30,11 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+# Settings a resumed run may change: the schedule (length, phase boundary) and how often it reports.
+# Everything else (model, data order, optimiser) must match the checkpoint it continues.
+_RESUME_SCHEDULE = ("steps", "phase1_fraction", "ckpt_every", "log_every")
+
+
 def _config_from_args(args: argparse.Namespace):
     import json
 
@@ -44,11 +49,13 @@ def _config_from_args(args: argparse.Namespace):
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():
         base = TrainConfig.from_dict(json.loads(saved.read_text()))
-        clash = {k: v for k, v in overrides.items() if v is not None and k != "steps" and getattr(base, k) != v}
+        clash = {k: v for k, v in overrides.items()
+                 if v is not None and k not in _RESUME_SCHEDULE and getattr(base, k) != v}
         if clash:
             raise KinemaError(f"--resume keeps the run's settings; these differ from {saved}: {sorted(clash)}")
-        if args.steps is not None:
-            base.steps = args.steps
+        for k in _RESUME_SCHEDULE:
+            if overrides[k] is not None:
+                setattr(base, k, overrides[k])
         return base
     cfg = TrainConfig()
     for k, v in overrides.items():

@@ -85,7 +85,7 @@ class KinemaModel:
                 docs/constraints.md); frames refer to the whole output at the model's fps.
             samples: how many different motions (same constraints, different noise).
             steps: DDIM steps (default: the model's saved setting).
-            guidance: ``(w_text, w_constr)`` or a Guidance (default: the model's, 2 and 2).
+            guidance: ``(w_text, w_constr)`` or a Guidance (default: the model's saved setting).
             seed: fixes the result.
             postprocess: foot locking + IK + exact constraint hitting.
             heading: first-frame facing in radians about +Y (0 faces +Z).

@@ -20,11 +20,12 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.model.denoiser import Denoiser
+from kinema.motion.features import FeatureLayout
 
 
-def _world_channels(layout_dim: int, num_joints: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _world_channels(num_joints: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Feature indices of joint_pos x and z for every joint: (J,), (J,)."""
-    start = 5  # root_pos (3) + heading (2)
+    start = FeatureLayout(num_joints).slices["joint_pos"].start
     x = start + 3 * torch.arange(num_joints)
     return x, x + 2
 
@@ -67,7 +68,7 @@ def sample_features(
             guidance = Guidance(mode="none")
     else:
         text_mask = None
-    ix, iz = _world_channels(D, J)
+    ix, iz = _world_channels(J)
     state = {"world_on": False}
 
     def refresh_world(x0_norm: torch.Tensor) -> None:

@@ -1,13 +1,17 @@
 """Atomic file writes: a temp file in the target folder, flushed, then renamed over the target.
 
 A crash or error leaves either the old file or the new one, never a half-written file, and no temp file.
+:func:`atomic_folder` does the same for a folder of files (checkpoints, exported models).
 Files get ordinary permissions (``0666 & ~umask``; ``mkstemp`` alone would make them 0600).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -34,3 +38,30 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """UTF-8 text version of :func:`atomic_write_bytes`."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+@contextmanager
+def atomic_folder(path: str | Path) -> Iterator[Path]:
+    """Build a folder under a temporary name next to ``path``; on success it replaces ``path``.
+
+    ``with atomic_folder(out) as tmp: write files into tmp``. Files and the folder get ordinary
+    permissions; on any error the temporary folder is removed and an existing ``path`` is untouched.
+    (Between removing an old ``path`` and the rename there is a short window without it.)
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    try:
+        yield tmp
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; the result is an ordinary folder
+        for f in tmp.rglob("*"):
+            if f.is_file():
+                os.chmod(f, 0o666 & ~umask)
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -20,9 +20,7 @@ No pickle anywhere: tensors go through safetensors, everything else through JSON
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +28,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_text
+from kinema.io.atomic import atomic_folder, atomic_write_text
 from kinema.model.loading import find_checkpoint
 
 KEEP_LAST = 2
@@ -71,8 +69,7 @@ def save_checkpoint(
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     final = run_dir / f"ckpt-{step:08d}"
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=run_dir))
-    try:
+    with atomic_folder(final) as tmp:
         save_file(_contiguous(model.state_dict()), str(tmp / "model.safetensors"))
         if ema is not None:
             save_file(_contiguous(ema.state_dict()), str(tmp / "ema.safetensors"))
@@ -83,15 +80,6 @@ def save_checkpoint(
             payload["optimizer_param_groups"] = groups
         payload["step"] = step
         (tmp / "checkpoint.json").write_text(json.dumps(payload, indent=1))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes 0700; a checkpoint folder is an ordinary folder
-        if final.exists():
-            shutil.rmtree(final)
-        os.replace(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     atomic_write_text(run_dir / "latest", final.name + "\n")
     old = sorted(p for p in run_dir.glob("ckpt-*") if p.is_dir() and p != final)
     for p in old[: max(0, len(old) - (KEEP_LAST - 1))]:

@@ -43,9 +43,10 @@ def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     axes[0].plot(steps, [r["loss"] for r in recs], lw=1)
     axes[0].set(title=f"{run_dir.name}: total loss (Eq. 1)", xlabel="step", ylabel="loss", yscale="log")
-    for term in TERMS:
-        if term in recs[0]:
-            axes[1].plot(steps, [r[term] for r in recs], lw=1, label=term)
+    for term in (*TERMS, "constraint"):
+        pts = [(r["step"], r[term]) for r in recs if term in r]
+        if pts:
+            axes[1].plot([p[0] for p in pts], [p[1] for p in pts], lw=1, label=term)
     axes[1].set(title="loss terms (unweighted)", xlabel="step", yscale="log")
     axes[1].legend(fontsize=8)
     phase2 = next((r["step"] for r in recs if r.get("phase") == 2), None)

@@ -172,7 +172,8 @@ class Trainer:
         x_t = self.schedule.q_sample(x0, t, noise)
         text = self.text_table[batch.caption_index]
         pred = model(x_t, t, text, batch.text_keep, batch.c_dir, x0, mask, batch.pad_mask)
-        loss, terms = motion_loss(pred, x0, batch.pad_mask, self.layout, self.skeleton, self.stats, self.weights)
+        loss, terms = motion_loss(pred, x0, batch.pad_mask, self.layout, self.skeleton, self.stats, self.weights,
+                                  constraint_mask=mask if phase == 2 else None)
         lr = lr_at(step, cfg.lr, cfg.warmup, cfg.steps)
         for group in self.optimizer.param_groups:
             group["lr"] = lr

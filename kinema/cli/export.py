@@ -1,0 +1,38 @@
+"""`kinema export RUN --out DIR`: pack a run's EMA weights as a small inference-only model folder.
+
+This is how the default model inside the package is made (see kinema/assets/models/default/MODEL_CARD.md):
+float16 weights plus checkpoint.json, no optimizer state. ``--guidance`` and ``--steps`` replace the
+sampling defaults saved with the model.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(sub) -> None:
+    """Add the `export` sub-command to the top-level parser."""
+    p = sub.add_parser("export", help="pack a trained checkpoint as an inference model folder (float16 EMA weights)")
+    p.add_argument("model", type=Path, help="run folder (its newest checkpoint) or checkpoint folder")
+    p.add_argument("--out", type=Path, required=True, help="model folder to write, e.g. kinema/assets/models/default")
+    p.add_argument("--dtype", default="float16", choices=("float16", "bfloat16", "float32"), help="weight precision")
+    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="default separated guidance weights saved with the model")
+    p.add_argument("--steps", type=int, help="default DDIM steps saved with the model")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from kinema.diffusion.guidance import Guidance
+    from kinema.model.export import export_model
+    from kinema.model.loading import load_denoiser
+
+    guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
+    out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps)
+    loaded = load_denoiser(out)  # prove the folder loads before reporting success
+    size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
+    print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
+          f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
+          f"{loaded.sampler.num_inference_steps} DDIM steps)")
+    return 0

@@ -1,0 +1,74 @@
+"""Pack a training checkpoint into a small, inference-only model folder (what kinema ships).
+
+A packed folder holds ``checkpoint.json`` (model config, layout, skeleton, statistics, sampler and
+guidance settings, training config and step: everything ``load_denoiser`` needs, minus optimizer
+state) and ``ema.safetensors`` (the EMA weights, float16 by default; the loader computes in float32).
+The folder is written under a temporary name and renamed into place, so a failed export never leaves
+a half-written model behind.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file, save_file
+
+from kinema.diffusion.guidance import Guidance
+from kinema.errors import KinemaError
+from kinema.io.atomic import atomic_folder
+from kinema.model.loading import find_checkpoint
+
+#: checkpoint.json keys that only matter for resuming training.
+_TRAINING_ONLY = ("optimizer_param_groups",)
+DTYPES = {"float16": torch.float16, "bfloat16": torch.bfloat16, "float32": torch.float32}
+
+
+def export_model(
+    src: str | Path,
+    out: str | Path,
+    dtype: str = "float16",
+    guidance: Guidance | None = None,
+    sampling_steps: int | None = None,
+    extra_info: dict | None = None,
+) -> Path:
+    """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
+
+    ``guidance`` and ``sampling_steps`` replace the defaults saved with the model (e.g. values tuned on
+    the validation split); ``extra_info`` is merged into checkpoint.json under ``"export"``.
+    Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
+    """
+    if dtype not in DTYPES:
+        raise KinemaError(f"unknown weight dtype {dtype!r}; choose one of {', '.join(DTYPES)}")
+    ckpt = find_checkpoint(src)
+    weights = ckpt / "ema.safetensors"
+    if not weights.exists():
+        weights = ckpt / "model.safetensors"
+    try:
+        info = json.loads((ckpt / "checkpoint.json").read_text())
+        state = load_file(str(weights))
+    except (OSError, ValueError, json.JSONDecodeError) as err:
+        raise KinemaError(f"{ckpt}: unreadable checkpoint ({err})") from None
+    for key in _TRAINING_ONLY:
+        info.pop(key, None)
+    if guidance is not None:
+        info["guidance"] = guidance.to_dict()
+    if sampling_steps is not None:
+        if sampling_steps <= 0:
+            raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")
+        info["sampler"] = dict(info["sampler"], num_inference_steps=int(sampling_steps))
+    info["export"] = {"source": str(ckpt), "weights": weights.name, "dtype": dtype, **(extra_info or {})}
+    state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
+    return _write_folder(Path(out), info, state)
+
+
+def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor]) -> Path:
+    keep = [p for p in out.iterdir() if p.name not in ("ema.safetensors", "checkpoint.json")] if out.is_dir() else []
+    with atomic_folder(out) as tmp:
+        save_file(state, str(tmp / "ema.safetensors"))
+        (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
+        for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
+            (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)
+    return out

@@ -1,0 +1,57 @@
+"""Packing a training run as an inference model folder (`kinema export`)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from kinema.cli import main
+from kinema.diffusion.guidance import Guidance
+from kinema.errors import KinemaError
+from kinema.generate.api import load_model
+from kinema.model.export import export_model
+from kinema.model.loading import find_checkpoint, load_denoiser
+
+
+def test_export_keeps_ema_weights_in_half_precision(tiny_checkpoint, tmp_path) -> None:
+    out = export_model(tiny_checkpoint, tmp_path / "model", guidance=Guidance("separated", 1.5, 3.0),
+                       sampling_steps=7)
+    assert sorted(p.name for p in out.iterdir()) == ["checkpoint.json", "ema.safetensors"]
+    src = find_checkpoint(tiny_checkpoint)
+    ema = load_file(str(src / "ema.safetensors"))
+    packed = load_file(str(out / "ema.safetensors"))
+    assert set(packed) == set(ema)
+    assert all(v.dtype == torch.float16 for v in packed.values())
+    for k, v in ema.items():
+        assert torch.allclose(packed[k].float(), v, rtol=1e-3, atol=1e-4), k
+    info = json.loads((out / "checkpoint.json").read_text())
+    assert "optimizer_param_groups" not in info and info["export"]["dtype"] == "float16"
+    loaded = load_denoiser(out)
+    assert (loaded.guidance.w_text, loaded.guidance.w_constr) == (1.5, 3.0)
+    assert loaded.sampler.num_inference_steps == 7
+    assert loaded.info["step"] == json.loads((src / "checkpoint.json").read_text())["step"]
+
+
+def test_exported_model_generates_like_the_checkpoint(tiny_checkpoint, tmp_path) -> None:
+    out = export_model(tiny_checkpoint, tmp_path / "model", dtype="float32")
+    a = load_model(tiny_checkpoint).generate("a person walks", seconds=1.0, seed=3, steps=4, postprocess=False)[0]
+    b = load_model(out).generate("a person walks", seconds=1.0, seed=3, steps=4, postprocess=False)[0]
+    assert torch.allclose(a.positions, b.positions, atol=1e-5)
+
+
+def test_reexport_keeps_model_card_and_cli_reports_errors(tiny_checkpoint, tmp_path, capsys) -> None:
+    out = tmp_path / "model"
+    assert main(["export", str(tiny_checkpoint), "--out", str(out), "--steps", "5"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    (out / "MODEL_CARD.md").write_text("card\n")
+    assert main(["export", str(tiny_checkpoint), "--out", str(out)]) == 0
+    assert (out / "MODEL_CARD.md").read_text() == "card\n"
+    assert main(["export", str(tmp_path / "missing"), "--out", str(tmp_path / "x")]) == 2
+    assert "no checkpoint found" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+    with pytest.raises(KinemaError, match="sampling steps"):
+        export_model(tiny_checkpoint, tmp_path / "y", sampling_steps=0)
+    assert not (tmp_path / "y").exists()
