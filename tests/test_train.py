@@ -109,3 +109,22 @@ def test_two_process_gloo_run(tiny_data, tmp_path):
     info = json.loads((tmp_path / "ddp" / "ckpt-00000004" / "checkpoint.json").read_text())
     assert info["world_size"] == 2 and info["step"] == 4
     assert (tmp_path / "ddp" / "log.jsonl").exists()
+
+
+def test_cli_resume_may_change_the_schedule_but_nothing_else(tiny_data, tmp_path, capsys):
+    from kinema.cli import main
+
+    out = tmp_path / "run"
+    base = ["train", "--config", "tiny", "--data", str(tiny_data), "--out", str(out), "--batch-size", "2",
+            "--text-encoder", "hash-test-32", "--no-progress"]
+    assert main([*base, "--steps", "4", "--ckpt-every", "2", "--phase1-fraction", "0.5"]) == 0
+    resumed = ["train", "--data", str(tiny_data), "--out", str(out), "--resume", "--no-progress"]
+    assert main([*resumed, "--steps", "6", "--phase1-fraction", "0.25"]) == 0
+    saved = json.loads((out / "train_config.json").read_text())
+    assert (saved["steps"], saved["phase1_fraction"], saved["model"]) == (6, 0.25, "tiny")
+    info = json.loads((out / "ckpt-00000006" / "checkpoint.json").read_text())
+    assert info["step"] == 6 and info["phase"] == 2
+    capsys.readouterr()
+    assert main([*resumed, "--steps", "8", "--lr", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert "--resume keeps the run's settings" in err and "'lr'" in err
