@@ -263,12 +263,41 @@ def test_postprocess_chains_foot_lock_then_exact(walk):
     targets = _walk_targets(walk)
     targets.contacts = (torch.arange(0, 20), contacts[:20])
     out, report = postprocess(sliding, targets)
-    assert set(report) == {"foot_lock", "exact"}
+    assert set(report) == {"smooth", "foot_lock", "exact"}
     assert report["foot_lock"]["skate_after"] < report["foot_lock"]["skate_before"]
     assert all(v["max"] < 0.1 for k, v in report["exact"]["after"].items() if k != "contact_skate_cm_s")
     assert out.foot_contacts is not None
-    unchanged, rep = postprocess(sliding, None, foot_lock=False)
+    unchanged, rep = postprocess(sliding, None, foot_lock=False, smooth=0)
     assert unchanged is sliding and rep == {}
+
+
+def test_smoothing_removes_jitter_and_keeps_the_motion(walk):
+    from kinema.postprocess.smooth import smooth_motion
+
+    clean = walk.to(torch.float64)
+    g = torch.Generator().manual_seed(0)
+    aa = math.radians(2.0) * torch.randn(clean.local_rotations.shape[:2] + (3,), generator=g, dtype=torch.float64)
+    root = clean.root_translation.clone()
+    root[:, [0, 2]] += 0.02 * torch.randn(root.shape[0], 2, generator=g, dtype=torch.float64)  # ground-plane jitter
+    noisy = Motion(clean.skeleton, clean.fps, root, quat_mul(clean.local_rotations, axis_angle_to_quat(aa)))
+    # Sign flips on every other frame are the same rotations and must not change the result.
+    flips = torch.ones(noisy.num_frames, 1, 1, dtype=torch.float64)
+    flips[1::2] = -1
+    flipped = Motion(noisy.skeleton, noisy.fps, noisy.root_translation, noisy.local_rotations * flips)
+    out, report = smooth_motion(noisy, sigma_root=0.075, sigma_rot=0.075)
+    out2, _ = smooth_motion(flipped, sigma_root=0.075, sigma_rot=0.075)
+    assert torch.allclose(out.positions, out2.positions, atol=1e-9)
+    assert report["accel_after_cm"] < 0.4 * report["accel_before_cm"], report
+    err_noisy = (noisy.positions - clean.positions).norm(dim=-1).mean()
+    err_out = (out.positions - clean.positions).norm(dim=-1).mean()
+    assert err_out < 0.6 * err_noisy, (float(err_out), float(err_noisy))
+    # The default (root x/z over one frame) barely moves a clean capture and keeps its vertical bounce.
+    default, rep_clean = smooth_motion(clean)
+    assert rep_clean["max_shift_cm"] < 1.0, rep_clean
+    assert torch.equal(default.root_translation[:, 1], clean.root_translation[:, 1])
+    assert torch.equal(default.local_rotations, clean.local_rotations)
+    same, rep0 = smooth_motion(noisy, sigma_root=0.0)
+    assert same is noisy and rep0["max_shift_cm"] == 0.0
 
 
 def test_targets_are_validated():

@@ -1,7 +1,8 @@
-"""Motion post-processing (Kimodo Sec. 4.4): foot locking with IK, then exact constraint hitting.
+"""Motion post-processing (Kimodo Sec. 4.4): de-jittering, foot locking with IK, exact constraint hitting.
 
 Generated motions are good but not exact: feet may skate a little where the model predicts contact,
-and kinematic constraints are met within centimetres. ``postprocess`` first locks planted feet
+and kinematic constraints are met within centimetres. ``postprocess`` first removes frame-to-frame
+jitter with a light Gaussian (kinema.postprocess.smooth; not in the paper), then locks planted feet
 (kinema.postprocess.footlock) and then runs a short optimisation plus an exact pass
 (kinema.postprocess.exact) so constrained frames are hit to within a millimetre. The exact pass runs
 last so constraints win over foot locks where they disagree.
@@ -22,6 +23,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
+from kinema.postprocess.smooth import DEFAULT_SIGMA_SECONDS, smooth_motion
 
 Pair = tuple[torch.Tensor, torch.Tensor]
 
@@ -126,15 +128,19 @@ def postprocess(
     targets: PostTargets | None = None,
     foot_lock: bool = True,
     exact: bool = True,
+    smooth: float = DEFAULT_SIGMA_SECONDS,
     **exact_kwargs,
 ) -> tuple[Motion, dict]:
-    """Foot locking (on ``motion.foot_contacts``, overridden by ``targets.contacts`` where given), then
-    the exact constraint pass; returns the motion and ``{"foot_lock": ..., "exact": ...}`` reports."""
+    """De-jittering (Gaussian of ``smooth`` seconds; 0 = off), foot locking (on ``motion.foot_contacts``,
+    overridden by ``targets.contacts`` where given), then the exact constraint pass; returns the motion
+    and ``{"smooth": ..., "foot_lock": ..., "exact": ...}`` reports."""
     from kinema.postprocess.exact import hit_constraints
     from kinema.postprocess.footlock import foot_lock as lock_feet
 
     report: dict = {}
     targets = None if targets is None else targets.validate(motion)
+    if smooth > 0:
+        motion, report["smooth"] = smooth_motion(motion, smooth)
     if foot_lock:
         contacts = motion.foot_contacts
         if targets is not None and targets.contacts is not None:
