@@ -185,3 +185,37 @@ def test_bench_all_writes_a_report(tiny_checkpoint, tmp_path):
     assert {r["config"] for r in rep["train"]} == {"tiny", "small", "small-1stage"}
     assert len(rep["generate"]) == 4 and rep["cold_start_s"] > 0
     assert "Generation latency" in (tmp_path / "bench" / "report.md").read_text()
+
+
+def test_displace_root_meets_root_targets_smoothly() -> None:
+    from kinema.generate.sampling import displace_root
+
+    T, D = 40, 9
+    x0 = torch.zeros(2, T, D)
+    x0[:, :, 0] = torch.linspace(0, 1, T)  # a straight root track on channel 0
+    tgt, mask = torch.zeros(2, T, D), torch.zeros(2, T, D)
+    tgt[0, [10, 30], 0] = torch.tensor([0.5, 0.2])
+    mask[0, [10, 30], 0] = 1
+    tgt[0, 20, 4] = 3.0  # a non-root channel: left alone
+    mask[0, 20, 4] = 1
+    out = displace_root(x0, tgt, mask)
+    assert torch.allclose(out[0, [10, 30], 0], torch.tensor([0.5, 0.2]))
+    assert out[0, 0, 0] == x0[0, 0, 0]  # frame 0 is free: the start stays where the model put it
+    r30 = 0.2 - float(x0[0, 30, 0])
+    assert torch.allclose(out[0, 31:, 0] - x0[0, 31:, 0], torch.full((T - 31,), r30))  # held after the last
+    jumps = (out[0, 1:, 0] - out[0, :-1, 0]).abs()
+    assert jumps.max() < 0.1  # continuous: no snapping at the constrained frames
+    assert torch.equal(out[1], x0[1]) and torch.equal(out[0, :, 1:], x0[0, :, 1:])
+    mask[0, 0, 2], tgt[0, 0, 2] = 1, 0.7  # a constrained first frame moves the start too
+    assert displace_root(x0, tgt, mask)[0, 0, 2] == pytest.approx(0.7)
+
+
+def test_root_displacement_can_be_switched_off(model):
+    cons = [{"type": "root2d", "times": [0.5, 1.0], "smooth_root_2d": [[0.0, 0.4], [0.3, 0.8]]}]
+    model.root_displacement = False
+    try:
+        off = model.generate("a person walks", seconds=1.5, constraints=cons, seed=0, steps=5, postprocess=False)[0]
+    finally:
+        model.root_displacement = True
+    on = model.generate("a person walks", seconds=1.5, constraints=cons, seed=0, steps=5, postprocess=False)[0]
+    assert not torch.allclose(on.root_translation, off.root_translation)

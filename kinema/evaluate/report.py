@@ -61,7 +61,9 @@ def _markdown(data: dict) -> str:
         "# kinema evaluation report", "",
         f"Model `{meta['model']}` at {meta['fps']:g} fps; {meta['num_cases']} cases from "
         f"{', '.join(meta['data'])} ({', '.join(meta['split'])}); seed {meta['seed']}, "
-        f"DDIM steps {meta['steps'] if meta['steps'] is not None else 'model default'}. "
+        f"DDIM steps {meta['steps'] if meta['steps'] is not None else 'model default'}; guidance "
+        f"{meta.get('guidance', 'model default')}; "
+        f"root displacement {'on' if meta.get('root_displacement') else 'off'}. "
         "Protocol and metric definitions: docs/evaluation.md.", "",
         "## Summary (layout of Kimodo Table 1)", "",
         format_table(data), "",

@@ -182,6 +182,15 @@ def _post(model, motion: Motion, case: dict) -> Motion:
     return run_postprocess(motion, cons, model)[0]
 
 
+def _guidance_meta(model, guidance):
+    """The guidance a run used, for the report: explicit weights, a Guidance, or the model's default."""
+    if isinstance(guidance, (tuple, list)):
+        return [float(w) for w in guidance]
+    if guidance is None:
+        guidance = getattr(getattr(model, "loaded", None), "guidance", None)
+    return None if guidance is None else guidance.to_dict()
+
+
 def _bar(total: int, progress: bool, desc: str):
     from tqdm.auto import tqdm
 
@@ -286,7 +295,9 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
                  "num_cases": len(cases), "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
                  "modes": modes, "steps": steps, "seed": seed, "data": sorted({c["source"]["data"] for c in cases}),
                  "split": sorted({c["source"]["split"] for c in cases}), "torch_threads": torch.get_num_threads(),
-                 "machine": platform.platform()},
+                 "machine": platform.platform(),
+                 "guidance": _guidance_meta(model, guidance),
+                 "root_displacement": bool(getattr(model, "root_displacement", False))},
         "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds, "postprocess_seconds": post_seconds,
                    "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples)},
         "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},

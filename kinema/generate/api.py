@@ -39,12 +39,18 @@ class GenerationReport:
 
 
 class KinemaModel:
-    """A trained model ready to generate; build it with :func:`load_model`."""
+    """A trained model ready to generate; build it with :func:`load_model`.
+
+    ``root_displacement`` (default True) moves the predicted root trajectory onto root constraints after
+    every denoising step (see kinema.generate.sampling.displace_root); set it False for the paper's
+    imputation alone.
+    """
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder):
         self.loaded = loaded
         self.text_encoder = text_encoder
         self.last_report = GenerationReport()
+        self.root_displacement = True
 
     @property
     def skeleton(self):
@@ -138,6 +144,7 @@ class KinemaModel:
                 x_tgt[None], mask[None], steps=steps, generator=g, progress=progress,
                 world_xz=None if world_xz is None else world_xz[None],
                 world_mask=None if world_mask is None else world_mask[None],
+                root_displacement=self.root_displacement,
             )[0]
             feats[:, 0] += shift[0]
             feats[:, 2] += shift[1]
