@@ -198,16 +198,36 @@ def test_displace_root_meets_root_targets_smoothly() -> None:
     mask[0, [10, 30], 0] = 1
     tgt[0, 20, 4] = 3.0  # a non-root channel: left alone
     mask[0, 20, 4] = 1
-    out = displace_root(x0, tgt, mask)
+    x0[:, :, 0] += 0.3  # the model starts 0.3 away from the origin
+    out = displace_root(x0, tgt, mask, anchor_start=False)
     assert torch.allclose(out[0, [10, 30], 0], torch.tensor([0.5, 0.2]))
-    assert out[0, 0, 0] == x0[0, 0, 0]  # frame 0 is free: the start stays where the model put it
+    assert out[0, 0, 0] == x0[0, 0, 0]  # frame 0 is free: without the anchor the start stays put
     r30 = 0.2 - float(x0[0, 30, 0])
     assert torch.allclose(out[0, 31:, 0] - x0[0, 31:, 0], torch.full((T - 31,), r30))  # held after the last
     jumps = (out[0, 1:, 0] - out[0, :-1, 0]).abs()
     assert jumps.max() < 0.1  # continuous: no snapping at the constrained frames
     assert torch.equal(out[1], x0[1]) and torch.equal(out[0, :, 1:], x0[0, :, 1:])
-    mask[0, 0, 2], tgt[0, 0, 2] = 1, 0.7  # a constrained first frame moves the start too
+    anchored = displace_root(x0, tgt, mask, origin=(-0.1, 0.0))
+    assert anchored[0, 0, 0] == pytest.approx(-0.1) and anchored[1, 0, 0] == pytest.approx(-0.1)
+    assert torch.allclose(anchored[0, [10, 30], 0], torch.tensor([0.5, 0.2]))
+    assert torch.allclose(anchored[1, :, 0] - x0[1, :, 0], torch.full((T,), -0.4))  # no targets: a shift
+    mask[0, 0, 2], tgt[0, 0, 2] = 1, 0.7  # a constrained first frame wins over the anchor
     assert displace_root(x0, tgt, mask)[0, 0, 2] == pytest.approx(0.7)
+
+
+def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
+    from kinema.generate.sampling import sample_features
+
+    L = model.loaded
+    text = model.encode_text("a person walks")
+    f = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
+                        generator=torch.Generator().manual_seed(0))[0]
+    assert f[0, [0, 2]].abs().max() < 1e-5
+    accel = (f[2:, [0, 2]] - 2 * f[1:-1, [0, 2]] + f[:-2, [0, 2]]).norm(dim=-1)
+    raw = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
+                          generator=torch.Generator().manual_seed(0), root_smoothing=0.0, root_displacement=False)[0]
+    accel_raw = (raw[2:, [0, 2]] - 2 * raw[1:-1, [0, 2]] + raw[:-2, [0, 2]]).norm(dim=-1)
+    assert accel.mean() < 0.5 * accel_raw.mean()
 
 
 def test_root_displacement_can_be_switched_off(model):
