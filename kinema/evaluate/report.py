@@ -63,7 +63,8 @@ def _markdown(data: dict) -> str:
         f"{', '.join(meta['data'])} ({', '.join(meta['split'])}); seed {meta['seed']}, "
         f"DDIM steps {meta['steps'] if meta['steps'] is not None else 'model default'}; guidance "
         f"{meta.get('guidance', 'model default')}; "
-        f"root displacement {'on' if meta.get('root_displacement') else 'off'}. "
+        f"root displacement {'on' if meta.get('root_displacement') else 'off'}, "
+        f"root smoothing {meta.get('root_smoothing', 0.0):g} s. "
         "Protocol and metric definitions: docs/evaluation.md.", "",
         "## Summary (layout of Kimodo Table 1)", "",
         format_table(data), "",

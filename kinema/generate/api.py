@@ -17,7 +17,7 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.sampling import sample_features
+from kinema.generate.sampling import ROOT_SMOOTHING_SECONDS, sample_features
 from kinema.generate.segments import SegmentPlan, plan_segments
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
 from kinema.model.loading import LoadedModel, load_denoiser
@@ -41,9 +41,10 @@ class GenerationReport:
 class KinemaModel:
     """A trained model ready to generate; build it with :func:`load_model`.
 
-    ``root_displacement`` (default True) moves the predicted root trajectory onto root constraints after
-    every denoising step (see kinema.generate.sampling.displace_root); set it False for the paper's
-    imputation alone.
+    Sampling-time root corrections (kinema.generate.sampling; not in the paper): ``root_displacement``
+    (default True) moves the predicted root trajectory onto root constraints and pins a free first frame
+    to the origin after every denoising step; ``root_smoothing`` (seconds, default 0.25) filters the
+    predicted root x/z. Set them to False / 0 for the paper's imputation alone.
     """
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder):
@@ -51,6 +52,7 @@ class KinemaModel:
         self.text_encoder = text_encoder
         self.last_report = GenerationReport()
         self.root_displacement = True
+        self.root_smoothing = ROOT_SMOOTHING_SECONDS
 
     @property
     def skeleton(self):
@@ -144,7 +146,8 @@ class KinemaModel:
                 x_tgt[None], mask[None], steps=steps, generator=g, progress=progress,
                 world_xz=None if world_xz is None else world_xz[None],
                 world_mask=None if world_mask is None else world_mask[None],
-                root_displacement=self.root_displacement,
+                root_displacement=self.root_displacement, anchor_start=self.root_displacement,
+                root_smoothing=self.root_smoothing,
             )[0]
             feats[:, 0] += shift[0]
             feats[:, 2] += shift[1]
