@@ -27,6 +27,8 @@ The first step runs without these channels; by the last step root and target agr
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
 
 from kinema.diffusion.guidance import Guidance
@@ -35,7 +37,6 @@ from kinema.model.denoiser import Denoiser
 from kinema.motion.features import FeatureLayout
 from kinema.motion.smoothing import smooth_time
 
-ROOT_XZ = (0, 2)  # smoothed-root x and z channels of the feature layout
 #: Gaussian (seconds) applied to the predicted smoothed-root x/z after every step. The smoothed root
 #: is itself the pelvis under a 0.5-s Gaussian, so a further 0.25-s filter leaves a valid one almost
 #: unchanged (combined width 0.56 s) while removing the frame-to-frame noise of an imprecise root stage.
@@ -44,7 +45,7 @@ ROOT_SMOOTHING_SECONDS = 0.25
 
 def displace_root(
     x0: torch.Tensor, tgt: torch.Tensor | None, mask: torch.Tensor | None, anchor_start: bool = True,
-    origin: tuple[float, float] = (0.0, 0.0),
+    origin: tuple[float, float] = (0.0, 0.0), channels: Sequence[int] = (0, 2),
 ) -> torch.Tensor:
     """Move the predicted smoothed-root x/z trajectory onto its targets with a smooth displacement.
 
@@ -60,26 +61,27 @@ def displace_root(
     the model should produce, and saying it stops an imprecise root stage from starting the motion
     half a metre away (measured at step 6000: 0.5-0.7 m along +Z for a walk). ``origin`` is the origin
     in the normalised units of ``x0``. Without ``anchor_start`` a free frame 0 keeps its value.
+    ``channels`` are the root x/z indices (``FeatureLayout.root_xz``).
     """
+    ch = list(channels)
+    x = x0[..., ch]  # (B, T, 2)
+    T = x.shape[1]
+    if mask is None or tgt is None:
+        m, r = torch.zeros_like(x, dtype=torch.bool), torch.zeros_like(x)
+    else:
+        m = mask[..., ch] > 0
+        r = torch.where(m, tgt[..., ch] - x, torch.zeros_like(x))
+    # frame 0 always carries a residual: its target, else the origin (anchor_start), else none
+    r0 = x.new_tensor(origin) - x[:, 0] if anchor_start else torch.zeros_like(x[:, 0])
+    r[:, 0] = torch.where(m[:, 0], r[:, 0], r0)
+    m[:, 0] = True
+    time = torch.arange(T).view(1, T, 1).expand_as(x)
+    prev = torch.where(m, time, -1).cummax(dim=1).values  # last constrained frame <= t
+    nxt = torch.where(m, time, T).flip(1).cummin(dim=1).values.flip(1)  # first constrained frame >= t
+    span = (nxt - prev).clamp_min(1).to(x.dtype)
+    w = torch.where(nxt < T, (time - prev).to(x.dtype) / span, torch.zeros_like(x))
     out = x0.clone()
-    B, T, _ = x0.shape
-    time = torch.arange(T)
-    for b in range(B):
-        for c, o in zip(ROOT_XZ, origin, strict=True):
-            if mask is None:
-                k = torch.zeros(0, dtype=torch.long)
-            else:
-                k = torch.nonzero(mask[b, :, c] > 0).flatten()
-            r = tgt[b, k, c] - x0[b, k, c] if k.numel() else x0.new_zeros(0)
-            if k.numel() == 0 or int(k[0]) != 0:
-                r0 = o - x0[b, 0, c] if anchor_start else x0.new_zeros(())
-                k, r = torch.cat([k.new_zeros(1), k]), torch.cat([r0.reshape(1), r])
-            lo = (torch.searchsorted(k, time, right=True) - 1).clamp(0, k.numel() - 1)
-            hi = (lo + 1).clamp(max=k.numel() - 1)
-            span = (k[hi] - k[lo]).clamp_min(1).to(x0.dtype)
-            w = ((time - k[lo]).to(x0.dtype) / span).clamp(0, 1)
-            w = torch.where(hi > lo, w, torch.zeros_like(w))
-            out[b, :, c] = x0[b, :, c] + (1 - w) * r[lo] + w * r[hi]
+    out[..., ch] = x + (1 - w) * r.gather(1, prev) + w * r.gather(1, nxt.clamp(max=T - 1))
     return out
 
 
@@ -126,7 +128,8 @@ def sample_features(
         mask = mask.float().clone()
         tgt = torch.nan_to_num(x_tgt.float()).clone()
     smooth_frames = root_smoothing * denoiser.config.fps
-    origin = tuple(float(v) for v in denoiser.normalize(torch.zeros(D))[list(ROOT_XZ)])
+    rxz = FeatureLayout(J).root_xz
+    origin = tuple(float(v) for v in denoiser.normalize(torch.zeros(D))[rxz])
     if text_emb is None:
         text_mask = torch.zeros(B, dtype=torch.bool)
         if mask is None:
@@ -138,7 +141,7 @@ def sample_features(
 
     def refresh_world(x0_norm: torch.Tensor) -> None:
         """Re-target world-frame joints against the current root estimate (unnormalised)."""
-        root = denoiser.denormalize(x0_norm)[..., [0, 2]]  # (B, T, 2)
+        root = denoiser.denormalize(x0_norm)[..., rxz]  # (B, T, 2)
         rel = world_xz - root[:, :, None, :]  # (B, T, J, 2)
         m = world_mask.float()
         tgt[..., ix] = torch.where(m > 0, rel[..., 0], tgt[..., ix])
@@ -152,9 +155,9 @@ def sample_features(
         x0 = denoiser.forward_guided(x_t, t, text_emb, c_dir, tgt_n, mask, None, guidance, text_mask=text_mask)
         if smooth_frames > 0:
             x0 = x0.clone()
-            x0[..., list(ROOT_XZ)] = smooth_time(x0[..., list(ROOT_XZ)], smooth_frames)
+            x0[..., rxz] = smooth_time(x0[..., rxz], smooth_frames)
         if root_displacement:
-            x0 = displace_root(x0, tgt_n, mask, anchor_start=anchor_start, origin=origin)
+            x0 = displace_root(x0, tgt_n, mask, anchor_start=anchor_start, origin=origin, channels=rxz)
         if has_world:
             refresh_world(x0)
         return x0

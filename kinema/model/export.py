@@ -19,7 +19,7 @@ from safetensors.torch import load_file, save_file
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
-from kinema.model.loading import find_checkpoint
+from kinema.model.loading import find_checkpoint, weights_file
 
 #: checkpoint.json keys that only matter for resuming training.
 _TRAINING_ONLY = ("optimizer_param_groups",)
@@ -43,9 +43,7 @@ def export_model(
     if dtype not in DTYPES:
         raise KinemaError(f"unknown weight dtype {dtype!r}; choose one of {', '.join(DTYPES)}")
     ckpt = find_checkpoint(src)
-    weights = ckpt / "ema.safetensors"
-    if not weights.exists():
-        weights = ckpt / "model.safetensors"
+    weights = weights_file(ckpt)
     try:
         info = json.loads((ckpt / "checkpoint.json").read_text())
         state = load_file(str(weights))

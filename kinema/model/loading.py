@@ -47,14 +47,19 @@ class LoadedModel:
     path: Path
 
 
+def weights_file(ckpt: Path, ema: bool = True) -> Path:
+    """The weights a checkpoint folder should be loaded from: the EMA copy when asked for and present
+    (training checkpoints hold both, exported models only the EMA), else the raw training weights."""
+    ema_file = ckpt / "ema.safetensors"
+    return ema_file if ema and ema_file.exists() else ckpt / "model.safetensors"
+
+
 def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
     """Read ``checkpoint.json`` and the (EMA) safetensors weights of a checkpoint or run folder."""
     ckpt = find_checkpoint(path)
     try:
         info = json.loads((ckpt / "checkpoint.json").read_text())
-        use_ema = ema and (ckpt / "ema.safetensors").exists()
-        weights_file = ckpt / ("ema.safetensors" if use_ema else "model.safetensors")
-        state = load_file(str(weights_file))
+        state = load_file(str(weights_file(ckpt, ema)))
         config = ModelConfig.from_dict(info["model_config"])
         model = Denoiser(config)
         model.load_state_dict({k: v.float() for k, v in state.items()})

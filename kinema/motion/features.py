@@ -57,6 +57,12 @@ class FeatureLayout:
             start += size
         return out
 
+    @property
+    def root_xz(self) -> list[int]:
+        """Channel indices of the smoothed root's ground-plane x and z (metres before normalisation)."""
+        start = self.slices["root_pos"].start
+        return [start, start + 2]
+
     def split(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
         """Named views of ``x (..., D)``; per-joint groups reshaped to ``(..., J, C)``."""
         J = self.num_joints

@@ -51,11 +51,6 @@ Frames = Sequence[int] | torch.Tensor
 
 
 # ---------------------------------------------------------------------------- channel indices
-def _root_xz(layout: FeatureLayout) -> list[int]:
-    s = layout.slices["root_pos"].start
-    return [s, s + 2]
-
-
 def _group(layout: FeatureLayout, name: str) -> list[int]:
     return list(range(layout.slices[name].start, layout.slices[name].stop))
 
@@ -112,13 +107,13 @@ def end_effector_mask(
     from :data:`EFFECTORS`) and root_pos x/z, at ``frames``."""
     pos_j = [j for e in positions for j in effector_joints(skeleton, e)]
     rot_j = [j for e in rotations for j in effector_joints(skeleton, e)]
-    ch = _root_xz(layout) + _joint_channels(layout, "joint_pos", pos_j)
+    ch = layout.root_xz + _joint_channels(layout, "joint_pos", pos_j)
     return _mask(T, layout, frames, ch + _joint_channels(layout, "joint_rot", rot_j))
 
 
 def root2d_mask(T: int, frames: Frames, layout: FeatureLayout, heading: bool = False) -> torch.Tensor:
     """(T, D): root_pos x/z (and heading when ``heading``) at ``frames`` (2D waypoints)."""
-    return _mask(T, layout, frames, _root_xz(layout) + (_group(layout, "heading") if heading else []))
+    return _mask(T, layout, frames, layout.root_xz + (_group(layout, "heading") if heading else []))
 
 
 def root_path_mask(
