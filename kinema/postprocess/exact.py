@@ -114,10 +114,16 @@ def _support(targets: PostTargets, T: int, blend: float, root_reach: float) -> t
     return env
 
 
+#: Adam steps of stage (a). The exact pass makes constraints exact whatever this is; the optimisation
+#: only spreads the edit over the body. 80 -> 30 steps cut a 5-s motion's post-processing with two
+#: waypoints and a hand target from ~0.9 s to ~0.4 s with no measurable change in jerk (731 vs 730 m/s^3).
+OPTIMISE_ITERATIONS = 30
+
+
 def optimise(
     motion: Motion,
     targets: PostTargets,
-    iterations: int = 80,
+    iterations: int = OPTIMISE_ITERATIONS,
     lr: float = 0.01,
     blend_seconds: float = 0.3,
     closeness: float = 1e-3,
@@ -376,7 +382,7 @@ def _root_waypoints(skel, L, r, targets: PostTargets, fps: float, radius: float,
 def hit_constraints(
     motion: Motion,
     targets: PostTargets,
-    iterations: int = 80,
+    iterations: int = OPTIMISE_ITERATIONS,
     lr: float = 0.01,
     blend_seconds: float = 0.3,
     closeness: float = 1e-3,
