@@ -119,12 +119,48 @@ def test_cli_resume_may_change_the_schedule_but_nothing_else(tiny_data, tmp_path
             "--text-encoder", "hash-test-32", "--no-progress"]
     assert main([*base, "--steps", "4", "--ckpt-every", "2", "--phase1-fraction", "0.5"]) == 0
     resumed = ["train", "--data", str(tiny_data), "--out", str(out), "--resume", "--no-progress"]
-    assert main([*resumed, "--steps", "6", "--phase1-fraction", "0.25"]) == 0
+    assert main([*resumed, "--steps", "6", "--phase1-fraction", "0.25", "--content-balance", "0.5"]) == 0
     saved = json.loads((out / "train_config.json").read_text())
     assert (saved["steps"], saved["phase1_fraction"], saved["model"]) == (6, 0.25, "tiny")
+    assert saved["content_balance"] == 0.5
     info = json.loads((out / "ckpt-00000006" / "checkpoint.json").read_text())
     assert info["step"] == 6 and info["phase"] == 2
     capsys.readouterr()
     assert main([*resumed, "--steps", "8", "--lr", "0.5"]) == 2
     err = capsys.readouterr().err
     assert "--resume keeps the run's settings" in err and "'lr'" in err
+
+
+def test_content_balance_weights_rare_contents_up():
+    from kinema.train.trainer import content_weights
+
+    recs = [{"content": "walk"}] * 9 + [{"content": "bow"}, {"clip_id": "unlabelled"}]
+    assert content_weights(recs, 0.0) is None
+    w = content_weights(recs, 0.5)
+    assert w[0] == pytest.approx(1 / 3) and w[9] == 1.0 and w[10] == 1.0
+    w1 = content_weights(recs, 1.0)
+    assert sum(w1[:9]) == pytest.approx(w1[9])  # power 1: every content gets the same total weight
+    with pytest.raises(Exception, match="content_balance"):
+        content_weights(recs, -1.0)
+
+
+def test_batch_sampler_draws_clips_in_proportion_to_their_weights():
+    from kinema.motion.features import FeatureLayout
+    from kinema.motion.stats import NormStats
+    from kinema.train.batching import BatchSampler
+
+    layout = FeatureLayout(3)
+    clips = [torch.full((20, layout.dim), float(k)) for k in range(4)]  # clip k is filled with k
+    stats = NormStats(torch.zeros(layout.dim), torch.ones(layout.dim))
+    kw = dict(num_buckets=1, text_dropout=0.0, random_heading=False)
+    ranges = [(k, k + 1) for k in range(4)]
+    weighted = BatchSampler(clips, ranges, layout, stats, 64, 20, clip_weights=[1.0, 1.0, 1.0, 5.0], **kw)
+    g = torch.Generator().manual_seed(0)
+    picks = torch.cat([weighted.sample(g).caption_index for _ in range(40)])
+    share = float((picks == 3).double().mean())
+    assert abs(share - 5 / 8) < 0.03, share
+    uniform = BatchSampler(clips, ranges, layout, stats, 64, 20, **kw)
+    picks = torch.cat([uniform.sample(g).caption_index for _ in range(40)])
+    assert abs(float((picks == 3).double().mean()) - 0.25) < 0.03
+    with pytest.raises(ValueError, match="one positive weight per clip"):
+        BatchSampler(clips, ranges, layout, stats, 8, 20, clip_weights=[1.0, 0.0, 1.0, 1.0], **kw)

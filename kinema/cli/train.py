@@ -18,6 +18,9 @@ def register(sub) -> None:
     p.add_argument("--lr", type=float)
     p.add_argument("--optimizer", choices=["adamw", "adam-atan2"])
     p.add_argument("--phase1-fraction", type=float, help="share of steps in text-only phase 1 (default 0.5)")
+    p.add_argument("--content-balance", type=float,
+                   help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
+                        "square-root balancing of rare contents")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -30,9 +33,9 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-# Settings a resumed run may change: the schedule (length, phase boundary) and how often it reports.
-# Everything else (model, data order, optimiser) must match the checkpoint it continues.
-_RESUME_SCHEDULE = ("steps", "phase1_fraction", "ckpt_every", "log_every")
+# Settings a resumed run may change: the schedule (length, phase boundary, how clips are weighted) and
+# how often it reports. Everything else (model, data, optimiser) must match the checkpoint it continues.
+_RESUME_SCHEDULE = ("steps", "phase1_fraction", "content_balance", "ckpt_every", "log_every")
 
 
 def _config_from_args(args: argparse.Namespace):
@@ -44,7 +47,8 @@ def _config_from_args(args: argparse.Namespace):
     overrides = {
         "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
-        "log_every": args.log_every, "seed": args.seed, "text_encoder": args.text_encoder,
+        "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
+        "text_encoder": args.text_encoder,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

@@ -55,6 +55,7 @@ class BatchSampler:
         random_heading: bool = True,
         rank: int = 0,
         world_size: int = 1,
+        clip_weights: list[float] | None = None,
     ):
         mine = [i for i in range(len(clips)) if i % world_size == rank and clips[i].shape[0] >= min_frames]
         if not mine:
@@ -69,13 +70,23 @@ class BatchSampler:
         n = max(1, min(num_buckets, len(usable)))
         size = math.ceil(len(usable) / n)
         self.buckets = [usable[k : k + size] for k in range(0, len(usable), size)]
-        frames = torch.tensor([float(sum(min(clips[i].shape[0], max_frames) for i in b)) for b in self.buckets])
-        self.bucket_probs = frames / frames.sum()  # every frame seen about equally often
+        # Without weights a clip is drawn uniformly within its bucket and a bucket by its frames, so every
+        # frame is seen about equally often; ``clip_weights`` (one per clip) scale both draws.
+        self.clip_weights = None if clip_weights is None else torch.as_tensor(clip_weights, dtype=torch.float64)
+        if self.clip_weights is not None and (self.clip_weights.shape != (len(clips),) or
+                                              not bool((self.clip_weights > 0).all())):
+            raise ValueError(f"clip_weights must hold one positive weight per clip ({len(clips)})")
+        w = self.clip_weights if self.clip_weights is not None else torch.ones(len(clips), dtype=torch.float64)
+        frames = torch.tensor([float(sum(w[i] * min(clips[i].shape[0], max_frames) for i in b)) for b in self.buckets])
+        self.bucket_probs = frames / frames.sum()
 
     def sample(self, g: torch.Generator) -> Batch:
         """One batch drawn with generator ``g``."""
         bucket = self.buckets[int(torch.multinomial(self.bucket_probs, 1, generator=g))]
-        picks = torch.randint(len(bucket), (self.batch_size,), generator=g)
+        if self.clip_weights is None:
+            picks = torch.randint(len(bucket), (self.batch_size,), generator=g)
+        else:
+            picks = torch.multinomial(self.clip_weights[bucket], self.batch_size, replacement=True, generator=g)
         idx = [bucket[int(k)] for k in picks]
         longest = min(self.max_frames, max(self.clips[i].shape[0] for i in idx))
         target = int(torch.randint(max(self.min_frames, longest // 2), longest + 1, (1,), generator=g))

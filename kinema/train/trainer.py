@@ -9,8 +9,10 @@ resumed run continues exactly as the uninterrupted one would have.
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -56,11 +58,26 @@ class TrainConfig:
     log_every: int = 20
     ckpt_every: int = 1000
     sampling_steps: int = 50  # saved with the model as the sampler default
+    # clip sampling weight = (train clips sharing its content label) ** -content_balance: 0 draws clips
+    # uniformly (common contents dominate), 0.5 square-root balances, 1 gives every content equal time
+    content_balance: float = 0.0
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
         names = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def content_weights(records: list[dict], power: float) -> list[float] | None:
+    """Per-clip sampling weights ``count(content) ** -power`` (None for ``power == 0``); a clip without a
+    ``content`` label counts as its own content."""
+    if power == 0:
+        return None
+    if not math.isfinite(power) or power < 0:
+        raise KinemaError(f"content_balance must be a finite number >= 0, got {power}")
+    keys = [str(r.get("content") or r.get("clip_id", i)) for i, r in enumerate(records)]
+    counts = Counter(keys)
+    return [counts[k] ** -power for k in keys]
 
 
 def _dist_info() -> tuple[int, int]:
@@ -97,6 +114,7 @@ class Trainer:
         self.batches = BatchSampler(
             clips, ranges, self.layout, self.stats, cfg.batch_size, max_frames,
             text_dropout=cfg.text_dropout, random_heading=cfg.random_heading, rank=self.rank, world_size=self.world,
+            clip_weights=content_weights(ds.clips, cfg.content_balance),
         )
         self.model_config = get_config(
             cfg.model, num_joints=self.skeleton.num_joints, text_dim=encoder.dim, fps=self.fps,
