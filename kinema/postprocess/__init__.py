@@ -23,7 +23,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
-from kinema.postprocess.smooth import DEFAULT_SIGMA_SECONDS, smooth_motion
+from kinema.postprocess.smooth import DEFAULT_ROT_SIGMA_SECONDS, DEFAULT_SIGMA_SECONDS, smooth_motion
 
 Pair = tuple[torch.Tensor, torch.Tensor]
 
@@ -129,9 +129,11 @@ def postprocess(
     foot_lock: bool = True,
     exact: bool = True,
     smooth: float = DEFAULT_SIGMA_SECONDS,
+    smooth_rotations: float = DEFAULT_ROT_SIGMA_SECONDS,
     **exact_kwargs,
 ) -> tuple[Motion, dict]:
-    """De-jittering (Gaussian of ``smooth`` seconds; 0 = off), foot locking (on ``motion.foot_contacts``,
+    """De-jittering (Gaussians of ``smooth`` seconds on the root x/z and ``smooth_rotations`` seconds on
+    local rotations; 0 = off), foot locking (on ``motion.foot_contacts``,
     overridden by ``targets.contacts`` where given), then the exact constraint pass; returns the motion
     and ``{"smooth": ..., "foot_lock": ..., "exact": ...}`` reports."""
     from kinema.postprocess.exact import hit_constraints
@@ -139,8 +141,8 @@ def postprocess(
 
     report: dict = {}
     targets = None if targets is None else targets.validate(motion)
-    if smooth > 0:
-        motion, report["smooth"] = smooth_motion(motion, smooth)
+    if smooth > 0 or smooth_rotations > 0:
+        motion, report["smooth"] = smooth_motion(motion, smooth, smooth_rotations)
     if foot_lock:
         contacts = motion.foot_contacts
         if targets is not None and targets.contacts is not None:
