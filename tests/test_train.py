@@ -164,3 +164,34 @@ def test_batch_sampler_draws_clips_in_proportion_to_their_weights():
     assert abs(float((picks == 3).double().mean()) - 0.25) < 0.03
     with pytest.raises(ValueError, match="one positive weight per clip"):
         BatchSampler(clips, ranges, layout, stats, 8, 20, clip_weights=[1.0, 0.0, 1.0, 1.0], **kw)
+
+
+def test_fine_tune_starts_from_the_given_weights(tiny_data, tmp_path):
+    Trainer(_cfg(steps=6), tiny_data, tmp_path / "base").run(progress=False)
+    base = load_denoiser(tmp_path / "base")  # EMA weights, float32
+    ft = Trainer(_cfg(steps=4, seed=3, phase1_fraction=0.0, init_from=str(tmp_path / "base")), tiny_data,
+                 tmp_path / "ft")
+    assert ft.init_weights(ft.cfg.init_from).name == "ckpt-00000006"
+    for (name, p), q, e in zip(base.denoiser.state_dict().items(), ft.model.state_dict().values(),
+                               ft.ema.state_dict().values(), strict=True):
+        assert torch.equal(p, q) and torch.equal(p, e), name
+    assert ft.step == 0 and ft.keyframe_cap(0) == ft.cfg.max_keyframes  # its model already did the ramp
+    ft.run(progress=False)
+    info = json.loads((tmp_path / "ft" / "ckpt-00000004" / "checkpoint.json").read_text())
+    assert info["train_config"]["init_from"] == str(tmp_path / "base") and info["phase"] == 2
+    fresh = Trainer(_cfg(steps=4, phase1_fraction=0.0), tiny_data, tmp_path / "fresh")
+    assert fresh.keyframe_cap(0) == 1  # a run from scratch ramps the keyframe count up
+
+
+def test_fine_tune_refuses_a_different_architecture(tiny_data, tmp_path, capsys):
+    from kinema.cli import main
+
+    Trainer(_cfg(steps=2), tiny_data, tmp_path / "base").run(progress=False)
+    base = ["train", "--data", str(tiny_data), "--batch-size", "2", "--text-encoder", "hash-test-32",
+            "--no-progress", "--steps", "2"]
+    assert main([*base, "--config", "small", "--out", str(tmp_path / "ft"), "--init-from",
+                 str(tmp_path / "base")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot fine-tune from this model" in err and "model_config.width" in err
+    assert main([*base, "--out", str(tmp_path / "ft2"), "--init-from", str(tmp_path / "nowhere")]) == 2
+    assert "no such model folder" in capsys.readouterr().err

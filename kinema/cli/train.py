@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--text-encoder", help="text encoder id (default minilm-l6-v2)")
     p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
+    p.add_argument("--init-from", help="fine-tune: start from this model's weights (an exported model, 'default' "
+                                       "for the shipped one, or a run/checkpoint folder); optimiser and step "
+                                       "start fresh")
     p.add_argument("--stop-after", type=int, help="stop after this many steps of this invocation")
     p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
     p.add_argument("--no-progress", action="store_true")
@@ -36,6 +39,15 @@ def register(sub) -> None:
 # Settings a resumed run may change: the schedule (length, phase boundary, how clips are weighted) and
 # how often it reports. Everything else (model, data, optimiser) must match the checkpoint it continues.
 _RESUME_SCHEDULE = ("steps", "phase1_fraction", "content_balance", "ckpt_every", "log_every")
+
+
+def _init_path(name: str | None) -> str | None:
+    """``--init-from`` as a path string ('default' names the shipped model); missing folders fail here."""
+    if name is None:
+        return None
+    from kinema.generate.api import resolve_model_path
+
+    return str(resolve_model_path(name))
 
 
 def _config_from_args(args: argparse.Namespace):
@@ -48,7 +60,7 @@ def _config_from_args(args: argparse.Namespace):
         "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
-        "text_encoder": args.text_encoder,
+        "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():
@@ -90,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
     trainer = Trainer(cfg, args.data, args.out, cache_dir=args.cache_dir)
     if args.resume and trainer.resume():
         print(f"resumed {args.out} at step {trainer.step}")
+    elif cfg.init_from:
+        print(f"fine-tuning from {trainer.init_weights(cfg.init_from)}")
     n = trainer.model.num_parameters()
     if trainer.rank == 0:
         print(f"model {cfg.model}: {n / 1e6:.2f} M parameters; {len(trainer.dataset)} training clips; "

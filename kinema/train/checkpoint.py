@@ -100,3 +100,40 @@ def load_checkpoint(path: str | Path, with_optimizer: bool = True) -> dict[str, 
     except (OSError, ValueError, json.JSONDecodeError) as err:
         raise KinemaError(f"{ckpt}: unreadable checkpoint ({err})") from None
     return out
+
+
+# architecture fields that may differ between a fine-tune and its initial model (training-only settings)
+_FREE_MODEL_FIELDS = ("dropout",)
+
+
+def load_init_weights(path: str | Path, model_config, layout, skeleton, fps: float):
+    """Weights to fine-tune from: ``(checkpoint folder, float32 state dict, NormStats)``.
+
+    Accepts an exported model or a run/checkpoint folder (EMA weights preferred) and checks that it was
+    trained for the same architecture, skeleton, fps and feature layout as the run being started, naming
+    every field that differs.
+    """
+    from kinema.model.loading import weights_file
+    from kinema.motion.stats import NormStats
+
+    ckpt = find_checkpoint(path)
+    try:
+        info = json.loads((ckpt / "checkpoint.json").read_text())
+        state = {k: v.float() for k, v in load_file(str(weights_file(ckpt, ema=True))).items()}
+        stats = NormStats.from_dict(info["stats"])
+        theirs = {k: v for k, v in info["model_config"].items() if k not in _FREE_MODEL_FIELDS}
+        ours = {k: v for k, v in model_config.to_dict().items() if k not in _FREE_MODEL_FIELDS}
+        diffs = [f"model_config.{k}: {theirs.get(k)!r} vs {ours.get(k)!r}"
+                 for k in sorted(set(theirs) | set(ours)) if theirs.get(k) != ours.get(k)]
+        if info["feature_layout"] != layout.to_dict():
+            diffs.append("feature_layout")
+        if info["skeleton"].get("names") != skeleton.to_dict().get("names"):
+            diffs.append("skeleton joint names")
+        if abs(float(info["fps"]) - float(fps)) > 1e-6:
+            diffs.append(f"fps: {info['fps']} vs {fps}")
+    except (OSError, ValueError, KeyError, json.JSONDecodeError) as err:
+        raise KinemaError(f"{ckpt}: cannot read weights to fine-tune from ({type(err).__name__}: {err})") from None
+    if diffs:
+        raise KinemaError(f"{ckpt}: cannot fine-tune from this model, it differs from the run being started in "
+                          + "; ".join(diffs) + " (model vs run)")
+    return ckpt, state, stats

@@ -27,7 +27,7 @@ from kinema.model.config import get_config
 from kinema.model.denoiser import Denoiser, local_root_stats
 from kinema.text import get_text_encoder
 from kinema.train.batching import BatchSampler, step_generator
-from kinema.train.checkpoint import load_checkpoint, load_optimizer_tensors, save_checkpoint
+from kinema.train.checkpoint import load_checkpoint, load_init_weights, load_optimizer_tensors, save_checkpoint
 from kinema.train.constraints import max_keyframes_at, sample_batch_masks
 from kinema.train.losses import LossWeights, motion_loss
 from kinema.train.optim import build_optimizer, lr_at, make_ema, update_ema
@@ -61,6 +61,9 @@ class TrainConfig:
     # clip sampling weight = (train clips sharing its content label) ** -content_balance: 0 draws clips
     # uniformly (common contents dominate), 0.5 square-root balances, 1 gives every content equal time
     content_balance: float = 0.0
+    # fine-tuning: start from the weights of this model or checkpoint folder (its EMA copy when present)
+    # instead of random ones; the optimiser, step counter and schedule start fresh
+    init_from: str = ""
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -165,6 +168,26 @@ class Trainer:
         self.step = int(ck["info"]["step"])
         return True
 
+    def init_weights(self, path: str | Path) -> Path:
+        """Fine-tuning: copy a trained model's weights (EMA copy preferred) into the model and its EMA.
+
+        The model must have this run's architecture, skeleton, fps and feature layout; its normalisation
+        statistics replace the dataset's (the weights were trained in them). Returns the checkpoint used.
+        """
+        ckpt, state, stats = load_init_weights(path, self.model_config, self.layout, self.skeleton, self.fps)
+        self.model.load_state_dict(state)
+        self.ema.load_state_dict(state)
+        self.stats = self.batches.stats = stats
+        return ckpt
+
+    def keyframe_cap(self, step: int) -> int:
+        """Most keyframes a phase-2 training mask may hold at ``step``: the curriculum ramp, except in a
+        fine-tune that starts in phase 2 (its model already went through the ramp)."""
+        cfg = self.cfg
+        if cfg.init_from and self.phase1_steps == 0:
+            return cfg.max_keyframes
+        return max_keyframes_at(step, self.phase1_steps, cfg.steps - self.phase1_steps, 1, cfg.max_keyframes)
+
     def save(self) -> Path | None:
         if self.rank != 0:
             return None
@@ -181,7 +204,7 @@ class Trainer:
         x0 = batch.features
         B = x0.shape[0]
         if phase == 2:
-            kmax = max_keyframes_at(step, self.phase1_steps, cfg.steps - self.phase1_steps, 1, cfg.max_keyframes)
+            kmax = self.keyframe_cap(step)
             mask = sample_batch_masks(batch.raw_features, batch.lengths, self.layout, self.skeleton, kmax, g)
         else:
             mask = torch.zeros_like(x0)
