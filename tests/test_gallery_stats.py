@@ -27,7 +27,7 @@ def test_known_motion_gives_known_statistics():
     pos[..., 2] += torch.arange(T).view(T, 1) / fps * 1.5  # 1.5 m/s along +Z, upright, no jerk
     st = motion_stats(pos, fps, NAMES)
     assert abs(st["speed m/s"] - 1.5) < 1e-5 and st["lean deg"] < 1e-3
-    assert abs(st["hand over head m"] + 0.7) < 1e-5 and st["toe lift m"] == 0.0 and st["jerk m/s^3"] < 1e-3
+    assert abs(st["hand over head m"] + 0.7) < 1e-5 and st["toe lift m"] == 0.0 and st["jerk m/s^3"] < 0.01
     # bend forward 90 degrees at the hips on the last frame: the lean reaches 90 degrees
     pos[-1, 1:5] = pos[-1, 0] + torch.tensor([[0, 0, 0.2], [0, 0, 0.4], [0, 0, 0.55], [0, 0, 0.7]])
     assert abs(motion_stats(pos, fps, NAMES)["lean deg"] - 90.0) < 1e-3
