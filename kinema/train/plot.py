@@ -28,8 +28,20 @@ def read_log(run_dir: Path) -> list[dict]:
     return [by_step[s] for s in sorted(by_step)]
 
 
+def moving_average(values: list[float], window: int) -> list[float]:
+    """Trailing mean over up to ``window`` values: single-batch losses are too noisy to read a trend."""
+    out, total = [], 0.0
+    for i, v in enumerate(values):
+        total += v
+        if i >= window:
+            total -= values[i - window]
+        out.append(total / min(i + 1, window))
+    return out
+
+
 def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
-    """Write a PNG with the total loss and every Eq. 1 term against the step (log scale)."""
+    """Write a PNG with the total loss and every Eq. 1 term against the step (log scale); the raw
+    per-batch total is drawn faint under its moving average, the terms as moving averages."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -41,13 +53,17 @@ def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
     recs = read_log(run_dir)
     steps = [r["step"] for r in recs]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    axes[0].plot(steps, [r["loss"] for r in recs], lw=1)
+    window = max(1, len(recs) // 40)
+    total = [r["loss"] for r in recs]
+    axes[0].plot(steps, total, lw=0.6, alpha=0.35, color="C0", label="per batch")
+    axes[0].plot(steps, moving_average(total, window), lw=1.6, color="C0", label=f"mean of {window} logs")
+    axes[0].legend(fontsize=8)
     axes[0].set(title=f"{run_dir.name}: total loss (Eq. 1)", xlabel="step", ylabel="loss", yscale="log")
     for term in (*TERMS, "constraint"):
         pts = [(r["step"], r[term]) for r in recs if term in r]
         if pts:
-            axes[1].plot([p[0] for p in pts], [p[1] for p in pts], lw=1, label=term)
-    axes[1].set(title="loss terms (unweighted)", xlabel="step", yscale="log")
+            axes[1].plot([p[0] for p in pts], moving_average([p[1] for p in pts], window), lw=1, label=term)
+    axes[1].set(title=f"loss terms (unweighted, mean of {window} logs)", xlabel="step", yscale="log")
     axes[1].legend(fontsize=8)
     phase2 = next((r["step"] for r in recs if r.get("phase") == 2), None)
     for ax in axes:
