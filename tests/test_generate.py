@@ -215,6 +215,36 @@ def test_displace_root_meets_root_targets_smoothly() -> None:
     assert displace_root(x0, tgt, mask)[0, 0, 2] == pytest.approx(0.7)
 
 
+def test_root_targets_compensate_the_smoothed_pelvis_offset() -> None:
+    """Where only the root is targeted, the root is aimed so that root + smoothed pelvis offset lands on
+    the target; a frame that also targets the pelvis keeps its own (root, offset) pair."""
+    from kinema.generate.sampling import pelvis_offset_targets
+    from kinema.model.config import get_config
+    from kinema.model.denoiser import Denoiser
+    from kinema.motion.features import FeatureLayout
+
+    J, T = 3, 30
+    layout = FeatureLayout(J)
+    den = Denoiser(get_config("tiny", num_joints=J, text_dim=32))
+    mean, std = torch.randn(layout.dim) * 0.1, torch.rand(layout.dim) + 0.5
+    den.set_normalization(mean, std)
+    rx, rz = layout.root_xz
+    px, pz = layout.slices["joint_pos"].start, layout.slices["joint_pos"].start + 2
+    x = torch.zeros(1, T, layout.dim)
+    x[..., px], x[..., pz] = 0.1, -0.2  # the model's pelvis sits 10 cm right, 20 cm behind its root
+    tgt, mask = torch.zeros_like(x), torch.zeros_like(x)
+    tgt[0, 10, [rx, rz]] = torch.tensor([1.0, 2.0])
+    mask[0, 10, [rx, rz]] = 1
+    tgt[0, 20, [rx, rz, px, pz]] = torch.tensor([3.0, 4.0, 0.05, 0.0])  # a full-body-like frame
+    mask[0, 20, [rx, rz, px, pz]] = 1
+    aim = den.denormalize(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0))
+    assert torch.allclose(aim[0, 10, [rx, rz]], torch.tensor([0.9, 2.2]), atol=1e-5)
+    assert torch.allclose(aim[0, 20, [rx, rz, px, pz]], torch.tensor([3.0, 4.0, 0.05, 0.0]), atol=1e-5)
+    unmasked = mask == 0
+    assert torch.equal(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0)[unmasked],
+                       (den.normalize(tgt) * mask)[unmasked])
+
+
 def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
     from kinema.generate.sampling import sample_features
 
