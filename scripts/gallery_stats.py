@@ -15,6 +15,8 @@ import argparse
 
 import torch
 
+from kinema.evaluate.metrics import position_jerk
+
 
 def motion_stats(positions: torch.Tensor, fps: float, names: list[str]) -> dict[str, float]:
     """``positions (T, J, 3)`` in metres -> the statistics above."""
@@ -26,15 +28,13 @@ def motion_stats(positions: torch.Tensor, fps: float, names: list[str]) -> dict[
     dist = (hips[1:, [0, 2]] - hips[:-1, [0, 2]]).norm(dim=-1).sum()
     trunk = head - hips
     lean = torch.rad2deg(torch.acos((trunk[:, 1] / trunk.norm(dim=-1)).clamp(-1, 1))).max()
-    third = positions[3:] - 3 * positions[2:-1] + 3 * positions[1:-2] - positions[:-3]
-    jerk = third.norm(dim=-1).mean() * fps**3 if T > 3 else torch.tensor(0.0)
     return {
         "speed m/s": float(dist / max(T - 1, 1) * fps),
         "lean deg": float(lean),
         "hand over head m": float((hands[..., 1].max(dim=1).values - head[:, 1]).max()),
         "hand sway m": float((positions[:, ix["Hand_R"]] - chest).std(dim=0).norm()),
         "toe lift m": float((toes[..., 1] - toes[..., 1].min()).max()),
-        "jerk m/s^3": float(jerk),
+        "jerk m/s^3": position_jerk(positions, fps),  # the evaluation's jerk metric
     }
 
 

@@ -139,11 +139,16 @@ def jerk(motion: Motion) -> float:
     differences of every joint's global position; 0.0 for clips shorter than 4 frames. Exact for cubic
     trajectories: ``p(t) = a t^3`` gives ``6 a``.
     """
-    P = _positions(motion)
+    return position_jerk(_positions(motion), motion.fps)
+
+
+def position_jerk(positions: torch.Tensor, fps: float) -> float:
+    """:func:`jerk` of joint positions ``(T, J, 3)`` in metres sampled at ``fps``."""
+    P = positions
     if P.shape[0] < 4:
         return 0.0
     d3 = P[3:] - 3.0 * P[2:-1] + 3.0 * P[1:-2] - P[:-3]
-    return float((d3.norm(dim=-1) * motion.fps**3).mean())
+    return float((d3.norm(dim=-1) * fps**3).mean())
 
 
 def jitter(motion: Motion) -> float:

@@ -111,12 +111,11 @@ def pelvis_offset_targets(
     rxz = FeatureLayout(J).root_xz
     ix, iz = _world_channels(J)
     pxz = [int(ix[0]), int(iz[0])]  # the pelvis is joint 0: its joint_pos is the offset from the root
-    D = x0.shape[-1]
-    inv_std = denoiser.normalize(torch.ones(D)) - denoiser.normalize(torch.zeros(D))  # the map is affine
-    bias = smooth_time(denoiser.denormalize(x0)[..., pxz], sigma_frames)  # (B, T, 2) metres
+    mean, std = denoiser.feat_mean, denoiser.feat_std
+    bias = smooth_time(x0[..., pxz] * std[pxz] + mean[pxz], sigma_frames)  # (B, T, 2) metres
     free = (mask[..., rxz] > 0) & (mask[..., pxz] == 0)
     out = tgt.clone()
-    out[..., rxz] = torch.where(free, tgt[..., rxz] - bias * inv_std[rxz], tgt[..., rxz])
+    out[..., rxz] = torch.where(free, tgt[..., rxz] - bias / std[rxz], tgt[..., rxz])
     return out
 
 
