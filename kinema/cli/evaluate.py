@@ -17,7 +17,7 @@ def register(sub) -> None:
     p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="separated guidance weights (default: the model's setting)")
     p.add_argument("--imputation-only", action="store_true",
-                   help="ablation: the paper's sampling (no root smoothing, start anchor or root displacement)")
+                   help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)")
     p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
     p.add_argument("--suite", type=Path,
                    help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it")
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
     model = load_model(args.model, text_cache=Path("cache/text"))
     if args.imputation_only:
-        model.root_displacement, model.root_smoothing = False, 0.0
+        model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
     save_suite(cases, out / "suite.json")
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,

@@ -64,7 +64,8 @@ def _markdown(data: dict) -> str:
         f"DDIM steps {meta['steps'] if meta['steps'] is not None else 'model default'}; guidance "
         f"{meta.get('guidance', 'model default')}; "
         f"root displacement {'on' if meta.get('root_displacement') else 'off'}, "
-        f"root smoothing {meta.get('root_smoothing', 0.0):g} s. "
+        f"root smoothing {meta.get('root_smoothing', 0.0):g} s, "
+        f"joint displacement {meta.get('joint_sigma', 0.0):g} s. "
         "Protocol and metric definitions: docs/evaluation.md.", "",
         "## Summary (layout of Kimodo Table 1)", "",
         format_table(data), "",

@@ -17,7 +17,8 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.sampling import ROOT_SMOOTHING_SECONDS, sample_features
+from kinema.generate.keyjoints import FeaturePoser
+from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, sample_features
 from kinema.generate.segments import SegmentPlan, plan_segments
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
 from kinema.model.loading import LoadedModel, load_denoiser
@@ -53,6 +54,7 @@ class KinemaModel:
         self.last_report = GenerationReport()
         self.root_displacement = True
         self.root_smoothing = ROOT_SMOOTHING_SECONDS
+        self.joint_sigma = JOINT_SIGMA_SECONDS
 
     @property
     def skeleton(self):
@@ -147,7 +149,8 @@ class KinemaModel:
                 world_xz=None if world_xz is None else world_xz[None],
                 world_mask=None if world_mask is None else world_mask[None],
                 root_displacement=self.root_displacement, anchor_start=self.root_displacement,
-                root_smoothing=self.root_smoothing,
+                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma,
+                joint_poser=FeaturePoser(self.skeleton) if self.joint_sigma > 0 else None,
             )[0]
             feats[:, 0] += shift[0]
             feats[:, 2] += shift[1]

@@ -46,6 +46,7 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
+from kinema.generate.keyjoints import FeaturePoser, KeyjointTargets, displace_joints
 from kinema.model.denoiser import Denoiser
 from kinema.motion.features import FeatureLayout
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
@@ -54,6 +55,11 @@ from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 #: is itself the pelvis under a 0.5-s Gaussian, so a further 0.25-s filter leaves a valid one almost
 #: unchanged (combined width 0.56 s) while removing the frame-to-frame noise of an imprecise root stage.
 ROOT_SMOOTHING_SECONDS = 0.25
+
+#: Gaussian (seconds) over which a keyjoint's miss is spread into its position channels after every
+#: step (kinema.generate.keyjoints): wide enough that the joint bends towards the target over a few
+#: frames instead of snapping at the keyframe.
+JOINT_SIGMA_SECONDS = 0.6
 
 
 def displace_root(
@@ -144,8 +150,14 @@ def sample_features(
     root_displacement: bool = True,
     root_smoothing: float = ROOT_SMOOTHING_SECONDS,
     anchor_start: bool = True,
+    joint_poser: FeaturePoser | None = None,
+    joint_sigma: float = JOINT_SIGMA_SECONDS,
 ) -> torch.Tensor:
-    """Run the reverse process for a batch of ``c_dir.shape[0]`` motions of ``num_frames`` frames."""
+    """Run the reverse process for a batch of ``c_dir.shape[0]`` motions of ``num_frames`` frames.
+
+    With ``joint_poser`` (the model's skeleton), keyjoint targets also pull the clean estimate after
+    every step (:func:`kinema.generate.keyjoints.displace_joints`, Gaussian of ``joint_sigma`` s).
+    """
     B = c_dir.shape[0]
     D = denoiser.config.feature_dim
     J = denoiser.config.num_joints
@@ -173,6 +185,10 @@ def sample_features(
         text_mask = None
     ix, iz = _world_channels(J)
     state = {"world_on": False}
+    keys = None
+    if joint_poser is not None and mask is not None and joint_sigma > 0:
+        keys = KeyjointTargets(tgt, mask, J, world_xz if has_world else None, world_mask if has_world else None)
+        keys = keys if keys.any else None
 
     def refresh_world(x0_norm: torch.Tensor) -> None:
         """Re-target world-frame joints against the current root estimate (unnormalised)."""
@@ -194,6 +210,9 @@ def sample_features(
         if root_displacement:
             aim = tgt_n if mask is None else pelvis_offset_targets(x0, tgt_n, mask, denoiser, pelvis_frames)
             x0 = displace_root(x0, aim, mask, anchor_start=anchor_start, origin=origin, channels=rxz)
+        if keys is not None:
+            feats = displace_joints(denoiser.denormalize(x0), keys, joint_poser, joint_sigma * denoiser.config.fps)
+            x0 = denoiser.normalize(feats)
         if has_world:
             refresh_world(x0)
         return x0
