@@ -208,7 +208,10 @@ def test_displace_root_meets_root_targets_smoothly() -> None:
     assert jumps.max() < 0.1  # continuous: no snapping at the constrained frames
     assert torch.equal(out[1], x0[1]) and torch.equal(out[0, :, 1:], x0[0, :, 1:])
     anchored = displace_root(x0, tgt, mask, origin=(-0.1, 0.0))
-    assert anchored[0, 0, 0] == pytest.approx(-0.1) and anchored[1, 0, 0] == pytest.approx(-0.1)
+    r10 = 0.5 - float(x0[0, 10, 0])
+    assert torch.allclose(anchored[0, :11, 0] - x0[0, :11, 0], torch.full((11,), r10))  # held back to frame 0
+    assert anchored[1, 0, 0] == pytest.approx(-0.1)  # no root target: pinned to the origin
+    assert anchored[0, 0, 2] == pytest.approx(0.0)  # channel 2 of row 0 has no target either
     assert torch.allclose(anchored[0, [10, 30], 0], torch.tensor([0.5, 0.2]))
     assert torch.allclose(anchored[1, :, 0] - x0[1, :, 0], torch.full((T,), -0.4))  # no targets: a shift
     mask[0, 0, 2], tgt[0, 0, 2] = 1, 0.7  # a constrained first frame wins over the anchor

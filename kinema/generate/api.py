@@ -3,8 +3,9 @@
 ``generate`` turns a prompt (or a multi-prompt timeline) plus optional kinematic constraints into
 ``Motion`` objects on the model's skeleton: text -> embedding, constraints -> imputed feature targets,
 DDIM with separated guidance, features -> rotations -> FK, then optional post-processing (foot locking,
-IK, exact constraint hitting). Times are seconds, positions metres, Y up, first frame's root over the
-origin facing ``heading`` radians (0 = +Z).
+IK, exact constraint hitting). Times are seconds, positions metres, Y up, first frame facing ``heading``
+radians (0 = +Z) with its root over the origin, unless root constraints (waypoints, paths, keyframes)
+place the motion elsewhere in the world.
 """
 
 from __future__ import annotations
@@ -44,8 +45,10 @@ class KinemaModel:
 
     Sampling-time root corrections (kinema.generate.sampling; not in the paper): ``root_displacement``
     (default True) moves the predicted root trajectory onto root constraints and pins a free first frame
-    to the origin after every denoising step; ``root_smoothing`` (seconds, default 0.25) filters the
-    predicted root x/z. Set them to False / 0 for the paper's imputation alone.
+    to the origin (or, with root constraints, shifts it with the first one) after every denoising step;
+    ``root_smoothing`` (seconds, default 0.25) filters the predicted root x/z; ``joint_sigma`` (seconds,
+    default 0.6) spreads each keyjoint's miss into its position channels
+    (kinema.generate.keyjoints). Set them to False / 0 / 0 for the paper's imputation alone.
     """
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder):
