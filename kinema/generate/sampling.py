@@ -14,9 +14,10 @@ smoothed pelvis), so raw errors stay the model's; post-processing makes them exa
 Two more root-only corrections after every step (also not in the paper, both justified by how the
 features are defined): the predicted smoothed-root x/z is filtered with a 0.25-s Gaussian
 (``root_smoothing``; the smoothed root is the pelvis under a 0.5-s Gaussian, so a valid one barely
-changes) and frame 0 is pinned to the origin where free (``anchor_start``; every training crop starts
-there). Measured at step 6000 on a 4-s walk: root second differences 17-28 -> 0.3 cm/frame^2, start
-0.5-0.7 m -> 0; on 24 validation cases: 2D root 8.4 -> 4.8 cm, raw skate 53 -> 40 cm/s, jerk 1537 -> 839.
+changes) and a free frame 0 is pinned to the origin when no root target exists (``anchor_start``; every
+training crop starts there), else shifted with the first root target (see ``displace_root``).
+Measured at step 6000 on a 4-s walk: root second differences 17-28 -> 0.3 cm/frame^2, start 0.5-0.7 m
+-> 0; on 24 validation cases: 2D root 8.4 -> 4.8 cm, raw skate 53 -> 40 cm/s, jerk 1537 -> 839.
 
 Where a root x/z target has no pelvis target beside it (waypoints, paths, end-effector constraints),
 the displacement aims the root at ``target - smooth(pelvis offset)`` (``pelvis_offset_targets``): the
