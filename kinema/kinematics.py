@@ -7,10 +7,14 @@ root translation ``(..., 3)`` metres, offsets ``(J, 3)`` metres, parents length 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import torch
 
-from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.geometry.rotations import quat_mul, quat_rotate, sixd_to_matrix
+
+if TYPE_CHECKING:
+    from kinema.skeleton import Skeleton
 
 
 def forward_kinematics(
@@ -58,3 +62,11 @@ def positions_from_global_rotations(
     bones = torch.einsum("...jab,jb->...ja", parent_rot, offsets)  # (..., J, 3); row 0 unused
     A = ancestor_matrix.to(dtype=dtype, device=global_rotmats.device)
     return root_position.unsqueeze(-2) + torch.einsum("jk,...kc->...jc", A, bones)
+
+
+def positions_from_sixd(rot6: torch.Tensor, root_position: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
+    """Joint positions ``(..., J, 3)`` from *global* 6D rotations ``(..., J, 6)`` (unnormalised) with the
+    root joint at ``root_position (..., 3)``: :func:`positions_from_global_rotations` on ``skeleton``."""
+    return positions_from_global_rotations(
+        sixd_to_matrix(rot6), root_position, skeleton.offsets, skeleton.ancestor_matrix, skeleton.parents
+    )

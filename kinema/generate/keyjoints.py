@@ -28,8 +28,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.geometry.rotations import sixd_to_matrix
-from kinema.kinematics import positions_from_global_rotations
+from kinema.kinematics import positions_from_sixd
 from kinema.motion.features import FeatureLayout
 from kinema.skeleton import Skeleton
 
@@ -78,11 +77,8 @@ class FeaturePoser:
     """
 
     def __init__(self, skeleton: Skeleton):
-        self.J = skeleton.num_joints
-        self.layout = FeatureLayout(self.J)
-        self.offsets = skeleton.offsets.float()
-        self.ancestors = skeleton.ancestor_matrix.float()
-        self.parents = list(skeleton.parents)
+        self.skeleton = skeleton
+        self.layout = FeatureLayout(skeleton.num_joints)
 
     def __call__(self, feats: torch.Tensor) -> torch.Tensor:
         """``feats (B, T, D)`` -> positions ``(B, T, J, 3)``."""
@@ -90,8 +86,7 @@ class FeaturePoser:
         rx, rz = self.layout.root_xz
         p = parts["joint_pos"][..., 0, :]
         pelvis = torch.stack([p[..., 0] + feats[..., rx], p[..., 1], p[..., 2] + feats[..., rz]], dim=-1)
-        R = sixd_to_matrix(parts["joint_rot"])
-        return positions_from_global_rotations(R, pelvis, self.offsets, self.ancestors, self.parents)
+        return positions_from_sixd(parts["joint_rot"], pelvis, self.skeleton)
 
 
 def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames: float) -> torch.Tensor:
@@ -109,18 +104,24 @@ def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames:
     return spread / norm[..., None]
 
 
-def displace_joints(feats: torch.Tensor, keys: KeyjointTargets, poser: FeaturePoser,
-                    sigma_frames: float) -> torch.Tensor:
-    """Unnormalised ``feats (B, T, D)`` with keyjoint residuals spread into ``joint_pos`` (see module).
+def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, poser: FeaturePoser,
+                       sigma_frames: float) -> torch.Tensor:
+    """Metres to add to the ``joint_pos`` channels of unnormalised ``feats (B, T, D)``: ``(B, T, J, 3)``.
 
-    Frames whose every joint coordinate is constrained (full-body keyframes) contribute nothing.
+    Keyjoint residuals (target - FK joint) spread over time (see module); frames whose every joint
+    coordinate is constrained (full-body keyframes) contribute nothing.
     """
     P = poser(feats)
     full = keys.mask.flatten(-2).amin(-1) > 0  # (B, T)
     m = keys.mask * (~full)[..., None, None].to(keys.mask)
     residual = (keys.pos - P) * m
-    disp = gaussian_spread(residual, m.amax(-1) > 0, sigma_frames)
+    return gaussian_spread(residual, m.amax(-1) > 0, sigma_frames)
+
+
+def displace_joints(feats: torch.Tensor, keys: KeyjointTargets, poser: FeaturePoser,
+                    sigma_frames: float) -> torch.Tensor:
+    """Unnormalised ``feats (B, T, D)`` with :func:`joint_displacement` added to ``joint_pos``."""
     out = feats.clone()
     jp = poser.layout.slices["joint_pos"]
-    out[..., jp] = feats[..., jp] + disp.flatten(-2)
+    out[..., jp] = feats[..., jp] + joint_displacement(feats, keys, poser, sigma_frames).flatten(-2)
     return out

@@ -47,7 +47,7 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
-from kinema.generate.keyjoints import FeaturePoser, KeyjointTargets, displace_joints
+from kinema.generate.keyjoints import FeaturePoser, KeyjointTargets, joint_displacement
 from kinema.model.denoiser import Denoiser
 from kinema.motion.features import FeatureLayout
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
@@ -186,7 +186,8 @@ def sample_features(
         tgt = torch.nan_to_num(x_tgt.float()).clone()
     smooth_frames = root_smoothing * denoiser.config.fps
     pelvis_frames = DEFAULT_ROOT_SIGMA_SECONDS * denoiser.config.fps
-    rxz = FeatureLayout(J).root_xz
+    layout = FeatureLayout(J)
+    rxz, jp = layout.root_xz, layout.slices["joint_pos"]
     origin = tuple(float(v) for v in denoiser.normalize(torch.zeros(D))[rxz])
     if text_emb is None:
         text_mask = torch.zeros(B, dtype=torch.bool)
@@ -221,9 +222,10 @@ def sample_features(
         if root_displacement:
             aim = tgt_n if mask is None else pelvis_offset_targets(x0, tgt_n, mask, denoiser, pelvis_frames)
             x0 = displace_root(x0, aim, mask, anchor_start=anchor_start, origin=origin, channels=rxz)
-        if keys is not None:
-            feats = displace_joints(denoiser.denormalize(x0), keys, joint_poser, joint_sigma * denoiser.config.fps)
-            x0 = denoiser.normalize(feats)
+        if keys is not None:  # metres / std: the displacement in the normalised joint_pos channels
+            disp = joint_displacement(denoiser.denormalize(x0), keys, joint_poser, joint_sigma * denoiser.config.fps)
+            x0 = x0.clone()
+            x0[..., jp] = x0[..., jp] + disp.flatten(-2) / denoiser.feat_std[jp]
         if has_world:
             refresh_world(x0)
         return x0

@@ -19,8 +19,7 @@ from dataclasses import asdict, dataclass
 import torch
 import torch.nn.functional as F
 
-from kinema.geometry.rotations import sixd_to_matrix
-from kinema.kinematics import positions_from_global_rotations
+from kinema.kinematics import positions_from_sixd
 from kinema.motion.features import FeatureLayout
 from kinema.motion.stats import NormStats
 from kinema.skeleton import Skeleton
@@ -67,21 +66,6 @@ def _masked_mean(elementwise: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     per_frame = torch.where(mask[..., None], per_frame, torch.zeros_like(per_frame))
     count = mask.sum().clamp_min(1) * per_frame.shape[-1]
     return per_frame.sum() / count
-
-
-def fk_joint_positions(rot6: torch.Tensor, root_joint_pos: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
-    """Joint positions ``(..., J, 3)`` in the ``j_p`` representation from global 6D rotations.
-
-    ``rot6 (..., J, 6)`` unnormalised (metric) 6D rotations; ``root_joint_pos (..., 3)`` the ``j_p``
-    entry of the root joint (x/z relative to the smoothed root, y global). Because ``j_p`` only shifts
-    x/z by the smoothed root, and FK is translation-equivariant, placing the root joint at its ``j_p``
-    entry yields every joint directly in the ``j_p`` representation: the same as placing it at the
-    global pelvis position and then subtracting the smoothed root.
-    """
-    mats = sixd_to_matrix(rot6)
-    return positions_from_global_rotations(
-        mats, root_joint_pos, skeleton.offsets, skeleton.ancestor_matrix, skeleton.parents
-    )
 
 
 def motion_loss(
@@ -139,7 +123,9 @@ def motion_loss(
         target_m = stats.denormalize(target.float())
         rot6 = layout.split(pred_m)["joint_rot"]  # (B, T, J, 6)
         target_jp = layout.split(target_m)["joint_pos"]  # (B, T, J, 3)
-        fk_jp = fk_joint_positions(rot6, target_jp[..., 0, :], skeleton)
+        # Placing the root joint at its j_p entry (x/z relative to the smoothed root, y global) yields
+        # every joint directly in the j_p representation, since FK is translation-equivariant.
+        fk_jp = positions_from_sixd(rot6, target_jp[..., 0, :], skeleton)
         err = F.smooth_l1_loss(
             fk_jp / weights.fk_unit, target_jp / weights.fk_unit, reduction="none", beta=weights.fk_beta
         )
