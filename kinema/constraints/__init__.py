@@ -3,11 +3,15 @@
 - kinema.constraints.types: `FullBodyConstraint`, `EndEffectorConstraint`, `Root2DConstraint`,
   `FootContactConstraint`, `ConstraintError`;
 - kinema.constraints.io: `load_constraints` / `save_constraints` (docs/constraints.md);
+- kinema.constraints.fps: the ``{"fps", "constraints"}`` file form and frame conversion;
+- kinema.constraints.kimodo: Kimodo's example folders (`read_kimodo_meta`) and whole-pose constraints;
 - kinema.constraints.encode: `encode_constraints` -> `ConstraintTargets` (x_tgt, mask, world x/z).
 """
 
 from kinema.constraints.encode import ConstraintTargets, encode_constraints, world_to_relative
+from kinema.constraints.fps import ConstraintWarning
 from kinema.constraints.io import constraint_to_json, dumps_constraints, load_constraints, save_constraints
+from kinema.constraints.kimodo import KIMODO_FPS, KimodoMeta, find_kimodo_meta, read_kimodo_meta
 from kinema.constraints.types import (
     CONTACT_NAMES,
     Constraint,
@@ -20,17 +24,22 @@ from kinema.constraints.types import (
 
 __all__ = [
     "CONTACT_NAMES",
+    "KIMODO_FPS",
     "Constraint",
     "ConstraintError",
     "ConstraintTargets",
+    "ConstraintWarning",
     "EndEffectorConstraint",
     "FootContactConstraint",
     "FullBodyConstraint",
+    "KimodoMeta",
     "Root2DConstraint",
     "constraint_to_json",
     "dumps_constraints",
     "encode_constraints",
+    "find_kimodo_meta",
     "load_constraints",
+    "read_kimodo_meta",
     "save_constraints",
     "world_to_relative",
 ]

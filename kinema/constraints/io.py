@@ -1,9 +1,12 @@
 """Constraint files: JSON <-> typed constraints (format in docs/constraints.md), and poses from BVH.
 
-A constraints file is a JSON list of objects, each with a ``type`` (``fullbody``, ``end-effector``,
-``left-hand``/``right-hand``/``left-foot``/``right-foot``, ``root2d``, ``foot-contact``), keyframes as
+A constraints file is a JSON list of objects (or ``{"fps": 30, "constraints": [...]}`` when its
+``frame_indices`` are at another fps than the model's, see kinema.constraints.fps), each with a
+``type`` (``fullbody``, ``end-effector``, ``left-hand``/``right-hand``/``left-foot``/``right-foot``,
+``root2d``, ``foot-contact``), keyframes as
 ``frame_indices`` or ``times`` and per-type arrays with one row per keyframe. Kimodo's field names are
-accepted (``smooth_root_2d``, ``global_root_heading``, ``local_joints_rot``, ``root_positions``).
+accepted (``smooth_root_2d``, ``global_root_heading``, ``local_joints_rot``, ``root_positions``), and
+so are Kimodo's whole-pose end-effector constraints (kinema.constraints.kimodo).
 `load_constraints` validates everything against the model skeleton, fps and duration and raises
 `ConstraintError` naming the file, the constraint (counted from 0), the field and the reason.
 Keys starting with ``_`` (and ``comment``) are ignored, any other unknown key is an error (typos).
@@ -20,6 +23,8 @@ from pathlib import Path
 
 import torch
 
+from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
+from kinema.constraints.kimodo import adapt_pose_form, warn_foreign
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -247,52 +252,51 @@ def _fullbody_from_json(obj: dict, kwargs: dict, base_dirs, skeleton, fps) -> Fu
 
 
 def load_constraints(path_or_obj, skeleton: Skeleton, fps: float, num_frames: int | None = None, *,
-                     base_dir: str | os.PathLike | None = None) -> list[Constraint]:
-    """Read and validate constraints from a JSON file (path) or an already parsed JSON list.
+                     base_dir: str | os.PathLike | None = None, source_fps: float | None = None,
+                     foreign_poses: str = "root") -> list[Constraint]:
+    """Read and validate constraints from a JSON file (path) or already parsed JSON (list or object).
 
     ``num_frames`` is the motion length at ``fps`` (None: no upper bound is checked). Relative
     ``bvh`` paths are looked up in ``base_dir`` if given, else in the file's folder then the current
-    directory. Raises `ConstraintError` (``file: constraint i (type): field 'f': reason``).
+    directory. ``frame_indices`` are at ``source_fps`` (``kinema generate --constraints-fps``) or the
+    file's ``"fps"`` (they must agree when both are given), or Kimodo's 30 fps for a file next to a
+    Kimodo ``meta.json``, else at ``fps``; they are converted to ``fps`` by time (kinema.constraints.fps).
+    Poses written for another skeleton keep their root (x, z) as waypoints with a `ConstraintWarning`
+    (``foreign_poses="root"``) or raise (``"error"``), see kinema.constraints.kimodo.
+    Raises `ConstraintError` (``file: constraint i (type): field 'f': reason``).
     """
-    source = None
-    if isinstance(path_or_obj, str | os.PathLike):
-        path = Path(path_or_obj)
-        source = str(path_or_obj)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConstraintError("file not found", source=source) from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise ConstraintError(f"cannot read the file ({err})", source=source) from None
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as err:
-            raise ConstraintError(f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}",
-                                  source=source) from None
-        base_dirs = [Path(base_dir)] if base_dir is not None else [path.parent, Path.cwd()]
-    else:
-        data = path_or_obj
-        base_dirs = [Path(base_dir) if base_dir is not None else Path.cwd()]
-    if not isinstance(data, list):
-        raise ConstraintError(f"expected a JSON list of constraint objects, got {type(data).__name__}",
-                              source=source)
-    out = []
+    data, source, base_dirs, file_fps = read_constraints_json(path_or_obj, base_dir)
+    src_fps = source_fps_for(data, file_fps=file_fps, source_fps=source_fps, source=source, model_fps=fps)
+    out, foreign = [], []
     for i, obj in enumerate(data):
         kind = obj.get("type") if isinstance(obj, dict) else None
         kind = kind if isinstance(kind, str) else None
+        written, foreign_j = obj, None
         try:
-            c = parse_constraint(obj, base_dirs=base_dirs, skeleton=skeleton, fps=fps)
+            written, foreign_j = adapt_pose_form(obj, skeleton, foreign_poses)
+            if foreign_j is not None:
+                foreign.append((i, kind, foreign_j))
+            c = parse_constraint(frames_to_source_times(written, src_fps, fps), base_dirs=base_dirs,
+                                 skeleton=skeleton, fps=fps)
+            c = convert_frames(c, src_fps, fps, num_frames)
             c.check(skeleton, fps, num_frames)
         except ConstraintError as err:
-            rename = {}
-            if isinstance(obj, dict) and kind is not None:
-                canon = "end-effector" if kind in EFFECTOR_SHORTHANDS else kind
-                keys = KEYS.get(canon, {})
-                rename = {a: k for k, a in reversed(keys.items())}  # canonical key by default
-                rename.update({a: k for k, a in keys.items() if k in obj})  # the key the user wrote
-            raise err.at(index=i, kind=kind, source=source, rename=rename) from None
-        out.append(c)
+            raise err.at(index=i, kind=kind, source=source, rename=_renames(written)) from None
+        if foreign_j is None or not any(c.same_as(o) for o in out):  # Kimodo repeats a pose per hand/foot
+            out.append(c)
+    warn_foreign(foreign, source, skeleton)
     return out
+
+
+def _renames(obj) -> dict[str, str]:
+    """Attribute -> the JSON key the user wrote (else the canonical key), for error messages."""
+    kind = obj.get("type") if isinstance(obj, dict) else None
+    if not isinstance(kind, str):
+        return {}
+    keys = KEYS.get("end-effector" if kind in EFFECTOR_SHORTHANDS else kind, {})
+    rename = {a: k for k, a in reversed(keys.items())}  # canonical key by default
+    rename.update({a: k for k, a in keys.items() if k in obj})  # the key the user wrote
+    return rename
 
 
 # ---------------------------------------------------------------------------- writing
