@@ -63,8 +63,8 @@ def test_timeline_joins_without_a_jump(model):
 
 
 def test_long_single_prompt_becomes_a_timeline(model):
-    m = model.generate("A person walks forward.", seconds=8.0, steps=3, postprocess=False)[0]
-    assert m.num_frames == 160 and model.last_report.segments == 2  # tiny model window: 6 s
+    result = model.generate("A person walks forward.", seconds=8.0, steps=3, postprocess=False)
+    assert result[0].num_frames == 160 and result.report.segments == 2  # tiny model window: 6 s
 
 
 def test_errors(model, tmp_path):

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         motion.save(path)
         print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
               f"{motion.num_joints} joints (lengths in metres)")
-    rep = model.last_report
+    rep = motions.report
     print(f"generated {len(motions)} motion(s), {rep.segments} segment(s) in {rep.seconds:.2f} s")
     for i, r in enumerate(rep.residuals):
         if r:

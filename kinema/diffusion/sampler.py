@@ -107,7 +107,7 @@ class DDIMSampler:
         x_t: torch.Tensor,
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
-        """One DDIM update from ``x_t`` at step ``t`` to the previous inference step.
+        """One DDIM update from ``x_t`` at step ``t`` to the previous step of ``self.timesteps``.
 
         The model predicts x0, so the noise is recovered as
         ``eps = (x_t - sqrt(abar_t) x0) / sqrt(1 - abar_t)`` and
@@ -117,9 +117,17 @@ class DDIMSampler:
         ``t`` is a Python int or a tensor whose entries all hold the same step.
         """
         t = self._as_step(t)
+        return self.step_to(x0_pred, t, self.previous_timestep(t), x_t, generator)
+
+    def step_to(
+        self, x0_pred: torch.Tensor, t: int, prev: int, x_t: torch.Tensor, generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """The DDIM update of :meth:`step` from step ``t`` to an explicit earlier step ``prev`` (-1 = clean).
+
+        Pure: reads no per-call state, so one sampler can serve several threads with different step counts.
+        """
         if x0_pred.shape != x_t.shape:
             raise ValueError(f"x0_pred shape {tuple(x0_pred.shape)} != x_t shape {tuple(x_t.shape)}")
-        prev = self.previous_timestep(t)
         if prev < 0:
             return x0_pred
         abar_t = float(self._abar[t])
@@ -149,8 +157,12 @@ class DDIMSampler:
         device: torch.device | str | None = None,
         dtype: torch.dtype = torch.float32,
         init_noise: torch.Tensor | None = None,
+        num_inference_steps: int | None = None,
     ) -> torch.Tensor:
         """Run the whole reverse process and return the final x0 (shape ``shape``).
+
+        ``num_inference_steps`` (default: the sampler's own setting) applies to this call only: the
+        sampler is not changed, so calls from several threads with different step counts do not interfere.
 
         Starts from N(0, I) noise drawn from ``generator`` (on the generator's device, then moved to
         ``device``, so a seed gives the same result whatever device the model runs on) unless
@@ -166,16 +178,20 @@ class DDIMSampler:
             gen_device = generator.device if generator is not None else "cpu"
             x = torch.randn(tuple(shape), generator=generator, device=gen_device, dtype=dtype)
             x = x.to(device=device) if device is not None else x
-        steps = self.timesteps.tolist()
+        if num_inference_steps is None:
+            steps = self.timesteps.tolist()
+        else:
+            steps = spaced_timesteps(self.num_train_steps, num_inference_steps, self.timestep_spacing)
+        pairs = list(zip(steps, steps[1:] + [-1], strict=True))
         if progress:
             from tqdm.auto import tqdm
 
-            steps = tqdm(steps, desc="DDIM", leave=False)
+            pairs = tqdm(pairs, desc="DDIM", leave=False)
         batch = x.shape[0]
-        for t in steps:
+        for t, prev in pairs:
             t_batch = torch.full((batch,), t, dtype=torch.long, device=x.device)
             x0_pred = denoise_fn(x, t_batch)
-            x = self.step(x0_pred, t, x, generator=generator)
+            x = self.step_to(x0_pred, t, prev, x, generator=generator)
         return x
 
     # ------------------------------------------------------------------ config

@@ -11,6 +11,8 @@ place the motion elsewhere in the world.
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,15 +35,46 @@ OVERLAP_SECONDS = 0.5
 
 @dataclass
 class GenerationReport:
-    """What the last ``generate`` call did: constraint residuals before/after post-processing, timing."""
+    """What one ``generate`` call did: its settings, timing, constraint residuals and warnings.
+
+    ``residuals`` holds one post-processing report per sample (empty dicts without post-processing):
+    ``{"smooth", "foot_lock", "exact": {"before", "after", ...}, "plausibility", "warnings"}``.
+    ``warnings`` are the things a user must hear about (a stage undone by the guard, an unreachable
+    target); the CLI prints them on stderr.
+    """
 
     seconds: float = 0.0
     segments: int = 1
+    frames: int = 0
+    steps: int = 0
+    guidance: tuple[float, float] = (0.0, 0.0)
+    seed: int = 0
     residuals: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+class GenerationResult(Sequence):
+    """The motions of one ``generate`` call (indexable like a list) and that call's own report."""
+
+    def __init__(self, motions: list[Motion], report: GenerationReport):
+        self.motions = list(motions)
+        self.report = report
+
+    def __getitem__(self, index):
+        return self.motions[index]
+
+    def __len__(self) -> int:
+        return len(self.motions)
+
+    def __repr__(self) -> str:
+        return f"GenerationResult({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
 
 
 class KinemaModel:
     """A trained model ready to generate; build it with :func:`load_model`.
+
+    One instance may be shared by several threads: ``generate`` keeps everything it computes in the
+    call (its result carries its own report) and never changes the model or its sampler.
 
     Sampling-time root corrections (kinema.generate.sampling; not in the paper): ``root_displacement``
     (default True) moves the predicted root trajectory onto root constraints and pins a free first frame
@@ -54,7 +87,6 @@ class KinemaModel:
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder):
         self.loaded = loaded
         self.text_encoder = text_encoder
-        self.last_report = GenerationReport()
         self.root_displacement = True
         self.root_smoothing = ROOT_SMOOTHING_SECONDS
         self.joint_sigma = JOINT_SIGMA_SECONDS
@@ -71,6 +103,11 @@ class KinemaModel:
     def max_seconds(self) -> float:
         return self.loaded.denoiser.config.max_frames / self.fps
 
+    @property
+    def max_steps(self) -> int:
+        """The largest number of DDIM steps: the length T of the training noise schedule."""
+        return self.loaded.sampler.num_train_steps
+
     def __repr__(self) -> str:
         return f"KinemaModel({self.loaded.path}, {self.skeleton.num_joints} joints @ {self.fps:g} fps)"
 
@@ -78,8 +115,10 @@ class KinemaModel:
     def generate(
         self,
         prompt_or_timeline,
+        *,
         seconds: float | None = None,
         constraints=None,
+        constraints_fps: float | None = None,
         samples: int = 1,
         steps: int | None = None,
         guidance: tuple[float, float] | Guidance | None = None,
@@ -87,37 +126,57 @@ class KinemaModel:
         postprocess: bool = True,
         heading: float = 0.0,
         progress: bool = False,
-    ) -> list[Motion]:
-        """Generate ``samples`` motions.
+    ) -> GenerationResult:
+        """Generate ``samples`` motions; returns them with this call's report (``result.report``).
 
         Args:
             prompt_or_timeline: a prompt ("A person walks forward.", "" for no text), a list of
                 ``(prompt, seconds)`` / ``{"prompt", "seconds"}`` segments, or a timeline .json path.
-            seconds: duration for a single prompt (default 5 s); ignored for timelines.
+            seconds: duration for a single prompt (default 5 s); ignored for timelines. The motion has
+                exactly ``round(seconds * fps)`` frames.
             constraints: a constraints .json path, a JSON-style list, or constraint objects (see
-                docs/constraints.md); frames refer to the whole output at the model's fps.
+                docs/constraints.md); frames refer to the whole output at the model's fps unless the
+                file states its own ``fps`` or ``constraints_fps`` is given.
+            constraints_fps: the frame rate the constraint file's ``frame_indices`` were written at.
             samples: how many different motions (same constraints, different noise).
-            steps: DDIM steps (default: the model's saved setting).
-            guidance: ``(w_text, w_constr)`` or a Guidance (default: the model's saved setting).
-            seed: fixes the result.
-            postprocess: foot locking + IK + exact constraint hitting.
+            steps: DDIM steps for this call (default: the model's saved setting), 1..``max_steps``.
+            guidance: ``(w_text, w_constr)`` >= 0 or a Guidance (default: the model's saved setting).
+            seed: fixes the result (0 <= seed < 2**64).
+            postprocess: foot locking + IK + exact constraint hitting, guarded (kinema.postprocess.guard).
             heading: first-frame facing in radians about +Y (0 faces +Z).
         """
-        import time
-
         t0 = time.perf_counter()
+        samples, steps, seed = self._check_counts(samples, steps, seed)
         segments = self._segments(prompt_or_timeline, seconds)
         guide = self._guidance(guidance)
-        total = sum(max(1, round(s.seconds * self.fps)) for s in segments)
-        plan = plan_segments(self, segments, constraints, total)
-        g = torch.Generator().manual_seed(int(seed))
-        motions = []
-        for _ in range(int(samples)):
-            motions.append(self._generate_one(plan, guide, steps, g, heading, postprocess, progress))
-        self.last_report = GenerationReport(time.perf_counter() - t0, len(segments), plan.reports)
-        return motions
+        plan = plan_segments(self, segments, constraints, constraints_fps)
+        g = torch.Generator().manual_seed(seed)
+        motions, residuals = [], []
+        for _ in range(samples):
+            motion, report = self._generate_one(plan, guide, steps, g, heading, postprocess, progress)
+            motions.append(motion)
+            residuals.append(report)
+        warnings = [w for r in residuals for w in r.get("warnings", [])]
+        report = GenerationReport(
+            seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
+            guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
+        )
+        return GenerationResult(motions, report)
 
     # ------------------------------------------------------------------ internals
+    def _check_counts(self, samples, steps, seed) -> tuple[int, int, int]:
+        """Validated ``samples``, ``steps`` (the saved default filled in) and ``seed``."""
+        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+            raise KinemaError(f"samples must be a positive integer, got {samples!r}")
+        if steps is None:
+            steps = self.loaded.sampler.num_inference_steps
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= self.max_steps:
+            raise KinemaError(f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
+                              f"diffusion length), got {steps!r}")
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**64:
+            raise KinemaError(f"seed must be an integer in [0, 2**64), got {seed!r}")
+        return samples, steps, seed
+
     def _segments(self, prompt_or_timeline, seconds) -> list[Segment]:
         if isinstance(prompt_or_timeline, str) and not prompt_or_timeline.lower().endswith(".json"):
             seconds = 5.0 if seconds is None else float(seconds)
@@ -135,13 +194,21 @@ class KinemaModel:
             return self.loaded.guidance
         if isinstance(guidance, Guidance):
             return guidance
-        w_text, w_constr = (float(w) for w in guidance)
+        try:
+            w_text, w_constr = (float(w) for w in guidance)
+        except (TypeError, ValueError):
+            raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {guidance!r}") from None
+        for name, w in (("w_text", w_text), ("w_constr", w_constr)):
+            if not (math.isfinite(w) and w >= 0):
+                raise KinemaError(f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
+                                  f"conditional model alone, > 1 = stronger), got {w}")
         return Guidance(mode="separated", w_text=w_text, w_constr=w_constr)
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
         return None if not prompt.strip() else self.text_encoder.encode([prompt]).float()
 
-    def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress) -> Motion:
+    def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
+        """One motion (all segments, cross-faded) and its post-processing report ({} when off)."""
         motion: Motion | None = None
         for k, seg in enumerate(plan.segments):
             x_tgt, mask, world_xz, world_mask, c_dir, shift = plan.segment_targets(k, motion, heading)
@@ -161,8 +228,8 @@ class KinemaModel:
             motion = part if motion is None else crossfade(motion, part, seg.overlap)
         assert motion is not None
         if postprocess:
-            motion = plan.postprocess(motion)
-        return motion
+            return plan.postprocess(motion)
+        return motion, {}
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:

@@ -172,8 +172,6 @@ def sample_features(
     B = c_dir.shape[0]
     D = denoiser.config.feature_dim
     J = denoiser.config.num_joints
-    if steps is not None:
-        sampler.set_timesteps(steps)
     has_world = world_xz is not None and world_mask is not None and bool(world_mask.any())
     if mask is None and has_world:
         mask = torch.zeros(B, num_frames, D)
@@ -230,5 +228,5 @@ def sample_features(
             refresh_world(x0)
         return x0
 
-    x = sampler.sample(denoise, (B, num_frames, D), generator=generator, progress=progress)
+    x = sampler.sample(denoise, (B, num_frames, D), generator=generator, progress=progress, num_inference_steps=steps)
     return denoiser.denormalize(x)

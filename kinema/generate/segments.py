@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.features import FeatureLayout, motion_to_features
 
@@ -42,7 +43,6 @@ class SegmentPlan:
     world_xz: torch.Tensor | None
     world_mask: torch.Tensor | None
     constraints: list = field(default_factory=list)
-    reports: list[dict] = field(default_factory=list)
 
     @property
     def layout(self) -> FeatureLayout:
@@ -80,25 +80,39 @@ class SegmentPlan:
             wxz = wxz - shift
         return x_tgt, mask, wxz, wm, c_dir, shift
 
-    def postprocess(self, motion: Motion) -> Motion:
+    def postprocess(self, motion: Motion) -> tuple[Motion, dict]:
+        """Guarded post-processing of one finished motion; returns it with its own report."""
         from kinema.generate.targets import run_postprocess
 
-        motion, report = run_postprocess(motion, self.constraints, self.model)
-        self.reports.append(report)
-        return motion
+        return run_postprocess(motion, self.constraints, self.model)
 
 
-def plan_segments(model, segments, constraints, total_frames: int) -> SegmentPlan:
+def segment_bounds(segments, fps: float) -> list[int]:
+    """Frame boundaries ``[0, b_1, ..., T]`` of consecutive segments: ``b_k = round(fps * (s_1 + ... + s_k))``.
+
+    Rounding the running total (not each segment) gives exactly the frames asked for: 60 s at 20 fps in
+    seven 8.57-s windows is 1200 frames, not 7 x 171. A segment that would get no frame is an error."""
+    bounds, total = [0], 0.0
+    for i, s in enumerate(segments):
+        total += s.seconds
+        bounds.append(int(math.floor(total * fps + 0.5)))
+        if bounds[-1] <= bounds[-2]:
+            raise KinemaError(f"timeline segment {i} ({s.prompt!r}) lasts {s.seconds:g} s, shorter than one "
+                              f"frame at {fps:g} fps ({1 / fps:.3f} s)")
+    return bounds
+
+
+def plan_segments(model, segments, constraints, constraints_fps: float | None = None) -> SegmentPlan:
     """Frame ranges for every segment and the encoded user constraints for the whole output."""
     from kinema.generate.targets import encode_user_constraints
 
     fps = model.fps
     overlap = max(1, round(0.5 * fps))
-    planned, start = [], 0
-    for i, s in enumerate(segments):
-        n = max(1, round(s.seconds * fps))
+    bounds = segment_bounds(segments, fps)
+    planned = []
+    for i, (s, start, end) in enumerate(zip(segments, bounds[:-1], bounds[1:], strict=True)):
         ov = 0 if i == 0 else min(overlap, start)
-        planned.append(PlannedSegment(s.prompt, start, start + n, ov))
-        start += n
-    cons, x_tgt, mask, wxz, wm = encode_user_constraints(model, constraints, total_frames)
+        planned.append(PlannedSegment(s.prompt, start, end, ov))
+    total_frames = bounds[-1]
+    cons, x_tgt, mask, wxz, wm = encode_user_constraints(model, constraints, total_frames, constraints_fps)
     return SegmentPlan(model, planned, total_frames, x_tgt, mask, wxz, wm, cons)

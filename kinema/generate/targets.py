@@ -7,6 +7,7 @@ targets (joint positions and rotations, smoothed-root x/z, contacts) for kinema.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -21,20 +22,27 @@ from kinema.constraints import (
     load_constraints,
 )
 from kinema.constraints.types import resolve_joint
+from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
 from kinema.postprocess import PostTargets, postprocess
 
 
-def encode_user_constraints(model, constraints, total_frames: int):
-    """(constraint objects, x_tgt (T, D), mask (T, D), world_xz (T, J, 2) | None, world_mask (T, J) | None)."""
+def encode_user_constraints(model, constraints, total_frames: int, constraints_fps: float | None = None):
+    """(constraint objects, x_tgt (T, D), mask (T, D), world_xz (T, J, 2) | None, world_mask (T, J) | None).
+
+    ``constraints_fps``: the rate a file's ``frame_indices`` were written at (default: the file's own
+    ``fps`` key, else the model's)."""
     D = model.loaded.layout.dim
     if constraints is None or (isinstance(constraints, list) and not constraints):
         return [], torch.zeros(total_frames, D), torch.zeros(total_frames, D), None, None
     if isinstance(constraints, (str, Path)):
         constraints = Path(constraints)
-    cons = load_constraints(constraints, model.skeleton, model.fps, total_frames)
+    if constraints_fps is not None and not (isinstance(constraints_fps, (int, float)) and
+                                            math.isfinite(constraints_fps) and constraints_fps > 0):
+        raise KinemaError(f"constraints_fps must be a positive number, got {constraints_fps!r}")
+    cons = load_constraints(constraints, model.skeleton, model.fps, total_frames, source_fps=constraints_fps)
     enc = encode_constraints(cons, model.skeleton, model.loaded.layout, model.fps, total_frames)
     wxz, wm = enc.world_xz, enc.world_mask
     if wm is not None and not bool(wm.any()):

@@ -22,6 +22,7 @@ pass both blend their edits with it so nothing pops.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
@@ -229,16 +230,30 @@ def solve_ik(
 # ----------------------------------------------------------------------------- correction blending
 
 
+_THREADS_LOCK = threading.Lock()
+_THREADS_STATE = {"depth": 0, "before": 1}
+
+
 @contextmanager
 def single_thread() -> Iterator[None]:
     """Run tiny-tensor loops on one intra-op thread: with (T, J)-sized ops, thread hand-offs cost far
-    more than they save, and on a busy machine spinning worker threads slow them down many times."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
+    more than they save, and on a busy machine spinning worker threads slow them down many times.
+
+    torch's thread count is process-wide, so nested and concurrent users (several Python threads
+    post-processing at once) share one count: the first to enter saves the setting, the last to leave
+    restores it."""
+    with _THREADS_LOCK:
+        if _THREADS_STATE["depth"] == 0:
+            _THREADS_STATE["before"] = torch.get_num_threads()
+            torch.set_num_threads(1)
+        _THREADS_STATE["depth"] += 1
     try:
         yield
     finally:
-        torch.set_num_threads(before)
+        with _THREADS_LOCK:
+            _THREADS_STATE["depth"] -= 1
+            if _THREADS_STATE["depth"] == 0:
+                torch.set_num_threads(_THREADS_STATE["before"])
 
 
 def raised_cosine(x: torch.Tensor) -> torch.Tensor:
