@@ -3,7 +3,7 @@
 Runs Blender's own BVH importer through scripts/blender_import_check.py (see its docstring for the
 import settings, the Y-up -> Z-up axis conversion and why no root or frame correction is needed) and
 compares every bone head with kinema's forward kinematics on a handful of frames. Skipped when
-``blender`` is not on PATH or the shared Bandai Namco data is absent.
+``blender`` is not on PATH. Uses the Bandai walk (real, or the synthetic one: see conftest.py).
 """
 
 from __future__ import annotations
@@ -21,14 +21,9 @@ from kinema.io.bvh_writer import write_bvh
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "scripts/blender_import_check.py"
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-CLIP = BANDAI / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
 BLENDER = shutil.which("blender")
 
-pytestmark = [
-    pytest.mark.skipif(BLENDER is None, reason="blender is not on PATH"),
-    pytest.mark.skipif(not CLIP.exists(), reason="shared Bandai Namco data not available"),
-]
+pytestmark = pytest.mark.skipif(BLENDER is None, reason="blender is not on PATH")
 
 #: Blender world (Z up) from kinema world (Y up): x -> x, y -> z, z -> -y.
 KINEMA_TO_BLENDER = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
@@ -43,8 +38,8 @@ def _blender_heads(bvh: Path, out: Path, frames: list[int]) -> dict:
 
 
 @pytest.mark.parametrize("order", ["ZXY", "XYZ"])
-def test_blender_import_matches_kinema_fk(tmp_path, order):
-    motion = read_bvh(CLIP, scale=0.01).prune(["joint_Root"])
+def test_blender_import_matches_kinema_fk(walk_clip, tmp_path, order):
+    motion = read_bvh(walk_clip, scale=0.01).prune(["joint_Root"])
     bvh = write_bvh(motion, tmp_path / "walk.bvh", order=order)  # metres, Y up
     T = motion.num_frames
     frames = [0, 1, 37, T // 2, T - 2, T - 1]

@@ -19,10 +19,13 @@ from kinema.io import bvh
 from kinema.io.bvh import BVHData, parse_bvh, read_bvh
 from kinema.io.bvh_writer import format_bvh, write_bvh
 
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-BANDAI_FILES = sorted(BANDAI.glob("*/data/*.bvh.gz")) if BANDAI.is_dir() else []
-SAMPLE = BANDAI_FILES[:: max(1, len(BANDAI_FILES) // 10)][:10]
-needs_bandai = pytest.mark.skipif(not BANDAI_FILES, reason="Bandai Namco dataset not available")
+
+@pytest.fixture(scope="module")
+def sample(bandai_root) -> list[Path]:
+    """Ten Bandai files spread over the data in use (real, or the synthetic clips: see conftest.py)."""
+    files = sorted(bandai_root.glob("*/data/*.bvh.gz"))
+    assert files
+    return files[:: max(1, len(files) // 10)][:10]
 
 
 def reference_positions(data: BVHData, scale: float) -> np.ndarray:
@@ -62,9 +65,8 @@ def reference_positions(data: BVHData, scale: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- real data
 
 
-@needs_bandai
-def test_parse_real_sample():
-    for path in SAMPLE:
+def test_parse_real_sample(sample):
+    for path in sample:
         data = parse_bvh(path)
         assert data.num_joints == 22 and data.names[0] == "joint_Root" and data.parents[0] == -1
         assert all(len(c) == 6 for c in data.channels)
@@ -81,9 +83,8 @@ def test_parse_real_sample():
         assert len(data.end_sites) == 5 and data.path == str(path)
 
 
-@needs_bandai
-def test_real_positions_match_independent_fk():
-    for path in SAMPLE:
+def test_real_positions_match_independent_fk(sample):
+    for path in sample:
         motion = read_bvh(path, scale=0.01)
         ref = reference_positions(parse_bvh(path), 0.01)
         got = motion.positions.numpy()
@@ -95,10 +96,9 @@ def test_real_positions_match_independent_fk():
         np.testing.assert_allclose(pruned.positions.numpy(), ref[:, 1:], atol=1e-5, rtol=0)
 
 
-@needs_bandai
 @pytest.mark.parametrize("scale,order,suffix", [(1.0, "ZXY", ".bvh"), (100.0, "XYZ", ".bvh.gz")])
-def test_real_round_trip(tmp_path, scale, order, suffix):
-    for path in SAMPLE[:3]:
+def test_real_round_trip(sample, tmp_path, scale, order, suffix):
+    for path in sample[:3]:
         motion = read_bvh(path, scale=0.01)
         out = write_bvh(motion, tmp_path / f"clip{suffix}", scale=scale, order=order)
         again = read_bvh(out, scale=1 / scale)

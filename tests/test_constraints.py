@@ -27,17 +27,14 @@ from kinema.motion.features import FeatureLayout, motion_to_features
 from kinema.skeleton import Skeleton
 
 REPO = Path(__file__).resolve().parents[1]
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-CLIP = BANDAI / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
 EXAMPLES = sorted((REPO / "examples/constraints").glob("*.json"))
 FPS, T = 20.0, 120
 
 
 @pytest.fixture(scope="module")
-def clip() -> Path:
-    if not CLIP.exists():
-        pytest.skip("shared Bandai Namco data not available")
-    return CLIP
+def clip(walk_clip) -> Path:
+    """The Bandai walk (real, or the synthetic one of the same name: see conftest.py)."""
+    return walk_clip
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +65,8 @@ def test_examples_exist():
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
-def test_example_loads_and_encodes(path, skel, layout, monkeypatch):
-    monkeypatch.chdir(REPO)  # the in-betweening example names its BVH relative to the repository root
+def test_example_loads_and_encodes(path, skel, layout, monkeypatch, bandai_workdir):
+    monkeypatch.chdir(bandai_workdir)  # the in-betweening example names its BVH relative to the repository root
     cs = load_constraints(path, skel, FPS, T)
     assert cs
     t = encode_constraints(cs, skel, layout, FPS, T)
@@ -267,8 +264,8 @@ def test_bvh_missing_joints_and_wrong_scale(clip, skel):
 
 
 # ---------------------------------------------------------------------------- round trip
-def test_save_load_round_trip(skel, layout, tmp_path, monkeypatch):
-    monkeypatch.chdir(REPO)
+def test_save_load_round_trip(skel, layout, tmp_path, monkeypatch, bandai_workdir):
+    monkeypatch.chdir(bandai_workdir)
     cs = [c for p in EXAMPLES for c in load_constraints(p, skel, FPS, T)]
     cs.append(EndEffectorConstraint(joint="Head", frame_indices=[3], rotations=[[0.1, -0.2, 0.3]]))
     path = save_constraints(cs, tmp_path / "out" / "all.json")

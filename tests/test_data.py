@@ -1,6 +1,7 @@
-"""Dataset build (kinema.data.bandai/build/dataset) and the `kinema data` CLI, on a real 12-clip subset.
+"""Dataset build (kinema.data.bandai/build/dataset) and the `kinema data` CLI, on a 12-clip subset.
 
-One build of 12 Bandai Namco clips (plus mirrors) is shared by the module; it takes a few seconds.
+One build of 12 Bandai Namco clips (plus mirrors) is shared by the module; it takes a few seconds. The clips
+are the real ones, or the synthetic ones of kinema.data.synthetic without the shared data (see conftest.py).
 """
 
 from __future__ import annotations
@@ -25,22 +26,18 @@ from kinema.errors import DataError
 from kinema.motion.features import FeatureLayout, motion_to_features
 from kinema.motion.stats import NormStats
 
-DATA = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-pytestmark = pytest.mark.skipif(
-    not (DATA / "Bandai-Namco-Research-Motiondataset-1").is_dir(), reason="Bandai Namco data absent"
-)
 LIMIT = 12
 
 
 @pytest.fixture(scope="module")
-def build(tmp_path_factory) -> Path:
+def build(bandai_root, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("data") / "bandai20"
     argv = [
         "data",
         "build",
         "bandai-namco",
         "--root",
-        str(DATA),
+        str(bandai_root),
         "--fps",
         "20",
         "--out",
@@ -61,11 +58,11 @@ def records(build) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def clips_by_id() -> dict[str, ClipInfo]:
-    return {c.clip_id: c for c in list_clips(DATA)}
+def clips_by_id(bandai_root) -> dict[str, ClipInfo]:
+    return {c.clip_id: c for c in list_clips(bandai_root)}
 
 
-def test_build_writes_every_file_and_features_match_layout(build, records):
+def test_build_writes_every_file_and_features_match_layout(build, records, bandai_root):
     assert sorted(p.name for p in build.iterdir()) == sorted(FILES)
     meta = json.loads((build / "meta.json").read_text())
     layout = FeatureLayout(21)
@@ -80,7 +77,7 @@ def test_build_writes_every_file_and_features_match_layout(build, records):
     for r in records:
         assert r["length"] > 0 and r["duration_s"] == pytest.approx(r["length"] / 20)
         assert 0.0 < r["min_toe_height"] < 0.08  # toes touch the floor (joint ~2-5 cm above it)
-        assert (DATA / r["path"]).is_file() and r["captions"]
+        assert (bandai_root / r["path"]).is_file() and r["captions"]
     # no temporary folders left next to the output
     assert [p.name for p in build.parent.iterdir()] == [build.name]
 
@@ -212,14 +209,14 @@ def test_dataset_errors_name_the_path(build, tmp_path, damage):
         MotionDataset(target if damage == "no_dir" else d)
 
 
-def test_existing_output_is_kept_unless_replaceable(build, tmp_path, monkeypatch):
+def test_existing_output_is_kept_unless_replaceable(build, tmp_path, monkeypatch, bandai_root):
     precious = tmp_path / "precious"
     precious.mkdir()
     (precious / "notes.txt").write_text("keep me")
     with pytest.raises(DataError, match="not a kinema dataset build"):
         from kinema.data.build import build_dataset
 
-        build_dataset(DATA, precious, limit=1, workers=1, progress=False)
+        build_dataset(bandai_root, precious, limit=1, workers=1, progress=False)
     assert (precious / "notes.txt").read_text() == "keep me"
 
     # a failing rebuild leaves the earlier build untouched
@@ -231,35 +228,35 @@ def test_existing_output_is_kept_unless_replaceable(build, tmp_path, monkeypatch
 
     monkeypatch.setattr("kinema.data.build.load_clip", boom)
     with pytest.raises(DataError, match="simulated failure"):
-        build_dataset(DATA, d, limit=2, workers=1, progress=False)
+        build_dataset(bandai_root, d, limit=2, workers=1, progress=False)
     assert (d / "meta.json").read_text() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["copy", "precious"]
 
 
-def _fake_root(tmp_path: Path, twin: dict | None) -> Path:
-    """A one-clip copy of dataset 1 with a chosen JSON twin (None: no twin)."""
-    src = DATA / "Bandai-Namco-Research-Motiondataset-1"
+def _fake_root(data: Path, tmp_path: Path, twin: dict | None) -> Path:
+    """A one-clip copy of dataset 1 under ``data`` with a chosen JSON twin (None: no twin)."""
+    src = data / "Bandai-Namco-Research-Motiondataset-1"
     dst = tmp_path / "Bandai-Namco-Research-Motiondataset-1"
     shutil.copytree(src / "cfg", dst / "cfg")
     (dst / "data").mkdir()
     name = "dataset-1_walk_happy_001"
-    with gzip.open(src / "data" / f"{name}.bvh.gz") as f:  # a real file, recompressed
+    with gzip.open(src / "data" / f"{name}.bvh.gz") as f:  # a dataset file, recompressed
         (dst / "data" / f"{name}.bvh.gz").write_bytes(gzip.compress(f.read()))
     if twin is not None:
         (dst / "data" / f"{name}.json").write_text(json.dumps(twin))
     return tmp_path
 
 
-def test_list_clips_checks_the_json_twin(tmp_path):
-    root = _fake_root(tmp_path / "ok", {"content": 0, "style": 1})  # walk, happy
+def test_list_clips_checks_the_json_twin(tmp_path, bandai_root):
+    root = _fake_root(bandai_root, tmp_path / "ok", {"content": 0, "style": 1})  # walk, happy
     (info,) = list_clips(root)
     assert (info.content, info.style, info.take) == ("walk", "happy", 1)
     assert info.relpath == "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_happy_001.bvh.gz"
     assert list_clips(root / "Bandai-Namco-Research-Motiondataset-1")[0].clip_id == info.clip_id
-    bad = _fake_root(tmp_path / "bad", {"content": 1, "style": 1})  # run != walk
+    bad = _fake_root(bandai_root, tmp_path / "bad", {"content": 1, "style": 1})  # run != walk
     with pytest.raises(DataError, match=r"dataset-1_walk_happy_001\.json.*disagree"):
         list_clips(bad)
-    missing = _fake_root(tmp_path / "missing", None)
+    missing = _fake_root(bandai_root, tmp_path / "missing", None)
     with pytest.raises(DataError, match=r"dataset-1_walk_happy_001\.json.*missing"):
         list_clips(missing)
     with pytest.raises(DataError, match="no Bandai-Namco"):
@@ -275,9 +272,9 @@ def test_load_clip_prunes_the_static_root_and_moves_the_pelvis(clips_by_id):
     assert 0.0 < min_toe_height(motion) < 0.08
 
 
-def test_rebuild_replaces_an_earlier_build_in_process_without_mirrors(build, tmp_path):
+def test_rebuild_replaces_an_earlier_build_in_process_without_mirrors(build, tmp_path, bandai_root):
     d = _copy(build, tmp_path)
-    argv = ["data", "build", "bandai-namco", "--root", str(DATA), "--out", str(d), "--limit", "2"]
+    argv = ["data", "build", "bandai-namco", "--root", str(bandai_root), "--out", str(d), "--limit", "2"]
     assert main(argv + ["--workers", "1", "--no-mirror", "--quiet"]) == 0
     meta = json.loads((d / "meta.json").read_text())
     assert meta["limit"] == 2 and meta["mirror"] is False and meta["counts"]["clips"] == 2

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -22,8 +21,6 @@ from kinema.motion.smoothing import smooth_time
 from kinema.motion.stats import NormStats
 from tests.test_motion import random_motion
 from tests.test_skeleton import SCHEMES, humanoid
-
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
 
 
 def standing(T=20, yaw=0.0, speed=0.0, fps=20.0) -> Motion:
@@ -112,7 +109,6 @@ def test_norm_stats_round_trip():
     assert torch.equal(again.mean, stats.mean)
 
 
-@pytest.mark.skipif(not BANDAI.exists(), reason="shared Bandai Namco data not available")
 @pytest.mark.parametrize(
     "clip",
     [
@@ -121,10 +117,11 @@ def test_norm_stats_round_trip():
         "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_wave-left-hand_elderly_003.bvh.gz",
     ],
 )
-def test_real_clip_features_round_trip_within_a_millimetre(clip):
+def test_real_clip_features_round_trip_within_a_millimetre(clip, bandai_root):
+    """On Bandai clips (real, or the synthetic ones of the same names: see conftest.py)."""
     from kinema.io.bvh import read_bvh
 
-    m = read_bvh(BANDAI / clip, scale=0.01).prune(["joint_Root"]).resample(20)
+    m = read_bvh(bandai_root / clip, scale=0.01).prune(["joint_Root"]).resample(20)
     f = motion_to_features(m)
     assert f.shape == (m.num_frames, FeatureLayout(21).dim)
     back = features_to_motion(f.float(), m.skeleton, m.fps)

@@ -21,16 +21,11 @@ from kinema.motion.core import Motion, load_motion
 from kinema.render import CONTACT_COLOUR, SIDE_COLOURS, TARGET_COLOUR, render_filmstrip, render_gif
 from kinema.skeleton import Skeleton
 
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-CLIP = BANDAI / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
-needs_clip = pytest.mark.skipif(not CLIP.exists(), reason="shared Bandai Namco data not available")
-
 
 @pytest.fixture(scope="module")
-def walk() -> Motion:
-    if not CLIP.exists():
-        pytest.skip("shared Bandai Namco data not available")
-    return load_motion(CLIP, scale=0.01).crop(0, 90)
+def walk(walk_clip) -> Motion:
+    """The first 3 s of the Bandai walk (real, or the synthetic one of the same name: see conftest.py)."""
+    return load_motion(walk_clip, scale=0.01).crop(0, 90)
 
 
 def _rgb(path: Path) -> np.ndarray:
@@ -114,22 +109,20 @@ def test_any_rig_renders_without_roles(tmp_path):
     assert render_gif(motion, tmp_path / "a.gif").exists()
 
 
-@needs_clip
-def test_cli_renders_png_and_gif(tmp_path, capsys):
+def test_cli_renders_png_and_gif(walk_clip, tmp_path, capsys):
     png, gif = tmp_path / "s.png", tmp_path / "a.gif"
-    assert main(["render", str(CLIP), "--scale", "0.01", "--out", str(png), "--frames", "4", "--title", "t"]) == 0
+    assert main(["render", str(walk_clip), "--scale", "0.01", "--out", str(png), "--frames", "4", "--title", "t"]) == 0
     assert "wrote" in capsys.readouterr().out
     npz = tmp_path / "c.npz"
-    load_motion(CLIP, scale=0.01).crop(0, 30).save(npz)
+    load_motion(walk_clip, scale=0.01).crop(0, 30).save(npz)
     assert main(["render", str(npz), "--out", str(gif), "--fps", "10"]) == 0
     with Image.open(png) as a, Image.open(gif) as b:
         assert a.format == "PNG" and b.format == "GIF" and b.n_frames == 10
 
 
-@needs_clip
-def test_cli_marks_constraints(tmp_path):
+def test_cli_marks_constraints(walk_clip, tmp_path):
     pytest.importorskip("kinema.constraints")
-    motion = load_motion(CLIP, scale=0.01)
+    motion = load_motion(walk_clip, scale=0.01)
     hand = motion.positions[60, motion.skeleton.index("right_hand")].tolist()
     pelvis = motion.positions[[30, 90], motion.skeleton.index("pelvis")]
     spec = [
@@ -140,7 +133,8 @@ def test_cli_marks_constraints(tmp_path):
     cfile = tmp_path / "c.json"
     cfile.write_text(json.dumps(spec))
     png = tmp_path / "c.png"
-    args = ["render", str(CLIP), "--scale", "0.01", "--out", str(png), "--frames", "4", "--constraints", str(cfile)]
+    args = ["render", str(walk_clip), "--scale", "0.01", "--out", str(png), "--frames", "4",
+            "--constraints", str(cfile)]
     assert main(args) == 0
     assert _has_colour(_rgb(png), TARGET_COLOUR)
     spec[0]["times"] = [60.0]  # beyond the clip: a one-line error
@@ -148,8 +142,7 @@ def test_cli_marks_constraints(tmp_path):
     assert main(args) == 2
 
 
-@needs_clip
-def test_cli_bad_input_exits_2(tmp_path, capsys):
+def test_cli_bad_input_exits_2(walk_clip, tmp_path, capsys):
     empty = tmp_path / "empty.bvh"
     empty.write_bytes(b"")
     odd = tmp_path / "motion.txt"
@@ -157,17 +150,17 @@ def test_cli_bad_input_exits_2(tmp_path, capsys):
     garbage = tmp_path / "bad.bvh.gz"
     garbage.write_bytes(b"\x1f\x8b\x08not really gzip")
     npz = tmp_path / "c.npz"
-    load_motion(CLIP, scale=0.01).crop(0, 5).save(npz)
+    load_motion(walk_clip, scale=0.01).crop(0, 5).save(npz)
     out = str(tmp_path / "o.png")
     cases = [
         [str(tmp_path / "missing.bvh"), "--out", out],
         [str(empty), "--out", out],
         [str(odd), "--out", out],
         [str(garbage), "--out", out],
-        [str(CLIP), "--scale", "0.01", "--out", str(tmp_path / "o.jpg")],
+        [str(walk_clip), "--scale", "0.01", "--out", str(tmp_path / "o.jpg")],
         [str(npz), "--scale", "0.01", "--out", out],
-        [str(CLIP), "--scale", "0.01", "--out", out, "--constraints", str(odd)],
-        [str(CLIP), "--scale", "0.01", "--out", out, "--fps", "10"],
+        [str(walk_clip), "--scale", "0.01", "--out", out, "--constraints", str(odd)],
+        [str(walk_clip), "--scale", "0.01", "--out", out, "--fps", "10"],
     ]
     for args in cases:
         assert main(["render", *args]) == 2, args

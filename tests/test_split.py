@@ -11,14 +11,11 @@ import pytest
 from kinema.data.split import assign_splits, group_of, parse_clip_name, split_for
 from kinema.errors import DataError
 
-DATA = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-DATASET_DIRS = [DATA / f"Bandai-Namco-Research-Motiondataset-{n}" for n in (1, 2)]
-needs_data = pytest.mark.skipif(not all(d.is_dir() for d in DATASET_DIRS), reason="Bandai Namco data absent")
 
-
-def _real_clips() -> list[dict]:
-    """Every clip that has motion (a .bvh.gz), parsed from its file name."""
-    return [parse_clip_name(p.name) for d in DATASET_DIRS for p in sorted((d / "data").glob("*.bvh.gz"))]
+def _clips(root: Path) -> list[dict]:
+    """Every clip under ``root`` that has motion (a .bvh.gz), parsed from its file name."""
+    dirs = [root / f"Bandai-Namco-Research-Motiondataset-{n}" for n in (1, 2)]
+    return [parse_clip_name(p.name) for d in dirs for p in sorted((d / "data").glob("*.bvh.gz"))]
 
 
 def test_parse_clip_name() -> None:
@@ -87,9 +84,9 @@ def test_assign_splits_small_groups_and_order() -> None:
     assert set(assign_splits(clips, fractions=(1.0, 0.0, 0.0)).values()) == {"train"}
 
 
-@needs_data
-def test_real_data_split() -> None:
-    clips = _real_clips()
+def test_real_data_split(real_bandai_root) -> None:
+    """The real data's size and split fractions: facts of the real data (skips without it)."""
+    clips = _clips(real_bandai_root)
     assert len(clips) > 2500
     pairs = [(c["clip_id"], group_of(c["clip_id"])) for c in clips]
     out = assign_splits(pairs)
@@ -116,3 +113,17 @@ def test_real_data_split() -> None:
     # the stateless rule and the ranked rule agree for almost every clip
     agree = sum(split_for(c, g) == out[c] for c, g in pairs) / len(pairs)
     assert agree > 0.9
+
+
+def test_split_of_the_data_in_use_covers_every_group(bandai_root) -> None:
+    """On the real or synthetic data alike: every group of 3 or more takes has train, val and test clips,
+    and the split does not depend on the order of the clips."""
+    pairs = [(c["clip_id"], group_of(c["clip_id"])) for c in _clips(bandai_root)]
+    out = assign_splits(pairs)
+    assert out == assign_splits(list(reversed(pairs))) and set(out) == {c for c, _ in pairs}
+    per_group: dict[str, Counter] = defaultdict(Counter)
+    for clip_id, group in pairs:
+        per_group[group][out[clip_id]] += 1
+    for group, counts in per_group.items():
+        if sum(counts.values()) >= 3:
+            assert counts["test"] >= 1 and counts["val"] >= 1 and counts["train"] >= 1, group

@@ -40,12 +40,39 @@ def _single_clip_data(tiny_data: Path, tmp_path: Path, frames: int = 40) -> Path
     return out
 
 
+def _fixed_batches_loss(trainer: Trainer, n: int = 8) -> float:
+    """The phase-1 training loss of ``trainer.model`` (no dropout, no update) averaged over ``n`` fixed
+    batches, timesteps and noises. Unlike the logged per-step losses, which vary threefold from one
+    random batch to the next, the same number before and after training measures what was learned."""
+    from kinema.train.losses import motion_loss
+
+    model, losses = trainer.model, []
+    model.eval()
+    with torch.no_grad():
+        for i in range(n):
+            g = torch.Generator().manual_seed(1000 + i)
+            batch = trainer.batches.sample(g)
+            x0 = batch.features
+            t = trainer.schedule.sample_timesteps(x0.shape[0], g)
+            x_t = trainer.schedule.q_sample(x0, t, torch.randn(x0.shape, generator=g))
+            pred = model(x_t, t, trainer.text_table[batch.caption_index], batch.text_keep, batch.c_dir, x0,
+                         torch.zeros_like(x0), batch.pad_mask)
+            loss, _ = motion_loss(pred, x0, batch.pad_mask, trainer.layout, trainer.skeleton, trainer.stats,
+                                  trainer.weights)
+            losses.append(float(loss))
+    model.train()
+    return sum(losses) / n
+
+
 def test_loss_drops_when_overfitting_a_few_clips(tiny_data, tmp_path):
     trainer = Trainer(_cfg(steps=60, phase1_fraction=1.0), tiny_data, tmp_path / "run")
+    before = _fixed_batches_loss(trainer)
     trainer.run(progress=False)
+    after = _fixed_batches_loss(trainer)
+    # measured: about 0.47 of the start on the real clips, 0.56-0.65 on the synthetic ones (seeds 0-3)
+    assert after < 0.75 * before, (before, after)
     log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
-    first, last = log[0]["loss"], sum(r["loss"] for r in log[-3:]) / 3
-    assert last < 0.6 * first, (first, last)
+    assert len(log) == 12 and all(torch.isfinite(torch.tensor(r["loss"])) for r in log)
 
 
 def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
