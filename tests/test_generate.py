@@ -92,7 +92,7 @@ def test_cli_end_to_end_bvh_and_npz(tiny_checkpoint, tmp_path, capsys):
                "--out", str(tmp_path / "bow.npz"), "--fps", "30", "--no-progress"])
     assert rc == 0
     with np.load(tmp_path / "bow.npz", allow_pickle=False) as d:
-        assert d["positions"].shape == (29, 21, 3) and "foot_contacts" in d.files  # 20 frames @ 20 -> 30 fps
+        assert d["positions"].shape == (30, 21, 3) and "foot_contacts" in d.files  # 1 s: 20 @ 20 -> 30 @ 30 fps
 
 
 def test_cli_bad_input_one_line(tiny_checkpoint, tmp_path, capsys):

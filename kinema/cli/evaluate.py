@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from kinema.cli._args import non_negative_float, positive_int, seed
+
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="score a model on the evaluation suite (report.md, report.json, plots)")
@@ -12,9 +14,9 @@ def register(sub) -> None:
     p.add_argument("--data", type=Path, default=Path("cache/bandai20"), help="dataset build (default cache/bandai20)")
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="clips to draw cases from")
     p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
-    p.add_argument("--seed", type=int, default=0, help="suite and generation seed")
-    p.add_argument("--steps", type=int, help="DDIM steps (default: the model's setting)")
-    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+    p.add_argument("--seed", type=seed, default=0, help="suite and generation seed")
+    p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting)")
+    p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="separated guidance weights (default: the model's setting)")
     p.add_argument("--imputation-only", action="store_true",
                    help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)")

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from kinema.cli._args import non_negative_float, positive_int
+
 
 def register(sub) -> None:
     """Add the `export` sub-command to the top-level parser."""
@@ -17,9 +19,9 @@ def register(sub) -> None:
     p.add_argument("model", type=Path, help="run folder (its newest checkpoint) or checkpoint folder")
     p.add_argument("--out", type=Path, required=True, help="model folder to write, e.g. kinema/assets/models/default")
     p.add_argument("--dtype", default="float16", choices=("float16", "bfloat16", "float32"), help="weight precision")
-    p.add_argument("--guidance", type=float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
-                   help="default separated guidance weights saved with the model")
-    p.add_argument("--steps", type=int, help="default DDIM steps saved with the model")
+    p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="default separated guidance weights saved with the model (finite, >= 0)")
+    p.add_argument("--steps", type=positive_int, help="default DDIM steps saved with the model")
     p.set_defaults(func=run)
 
 

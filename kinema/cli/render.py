@@ -28,7 +28,10 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import math
+
     from kinema.errors import KinemaError
+    from kinema.io.atomic import check_output_path
     from kinema.motion.core import load_motion
     from kinema.render import render_filmstrip, render_gif
 
@@ -51,8 +54,9 @@ def run(args: argparse.Namespace) -> int:
     if args.fps is not None and kind == ".png":
         raise KinemaError("--fps applies to a .gif animation only (use --frames for a filmstrip)")
     scale = 1.0 if args.scale is None else args.scale
-    if not scale > 0:
-        raise KinemaError(f"--scale must be positive, got {scale}")
+    if not (math.isfinite(scale) and scale > 0):
+        raise KinemaError(f"--scale must be a positive number, got {scale}")
+    check_output_path(args.out)
     try:
         motion = load_motion(src, scale=scale)
     except (EOFError, OSError) as err:  # e.g. a truncated .gz

@@ -53,6 +53,8 @@ def read_constraints_json(path_or_obj, base_dir=None) -> tuple[list, str | None,
         except json.JSONDecodeError as err:
             raise ConstraintError(f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}",
                                   source=source) from None
+        except RecursionError:
+            raise ConstraintError("JSON nested too deeply to read (not a constraints file)", source=source) from None
         base_dirs = [Path(base_dir)] if base_dir is not None else [path.parent, Path.cwd()]
     else:
         data = path_or_obj

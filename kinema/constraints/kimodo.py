@@ -83,7 +83,7 @@ def find_kimodo_meta(constraints_path: str | os.PathLike) -> Path | None:
     meta = Path(constraints_path).parent / "meta.json"
     try:
         data = json.loads(meta.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         return None
     return meta if _looks_like_kimodo(data) else None
 
@@ -114,6 +114,8 @@ def read_kimodo_meta(path: str | os.PathLike) -> KimodoMeta:
         raise _meta_error(path, None, f"cannot read the file ({err})") from None
     except json.JSONDecodeError as err:
         raise _meta_error(path, None, f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}") from None
+    except RecursionError:
+        raise _meta_error(path, None, "JSON nested too deeply to read") from None
     if not isinstance(data, dict):
         raise _meta_error(path, None, f"expected a JSON object, got {type(data).__name__}")
     seed = data.get("seed")

@@ -33,6 +33,7 @@ from typing import Any
 
 import torch
 import torch.nn.functional as F
+from safetensors import SafetensorError
 from safetensors.torch import load_file
 from safetensors.torch import save as save_safetensors_bytes
 from torch import nn
@@ -280,6 +281,6 @@ def load_retrieval(path: str | Path | None = None) -> RetrievalModel:
         model.load_state_dict({k: v.float() for k, v in state.items()})
     except KinemaError:
         raise
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError) as err:
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, SafetensorError) as err:
         raise KinemaError(f"{path}: unreadable retrieval model ({err})") from None
     return model.eval()

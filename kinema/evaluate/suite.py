@@ -267,6 +267,8 @@ def load_suite(path) -> list[dict]:
         raise KinemaError(f"{path}: no such suite file") from None
     except (OSError, ValueError) as exc:
         raise KinemaError(f"{path}: cannot read suite: {exc}") from None
+    except RecursionError:
+        raise KinemaError(f"{path}: cannot read suite: JSON nested too deeply") from None
     if not isinstance(doc, dict) or doc.get("format") != SUITE_FORMAT or not isinstance(doc.get("cases"), list):
         raise KinemaError(f"{path}: not a kinema evaluation suite (expected format {SUITE_FORMAT!r})")
     if doc.get("version") != SUITE_VERSION:

@@ -8,6 +8,7 @@ continues the pose with consistent velocities; afterwards the shared frames are 
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from dataclasses import dataclass
@@ -18,6 +19,9 @@ import torch
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
 from kinema.motion.core import Motion
+
+#: Keys of a timeline segment object (besides ``comment`` and keys starting with ``_``, ignored).
+SEGMENT_KEYS = ("prompt", "seconds")
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,10 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
             obj = json.loads(path.read_text())
         except json.JSONDecodeError as err:
             raise KinemaError(f"{path}:{err.lineno}: not valid JSON ({err.msg})") from None
+        except RecursionError:
+            raise KinemaError(f"{path}: JSON nested too deeply to read (not a timeline)") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise KinemaError(f"{path}: cannot read the timeline file ({err})") from None
         source = str(path)
     if not isinstance(obj, list) or not obj:
         raise KinemaError(f"{source}: a timeline is a non-empty JSON list of {{'prompt', 'seconds'}} objects")
@@ -50,6 +58,7 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
             item = {"prompt": item[0], "seconds": item[1]}
         if not isinstance(item, dict):
             raise KinemaError(f"{source}: segment {i}: expected an object with 'prompt' and 'seconds'")
+        _check_keys(item, source, i)
         prompt, seconds = item.get("prompt"), item.get("seconds")
         if not isinstance(prompt, str):
             raise KinemaError(f"{source}: segment {i}: field 'prompt' must be a string")
@@ -57,6 +66,17 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
             raise KinemaError(f"{source}: segment {i}: field 'seconds' must be a positive number, got {seconds!r}")
         out.append(Segment(prompt, float(seconds)))
     return out
+
+
+def _check_keys(item: dict, source: str, i: int) -> None:
+    """Unknown keys are an error (typos such as "promt"); ``comment`` and ``_...`` keys are ignored."""
+    for key in item:
+        if key in SEGMENT_KEYS or key == "comment" or (isinstance(key, str) and key.startswith("_")):
+            continue
+        close = difflib.get_close_matches(str(key), SEGMENT_KEYS, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise KinemaError(f"{source}: segment {i}: unknown key {key!r}{hint}; expected 'prompt' and 'seconds' "
+                          "(and 'comment', '_...')")
 
 
 def split_long(prompt: str, seconds: float, max_seconds: float) -> list[Segment]:

@@ -15,6 +15,32 @@ from contextlib import contextmanager
 from pathlib import Path
 
 
+def check_output_path(path: str | Path) -> Path:
+    """Check, before any long work, that a file can be written at ``path``; returns it as a Path.
+
+    Missing parent folders are fine (the writers create them). A ``path`` that is a folder, a parent
+    that is a file, or a folder that cannot be written to (tried with a temporary file, so it also
+    holds for root on a read-only file system) raise a one-line `KinemaError`; nothing is left behind.
+    """
+    from kinema.errors import KinemaError
+
+    path = Path(path)
+    if path.is_dir():
+        raise KinemaError(f"{path}: is a folder; give a file name to write")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise KinemaError(f"{path}: cannot write there, {folder} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".kinema-write-test.", dir=folder)
+    except OSError as err:
+        raise KinemaError(f"{path}: cannot write to the folder {folder} ({err.strerror or err})") from None
+    os.close(fd)
+    os.unlink(probe)
+    return path
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (creating the parent folder)."""
     path = Path(path)

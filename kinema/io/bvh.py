@@ -35,6 +35,12 @@ _CANONICAL = {n.lower(): n for n in CHANNEL_NAMES}
 _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.M)
 _FRAMES_RE = re.compile(r"Frames\s*:\s*(\S*)\s*$", re.I)
 _FRAME_TIME_RE = re.compile(r"Frame\s+Time\s*:\s*(\S*)\s*$", re.I)
+#: Largest rotation channel value read (degrees): beyond it the angle has lost all precision (a
+#: corrupt file), though unwrapped angles of many turns are fine.
+MAX_DEGREES = 1e7
+#: Largest length read, in metres after ``scale``: beyond it a value is corrupt (or the scale wrong),
+#: and it would not fit the float32 arrays of kinema's npz format either.
+MAX_METRES = 1e6
 
 
 @dataclass(eq=False)
@@ -107,14 +113,18 @@ def parse_bvh(path_or_text: str | os.PathLike | bytes, *, source_name: str | Non
     if num_channels == 0:
         raise BVHError("the hierarchy declares no channels", name, motion_line)
     values = _parse_values(text[data_start:], data_line, num_frames, num_channels, name)
-    bad = ~np.isfinite(values)
+    flat = [c for chans in channels for c in chans]
+    is_rot = np.array([c.endswith("rotation") for c in flat])
+    bad = ~np.isfinite(values) | (is_rot[None] & (np.abs(values) > MAX_DEGREES))
     if bad.any():
         frame, col = (int(i[0]) for i in np.nonzero(bad))
         joint = int(np.searchsorted(np.cumsum([len(c) for c in channels]), col, side="right"))
-        chan = channels[joint][col - sum(len(c) for c in channels[:joint])]
+        chan = flat[col]
         line = _frame_lines(text[data_start:], data_line)[frame]
+        what = "non-finite value" if not np.isfinite(values[frame, col]) else "rotation out of range:"
+        limit = f" (|angle| <= {MAX_DEGREES:g} degrees)" if np.isfinite(values[frame, col]) else ""
         raise BVHError(
-            f"non-finite value {values[frame, col]} in frame {frame + 1} ({names[joint]} {chan})", name, line
+            f"{what} {values[frame, col]:g} in frame {frame + 1} ({names[joint]} {chan}){limit}", name, line
         )
     return BVHData(names, parents, offsets, channels, end_sites, frame_time, values, name)
 
@@ -387,6 +397,7 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
     if not (math.isfinite(scale) and scale > 0):
         raise BVHError(f"scale must be a positive number, got {scale}", data.path)
     T, J, C = data.num_frames, data.num_joints, data.num_channels
+    _check_lengths(data, scale)
     vals = np.concatenate([data.values, np.zeros((T, 1))], axis=1)  # column C is a constant zero
     offsets = data.offsets * scale
     positions: dict[int, np.ndarray] = {}  # joint -> (T, 3) scaled, for joints with position channels
@@ -435,6 +446,29 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
     ends = {j: tuple(float(x) for x in v * scale) for j, v in data.end_sites.items()}
     skeleton = Skeleton(data.names, data.parents, offsets, end_sites=ends, name=name)
     return Motion(skeleton, fps, root, quats)
+
+
+def _check_lengths(data: BVHData, scale: float) -> None:
+    """OFFSETs and position channels, times ``scale``, must be finite and at most `MAX_METRES`."""
+    for j, off in enumerate(data.offsets):
+        if not np.all(np.abs(off * scale) <= MAX_METRES):
+            raise BVHError(f"OFFSET of joint {data.names[j]} is {off.tolist()} x scale {scale:g}: not a "
+                           f"length within {MAX_METRES:g} m", data.path)
+    for j, site in data.end_sites.items():
+        if not np.all(np.abs(site * scale) <= MAX_METRES):
+            raise BVHError(f"End Site OFFSET of joint {data.names[j]} is {site.tolist()} x scale {scale:g}: "
+                           f"not a length within {MAX_METRES:g} m", data.path)
+    cols = [(start + k, j, c) for j, (start, chans) in enumerate(zip(data.column_starts, data.channels, strict=True))
+            for k, c in enumerate(chans) if c.endswith("position")]
+    if not cols or data.values.size == 0:
+        return
+    pos = data.values[:, [c for c, _, _ in cols]] * scale
+    bad = ~(np.abs(pos) <= MAX_METRES)
+    if bad.any():
+        frame, k = (int(i[0]) for i in np.nonzero(bad))
+        _, j, chan = cols[k]
+        raise BVHError(f"{data.names[j]} {chan} in frame {frame + 1} is {data.values[frame, cols[k][0]]:g} x scale "
+                       f"{scale:g}: not a position within {MAX_METRES:g} m", data.path)
 
 
 def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY") -> BVHData:

@@ -20,6 +20,11 @@ from kinema.io.atomic import atomic_write_bytes
 REQUIRED_KEYS = ("joint_names", "parents", "fps", "local_quats", "root_translation", "offsets")
 
 
+def _float32(t: torch.Tensor) -> np.ndarray:
+    with np.errstate(over="ignore"):  # overflow becomes inf, reported by save_npz
+        return t.detach().cpu().numpy().astype(np.float32)
+
+
 def save_npz(motion, path: str | Path) -> Path:
     """Write a Motion as ``.npz`` atomically (compressed)."""
     if not motion.is_finite():
@@ -29,17 +34,38 @@ def save_npz(motion, path: str | Path) -> Path:
         "joint_names": np.array(skel.names, dtype=str),
         "parents": np.array(skel.parents, dtype=np.int64),
         "fps": np.array(motion.fps, dtype=np.float64),
-        "positions": motion.positions.detach().cpu().numpy().astype(np.float32),
-        "local_quats": motion.local_rotations.detach().cpu().numpy().astype(np.float32),
-        "root_translation": motion.root_translation.detach().cpu().numpy().astype(np.float32),
+        "positions": _float32(motion.positions),
+        "local_quats": _float32(motion.local_rotations),
+        "root_translation": _float32(motion.root_translation),
         "offsets": skel.offsets.numpy().astype(np.float64),
     }
     if motion.foot_contacts is not None:
         arrays["foot_contacts"] = motion.foot_contacts.detach().cpu().numpy().astype(np.float32)
+    for key, arr in arrays.items():
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise KinemaError(f"{path}: '{key}' does not fit the npz format's float32 (values too large); "
+                              "nothing written")
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
     atomic_write_bytes(Path(path), buf.getvalue())
     return Path(path)
+
+
+def _check_finite(path: Path, data) -> None:
+    """Numeric arrays must be finite and fps positive: a one-line error naming the key and where."""
+    for key in ("fps", "offsets", "root_translation", "local_quats", "positions", "foot_contacts"):
+        if key not in data.files:
+            continue
+        arr = data[key]
+        if arr.dtype.kind not in "biuf":
+            raise KinemaError(f"{path}: '{key}' must hold numbers, found dtype {arr.dtype}")
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            at = f" (first at index {np.argwhere(bad)[0].tolist()})" if bad.ndim else ""
+            raise KinemaError(f"{path}: '{key}' holds NaN or infinite values{at}; not a valid kinema motion")
+    fps = data["fps"]
+    if fps.size != 1 or not float(fps.reshape(-1)[0]) > 0:
+        raise KinemaError(f"{path}: 'fps' must be one positive number, got {fps.tolist()}")
 
 
 def load_npz(path: str | Path):
@@ -56,6 +82,7 @@ def load_npz(path: str | Path):
         missing = [k for k in REQUIRED_KEYS if k not in data.files]
         if missing:
             raise KinemaError(f"{path}: missing keys {missing} (see docs/formats.md)")
+        _check_finite(path, data)
         names = [str(n) for n in data["joint_names"]]
         skel = Skeleton(names, data["parents"].tolist(), data["offsets"])
         contacts = torch.from_numpy(data["foot_contacts"]) if "foot_contacts" in data.files else None

@@ -14,6 +14,10 @@ Presets (``get_config``):
   width 256/4 layers 0.84 s per step and 30 ms per guided forward; 192/4 0.55 s and 20 ms;
   192/3 0.42 s and 15 ms. 192/4 samples a 5-s motion with 50 DDIM steps in about a second and
   trains ~6k steps per CPU hour.
+- ``medium``: width 384, 4 layers, 8 heads (head size 48 as in ``small``) -- 2x wider than ``small``,
+  about 4x its parameters and step cost; for a longer CPU run or a GPU (docs/training.md).
+- ``large``: width 512, 8 layers, 8 heads, 16 registers -- a GPU preset between ``medium`` and ``paper``
+  (scripts/train_gpu.py picks the widest preset that fits its time budget).
 - ``paper``: width 1024, 16 layers per stage, 8 heads, P = 49 registers, 4096-d text (LLM2Vec).
   With ``ff_mult = 2`` (feed-forward 2048, PyTorch's default) this is ~282 M parameters for a
   27-joint skeleton, as the paper reports; ``ff_mult = 4`` would give ~420 M, so the paper's
@@ -41,6 +45,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "tiny": {"width": 64, "layers": 2, "heads": 4, "ff_mult": 2, "dropout": 0.0, "num_registers": 4,
              "text_dim": 384},
     "small": {"width": 192, "layers": 4, "heads": 4, "ff_mult": 2, "dropout": 0.1, "num_registers": 8,
+              "text_dim": 384},
+    "medium": {"width": 384, "layers": 4, "heads": 8, "ff_mult": 2, "dropout": 0.1, "num_registers": 8,
+               "text_dim": 384},
+    "large": {"width": 512, "layers": 8, "heads": 8, "ff_mult": 2, "dropout": 0.1, "num_registers": 16,
               "text_dim": 384},
     "paper": {"width": 1024, "layers": 16, "heads": 8, "ff_mult": 2, "dropout": 0.1, "num_registers": 49,
               "text_dim": 4096},
@@ -153,6 +161,8 @@ class ModelConfig:
             data = json.loads(Path(path).read_text())
         except (OSError, json.JSONDecodeError) as exc:
             raise KinemaError(f"cannot read model config {path}: {exc}") from exc
+        except RecursionError:
+            raise KinemaError(f"cannot read model config {path}: JSON nested too deeply") from None
         if not isinstance(data, dict):
             raise KinemaError(f"model config {path} is not a JSON object")
         return cls.from_dict(data)

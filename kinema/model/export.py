@@ -14,12 +14,12 @@ import shutil
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
-from kinema.model.loading import find_checkpoint, weights_file
+from kinema.model.loading import find_checkpoint, load_denoiser, read_checkpoint_info, read_weights, weights_file
 
 #: checkpoint.json keys that only matter for resuming training.
 _TRAINING_ONLY = ("optimizer_param_groups",)
@@ -44,11 +44,10 @@ def export_model(
         raise KinemaError(f"unknown weight dtype {dtype!r}; choose one of {', '.join(DTYPES)}")
     ckpt = find_checkpoint(src)
     weights = weights_file(ckpt)
-    try:
-        info = json.loads((ckpt / "checkpoint.json").read_text())
-        state = load_file(str(weights))
-    except (OSError, ValueError, json.JSONDecodeError) as err:
-        raise KinemaError(f"{ckpt}: unreadable checkpoint ({err})") from None
+    info = read_checkpoint_info(ckpt)
+    state = read_weights(weights)
+    if not isinstance(info.get("sampler", {}), dict):
+        raise KinemaError(f"{ckpt / 'checkpoint.json'}: field 'sampler' must be an object (damaged checkpoint?)")
     for key in _TRAINING_ONLY:
         info.pop(key, None)
     if guidance is not None:
@@ -69,4 +68,5 @@ def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor]) -> Path
         (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
         for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
             (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)
+        load_denoiser(tmp)  # a folder that would not load never replaces ``out``
     return out

@@ -6,6 +6,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
+from safetensors import SafetensorError
 from safetensors.torch import load_file
 
 from kinema.diffusion.guidance import Guidance
@@ -54,12 +56,46 @@ def weights_file(ckpt: Path, ema: bool = True) -> Path:
     return ema_file if ema and ema_file.exists() else ckpt / "model.safetensors"
 
 
+def read_checkpoint_info(ckpt: Path) -> dict:
+    """``checkpoint.json`` of a checkpoint folder as a dict; a missing, unreadable, garbled or
+    non-object file is a one-line `KinemaError` naming it."""
+    path = Path(ckpt) / "checkpoint.json"
+    try:
+        info = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise KinemaError(f"{path}: cannot read the file ({err})") from None
+    except json.JSONDecodeError as err:
+        raise KinemaError(f"{path}: not valid JSON: line {err.lineno}, column {err.colno}: {err.msg} "
+                          "(damaged checkpoint?)") from None
+    except RecursionError:
+        raise KinemaError(f"{path}: JSON nested too deeply to read (damaged checkpoint?)") from None
+    if not isinstance(info, dict):
+        raise KinemaError(f"{path}: expected a JSON object, got {type(info).__name__} (damaged checkpoint?)")
+    return info
+
+
+def read_weights(path: Path) -> dict[str, torch.Tensor]:
+    """The tensors of a ``.safetensors`` file; a missing, empty, truncated or garbled file, or one holding
+    NaN/inf, is a one-line `KinemaError` naming it (no half-loaded model)."""
+    try:
+        state = load_file(str(path))
+    except FileNotFoundError:
+        raise KinemaError(f"{path}: weights file not found") from None
+    except (SafetensorError, OSError, ValueError) as err:
+        raise KinemaError(f"{path}: not a readable safetensors weights file ({err}); damaged or "
+                          "incompletely copied?") from None
+    for name, tensor in state.items():
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            raise KinemaError(f"{path}: tensor {name!r} holds NaN or infinite values (damaged weights?)")
+    return state
+
+
 def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
     """Read ``checkpoint.json`` and the (EMA) safetensors weights of a checkpoint or run folder."""
     ckpt = find_checkpoint(path)
+    info = read_checkpoint_info(ckpt)
+    state = read_weights(weights_file(ckpt, ema))
     try:
-        info = json.loads((ckpt / "checkpoint.json").read_text())
-        state = load_file(str(weights_file(ckpt, ema)))
         config = ModelConfig.from_dict(info["model_config"])
         model = Denoiser(config)
         model.load_state_dict({k: v.float() for k, v in state.items()})
@@ -76,7 +112,9 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
             info=info,
             path=ckpt,
         )
-    except (OSError, ValueError, KeyError, RuntimeError, json.JSONDecodeError) as err:
+    except KinemaError as err:  # e.g. a SkeletonError for a malformed skeleton entry
+        raise KinemaError(f"{ckpt}: cannot load model ({err})") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, RuntimeError) as err:
         raise KinemaError(f"{ckpt}: cannot load model ({type(err).__name__}: {err})") from None
     for p in loaded.denoiser.parameters():
         p.requires_grad_(False)

@@ -126,16 +126,29 @@ class Motion:
             foot_contacts=contacts,
         )
 
-    def resample(self, fps: float) -> Motion:
+    def resample(self, fps: float, *, keep_duration: bool = False) -> Motion:
         """Resample to another frame rate: slerp for rotations, linear for the root, nearest for contacts.
 
-        Frame 0 is kept; the new frames cover the same time span ``[0, (T-1)/fps]``.
+        Frame 0 is kept; the new frames cover the same time span ``[0, (T-1)/fps]``. With
+        ``keep_duration`` the result has ``round(duration * fps)`` frames instead (the same `duration`,
+        up to rounding, as a generated motion of that many seconds): frame ``i`` is the pose at time
+        ``i / fps``, and a time past the last frame holds the last pose.
         """
+        try:
+            ok = not isinstance(fps, bool) and math.isfinite(float(fps)) and float(fps) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise KinemaError(f"fps must be a positive number, got {fps!r}")
+        fps = float(fps)
         if abs(fps - self.fps) < 1e-9:
             return self
         T = self.num_frames
-        n_new = int(math.floor((T - 1) * fps / self.fps + 1e-6)) + 1
-        src = torch.arange(n_new, dtype=torch.float64) * (self.fps / fps)
+        if keep_duration:
+            n_new = max(1, round(self.duration * fps))
+        else:
+            n_new = int(math.floor((T - 1) * fps / self.fps + 1e-6)) + 1
+        src = (torch.arange(n_new, dtype=torch.float64) * (self.fps / fps)).clamp(max=T - 1)
         lo = src.floor().long().clamp(max=T - 1)
         hi = (lo + 1).clamp(max=T - 1)
         w = (src - lo.double()).to(self.dtype)

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from kinema.errors import KinemaError
@@ -97,8 +98,8 @@ def load_checkpoint(path: str | Path, with_optimizer: bool = True) -> dict[str, 
         out["ema"] = load_file(str(ema)) if ema.exists() else None
         opt = ckpt / "optimizer.safetensors"
         out["optimizer"] = load_file(str(opt)) if with_optimizer and opt.exists() else None
-    except (OSError, ValueError, json.JSONDecodeError) as err:
-        raise KinemaError(f"{ckpt}: unreadable checkpoint ({err})") from None
+    except (OSError, ValueError, SafetensorError, RecursionError) as err:
+        raise KinemaError(f"{ckpt}: unreadable checkpoint ({type(err).__name__}: {err})") from None
     return out
 
 
@@ -131,7 +132,7 @@ def load_init_weights(path: str | Path, model_config, layout, skeleton, fps: flo
             diffs.append("skeleton joint names")
         if abs(float(info["fps"]) - float(fps)) > 1e-6:
             diffs.append(f"fps: {info['fps']} vs {fps}")
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as err:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, SafetensorError, RecursionError) as err:
         raise KinemaError(f"{ckpt}: cannot read weights to fine-tune from ({type(err).__name__}: {err})") from None
     if diffs:
         raise KinemaError(f"{ckpt}: cannot fine-tune from this model, it differs from the run being started in "
