@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import pytest
 import torch
@@ -18,17 +17,13 @@ from kinema.postprocess.footlock import PAD_SECONDS, REACH_TOLERANCE, clean_cont
 from kinema.postprocess.ik import limb_chain, solve_ik, spread_corrections, two_bone_ik
 from tests.test_skeleton import SCHEMES, humanoid
 
-BANDAI = Path(__file__).resolve().parents[2] / "shared/datasets/bandai-namco"
-WALK = BANDAI / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
-
 
 @pytest.fixture(scope="module")
-def walk() -> Motion:
-    if not WALK.exists():
-        pytest.skip("shared Bandai Namco walking clip not available")
+def walk(walk_clip) -> Motion:
+    """The Bandai walk at 20 fps (real, or the synthetic one of the same name: see conftest.py)."""
     from kinema.io.bvh import read_bvh
 
-    return read_bvh(WALK, scale=0.01).prune(["joint_Root"]).resample(20)
+    return read_bvh(walk_clip, scale=0.01).prune(["joint_Root"]).resample(20)
 
 
 def posed_humanoid(T=16, amount=0.4, seed=0) -> Motion:
@@ -292,12 +287,13 @@ def test_postprocess_chains_foot_lock_then_exact(walk):
     targets = _walk_targets(walk)
     targets.contacts = (torch.arange(0, 20), contacts[:20])
     out, report = postprocess(sliding, targets)
-    assert set(report) == {"smooth", "foot_lock", "exact"}
+    assert set(report) == {"smooth", "foot_lock", "exact", "plausibility", "warnings"}
+    assert report["warnings"] == [] and "undone" not in report["exact"]
     assert report["foot_lock"]["skate_after"] < report["foot_lock"]["skate_before"]
     assert all(v["max"] < 0.1 for k, v in report["exact"]["after"].items() if k != "contact_skate_cm_s")
     assert out.foot_contacts is not None
     unchanged, rep = postprocess(sliding, None, foot_lock=False, smooth=0, smooth_rotations=0)
-    assert unchanged is sliding and rep == {}
+    assert unchanged is sliding and set(rep) == {"plausibility", "warnings"} and rep["warnings"] == []
 
 
 def test_smoothing_removes_jitter_and_keeps_the_motion(walk):

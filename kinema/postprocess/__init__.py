@@ -23,6 +23,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
+from kinema.postprocess.guard import DEFAULT_BOUNDS, GuardBounds, Plausibility, plausibility, violations
 from kinema.postprocess.smooth import DEFAULT_ROT_SIGMA_SECONDS, DEFAULT_SIGMA_SECONDS, smooth_motion
 
 Pair = tuple[torch.Tensor, torch.Tensor]
@@ -130,33 +131,91 @@ def postprocess(
     exact: bool = True,
     smooth: float = DEFAULT_SIGMA_SECONDS,
     smooth_rotations: float = DEFAULT_ROT_SIGMA_SECONDS,
+    bounds: GuardBounds = DEFAULT_BOUNDS,
     **exact_kwargs,
 ) -> tuple[Motion, dict]:
     """De-jittering (Gaussians of ``smooth`` seconds on the root x/z and ``smooth_rotations`` seconds on
-    local rotations; 0 = off), foot locking (on ``motion.foot_contacts``,
-    overridden by ``targets.contacts`` where given), then the exact constraint pass; returns the motion
-    and ``{"smooth": ..., "foot_lock": ..., "exact": ...}`` reports."""
-    from kinema.postprocess.exact import hit_constraints
+    local rotations; 0 = off), foot locking (on ``motion.foot_contacts``, overridden by
+    ``targets.contacts`` where given), then the exact constraint pass, each stage guarded
+    (kinema.postprocess.guard): a stage that would make the motion less plausible than the raw one beyond
+    ``bounds`` is undone. Returns the motion and ``{"smooth", "foot_lock", "exact", "plausibility",
+    "warnings"}``; ``warnings`` lists undone stages and constraints left unmet, in words."""
+    report: dict = {"warnings": []}
+    targets = None if targets is None else targets.validate(motion)
+    guard = _Guard(plausibility(motion), bounds, report)
+    if smooth > 0 or smooth_rotations > 0:
+        new, report["smooth"] = smooth_motion(motion, smooth, smooth_rotations)
+        motion = guard.accept("de-jittering", motion, new, report["smooth"])
+    if foot_lock:
+        motion = _guarded_foot_lock(motion, targets, guard, report)
+    if exact and targets is not None and not targets.is_empty():
+        motion = _guarded_exact(motion, targets, guard, report, exact_kwargs)
+    report["plausibility"] = {"raw": guard.raw.as_dict(), "final": plausibility(motion).as_dict()}
+    return motion, report
+
+
+class _Guard:
+    """Accepts a stage's output only while it stays within ``bounds`` of the raw motion's plausibility."""
+
+    def __init__(self, raw: Plausibility, bounds: GuardBounds, report: dict):
+        self.raw, self.before, self.bounds, self.report = raw, raw, bounds, report
+
+    def problems(self, new: Motion, extra: list[str] = (), stage_report: dict | None = None) -> list[str]:
+        measured = plausibility(new)
+        if stage_report is not None:
+            stage_report["added_pelvis_speed_m_s"] = round(measured.added_speed(self.before), 3)
+        self.measured = measured
+        return violations(self.raw, self.before, measured, self.bounds) + list(extra)
+
+    def accept(self, stage: str, old: Motion, new: Motion, stage_report: dict, extra: list[str] = ()) -> Motion:
+        problems = self.problems(new, extra, stage_report)
+        if not problems:
+            self.before = self.measured
+            return new
+        stage_report["undone"] = problems
+        self.report["warnings"].append(f"post-processing: {stage} undone, it would have made the motion worse "
+                                       f"than the raw one: {'; '.join(problems)}")
+        return old
+
+
+def _guarded_foot_lock(motion: Motion, targets: PostTargets | None, guard: _Guard, report: dict) -> Motion:
+    """Foot locking; if moving the pelvis to reach the locks trips the guard, lock without moving it."""
     from kinema.postprocess.footlock import foot_lock as lock_feet
 
-    report: dict = {}
-    targets = None if targets is None else targets.validate(motion)
-    if smooth > 0 or smooth_rotations > 0:
-        motion, report["smooth"] = smooth_motion(motion, smooth, smooth_rotations)
-    if foot_lock:
-        contacts = motion.foot_contacts
-        if targets is not None and targets.contacts is not None:
-            if contacts is None:
-                from kinema.motion.contacts import foot_contacts as estimate
+    contacts = motion.foot_contacts
+    if targets is not None and targets.contacts is not None:
+        if contacts is None:
+            from kinema.motion.contacts import foot_contacts as estimate
 
-                contacts = estimate(motion.positions, motion.fps, motion.skeleton)
-            contacts = contacts.clone().to(motion.dtype)
-            frames, flags = targets.contacts
-            contacts[frames] = flags.to(contacts.dtype)
-        motion, report["foot_lock"] = lock_feet(motion, contacts)
-    if exact and targets is not None and not targets.is_empty():
-        motion, report["exact"] = hit_constraints(motion, targets, **exact_kwargs)
-    return motion, report
+            contacts = estimate(motion.positions, motion.fps, motion.skeleton)
+        contacts = contacts.clone().to(motion.dtype)
+        frames, flags = targets.contacts
+        contacts[frames] = flags.to(contacts.dtype)
+    new, rep = lock_feet(motion, contacts)
+    first = guard.problems(new)
+    if first:
+        new, rep = lock_feet(motion, contacts, reach_passes=0)
+        rep["pelvis_moves_off"] = first
+    report["foot_lock"] = rep
+    return guard.accept("foot locking", motion, new, rep)
+
+
+def _guarded_exact(motion: Motion, targets: PostTargets, guard: _Guard, report: dict, kwargs: dict) -> Motion:
+    """The exact constraint pass, undone as a whole when it trips the guard; unmet targets are warned of."""
+    from kinema.postprocess.exact import hit_constraints
+    from kinema.postprocess.residuals import constraint_residuals, unmet_targets
+
+    new, rep = hit_constraints(motion, targets, **kwargs)
+    outside = rep["max_change_outside_blend_cm"]
+    extra = [] if outside <= guard.bounds.outside_change_cm else [
+        f"joints moved {outside:.1f} cm on frames no constraint may touch"]
+    kept = guard.accept("the exact constraint pass", motion, new, rep, extra)
+    if kept is motion:  # undone: the residuals are those of the motion kept
+        rep["after"] = constraint_residuals(motion, targets)
+        rep["unmet"] = unmet_targets(motion, targets)
+    report["exact"] = rep
+    report["warnings"] += [f"constraint not met: {u}" for u in rep["unmet"]]
+    return kept
 
 
 __all__ = ["PostTargets", "postprocess"]

@@ -12,9 +12,13 @@ Two stages:
     1. full-body keyframes (rotation targets for every joint): exact local rotations and root
        translation, the corrections blended into neighbouring frames (kinema.postprocess.ik
        ``spread_corrections``, raised cosine over ``blend_seconds``);
-    2. smoothed-root x/z waypoints: a smooth displacement of the root's x/z (minimum squared
-       acceleration, exactly zero outside the Gaussian's reach of the waypoints) chosen so the
-       smoothed pelvis passes through every waypoint while keyframe frames stay pinned;
+    2. smoothed-root x/z waypoints: a smooth displacement of the root's x/z (small squared
+       acceleration, exactly zero outside the Gaussian's reach of the waypoints) fitted so the
+       smoothed pelvis passes through the waypoints while keyframe frames stay pinned (a regularised
+       fit, kinema.postprocess.waypoints: isolated waypoints are met within 0.01 cm, dense paths within
+       centimetres instead of inverting the smoothing);
+    Targets beyond a limb's reach move the body by at most 0.5 m (kinema.postprocess.reach); what
+    remains is reported in plain words (``unmet``, kinema.postprocess.residuals).
     3. end effectors: two-bone IK on the joint's chain for positions (toes move their foot rigidly via
        the leg chain), the joint's global rotation for rotations; not applied on keyframe frames,
        and never touching the pelvis, so steps 1-2 stay exact. (Positions of joints directly below
@@ -26,6 +30,7 @@ Two stages:
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import torch
 
@@ -43,74 +48,24 @@ from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess import PostTargets
-from kinema.postprocess.ik import limb_chain, raised_cosine, single_thread, solve_ik, spread_corrections
-from kinema.postprocess.reach import reach_shift
+from kinema.postprocess.ik import limb_chain, single_thread, solve_ik, spread_corrections
+from kinema.postprocess.reach import clip_to_reach, reach_radius_seconds, reach_shift
+from kinema.postprocess.residuals import constraint_residuals, unmet_targets
+from kinema.postprocess.waypoints import frame_envelope, root_waypoints, smoothing_matrix
 
 
-def smoothing_matrix(num_frames: int, sigma_frames: float) -> torch.Tensor:
-    """``(T, T)`` float64 matrix S with ``S @ x == smooth_time(x, sigma_frames)`` (the op is linear)."""
-    return smooth_time(torch.eye(num_frames, dtype=torch.float64), sigma_frames)
-
-
-def _angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> torch.Tensor:
-    rel = quat_mul(quat_inverse(q_target), q)
-    return torch.rad2deg(2 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs()))
-
-
-def _stats(x: torch.Tensor) -> dict:
-    return {"mean": float(x.mean()), "max": float(x.max()), "count": int(x.numel())}
-
-
-def constraint_residuals(motion: Motion, targets: PostTargets) -> dict:
-    """Residuals per constraint kind: full-body / end-effector positions (cm) and rotations (deg),
-    smoothed-root x/z (cm), and the horizontal skate (cm/s) of joints flagged as planted."""
-    G, P = motion.to(torch.float64).global_transforms()
-    fb = set(targets.full_body_frames(motion.num_joints).tolist())
-    errs: dict[str, list[torch.Tensor]] = {}
-    for kind, table, err in (
-        ("position_cm", targets.joint_positions, lambda f, j, v: (P[f, j] - v).norm(dim=-1) * 100),
-        ("rotation_deg", targets.joint_rotations, lambda f, j, v: _angle_deg(G[f, j], v)),
-    ):
-        for j, (f, v) in table.items():
-            on_fb = torch.tensor([int(k) in fb for k in f.tolist()], dtype=torch.bool)
-            e = err(f, j, v)
-            errs.setdefault("full_body_" + kind, []).append(e[on_fb])
-            errs.setdefault(kind, []).append(e[~on_fb])
-    out = {k: _stats(torch.cat(v)) for k, v in errs.items() if sum(x.numel() for x in v)}
-    if targets.root_xz is not None and targets.root_xz[0].numel():
-        f, xz = targets.root_xz
-        pelvis = motion.skeleton.roles.get("pelvis", 0)
-        smooth = smooth_time(P[:, pelvis][:, [0, 2]], targets.root_sigma * motion.fps)
-        out["root_xz_cm"] = _stats((smooth[f] - xz).norm(dim=-1) * 100)
-    if targets.contacts is not None and targets.contacts[0].numel():
-        from kinema.motion.contacts import contact_joints
-
-        planted = torch.zeros(motion.num_frames, 4, dtype=torch.bool)
-        planted[targets.contacts[0]] = targets.contacts[1] > 0.5
-        both = planted[1:] & planted[:-1]
-        xz = P[:, contact_joints(motion.skeleton)][..., [0, 2]]
-        speed = (xz[1:] - xz[:-1]).norm(dim=-1) * motion.fps * 100
-        if both.any():
-            out["contact_skate_cm_s"] = _stats(speed[both])
-    return out
-
-
-def _envelope(frames: torch.Tensor, num_frames: int, radius: float) -> torch.Tensor:
-    if frames.numel() == 0:
-        return torch.zeros(num_frames, dtype=torch.float64)
-    t = torch.arange(num_frames, dtype=torch.float64)
-    d = (t[:, None] - frames.to(torch.float64)[None]).abs().min(dim=1).values
-    return raised_cosine(d / max(radius, 1e-6))
-
-
-def _support(targets: PostTargets, T: int, blend: float, root_reach: float) -> torch.Tensor:
-    """(T,) envelope in [0, 1] of frames the optimisation may touch."""
+def _support(targets: PostTargets, T: int, blend: float, root_reach: float, reach: float = 0.0) -> torch.Tensor:
+    """(T,) envelope in [0, 1] of frames the optimisation may touch; ``reach`` (frames) widens it around
+    position targets by the window over which an out-of-reach target may move the body."""
     frames = [f for table in (targets.joint_positions, targets.joint_rotations) for f, _ in table.values()]
     if targets.contacts is not None:
         frames.append(targets.contacts[0])
-    env = _envelope(torch.cat(frames) if frames else torch.zeros(0, dtype=torch.long), T, blend + 1)
+    env = frame_envelope(torch.cat(frames) if frames else torch.zeros(0, dtype=torch.long), T, blend + 1)
+    if reach > blend and targets.joint_positions:
+        pos = torch.cat([f for f, _ in targets.joint_positions.values()])
+        env = torch.maximum(env, frame_envelope(pos, T, reach + 1))
     if targets.root_xz is not None:
-        env = torch.maximum(env, _envelope(targets.root_xz[0], T, root_reach + blend + 1))
+        env = torch.maximum(env, frame_envelope(targets.root_xz[0], T, root_reach + blend + 1))
     return env
 
 
@@ -261,7 +216,7 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
         if targets.joint_positions:
             r = r + reach_shift(Motion(skel, fps, r, L), targets.joint_positions, pinned, radius)
         if has_root:
-            r = _root_waypoints(skel, L, r, targets, fps, radius, pinned)
+            r = root_waypoints(skel, L, r, targets, fps, radius, pinned)
 
     # 3. end effectors (never on keyframe frames, never the root translation)
     m = Motion(skel, fps, r, L, motion.foot_contacts)
@@ -339,46 +294,6 @@ def _set_global_rotation(m: Motion, j: int, G_new: torch.Tensor, env: torch.Tens
     return Motion(m.skeleton, m.fps, m.root_translation, L, m.foot_contacts)
 
 
-def _root_waypoints(skel, L, r, targets: PostTargets, fps: float, radius: float, pinned) -> torch.Tensor:
-    """Root translation whose smoothed pelvis x/z passes through the waypoints (pinned frames fixed).
-
-    The displacement ``d`` of the root x/z is zero outside the frames that can influence a waypoint
-    (Gaussian reach + blend radius) and, inside, minimises ``|second difference of d|^2 + tiny |d|^2``
-    subject to ``S d = residual`` at waypoints and ``d = 0`` on pinned frames (a linear KKT solve).
-    """
-    T = r.shape[0]
-    sigma = targets.root_sigma * fps
-    S = smoothing_matrix(T, sigma)
-    pelvis = skel.roles.get("pelvis", 0)
-    _, P = forward_kinematics(L, r, skel.offsets, skel.parents)
-    f, xz = targets.root_xz
-    # dedupe repeated frames (last wins)
-    last = {int(k): i for i, k in enumerate(f.tolist())}
-    f, xz = torch.tensor(list(last)), xz[torch.tensor(list(last.values()))]
-    resid = xz - (S @ P[:, pelvis][:, [0, 2]])[f]
-    free = _envelope(f, T, math.ceil(3 * sigma) + radius + 1) > 0
-    idx = torch.nonzero(free).flatten()
-    n = idx.numel()
-    D2 = torch.zeros(max(T - 2, 0), T, dtype=torch.float64)
-    if T > 2:
-        i = torch.arange(T - 2)
-        D2[i, i], D2[i, i + 1], D2[i, i + 2] = 1.0, -2.0, 1.0
-    D2 = D2[:, idx]
-    ell = max(radius, 1.0)  # correlation length (frames) of the displacement
-    Q = D2.T @ D2 + torch.eye(n, dtype=torch.float64) / ell**4
-    pin = torch.nonzero(pinned[idx]).flatten()
-    A = torch.cat([S[f][:, idx], torch.eye(n, dtype=torch.float64)[pin]])
-    b = torch.cat([resid, torch.zeros(pin.numel(), 2, dtype=torch.float64)])
-    X = torch.linalg.solve(Q, A.T)
-    M = A @ X
-    M = M + 1e-12 * M.diagonal().abs().max().clamp_min(1e-12) * torch.eye(M.shape[0], dtype=torch.float64)
-    d = X @ torch.linalg.solve(M, b)
-    r = r.clone()
-    r[idx, 0] += d[:, 0]
-    r[idx, 2] += d[:, 1]
-    return r
-
-
 def hit_constraints(
     motion: Motion,
     targets: PostTargets,
@@ -389,14 +304,16 @@ def hit_constraints(
     smoothness: float = 0.1,
 ) -> tuple[Motion, dict]:
     """Short optimisation then exact pass; returns the motion (input dtype) and a report with
-    ``before``/``after`` residuals (see ``constraint_residuals``), the optimisation losses, and the
-    largest joint displacement (cm) on unconstrained frames and outside every blend window."""
+    ``before``/``after`` residuals (see ``constraint_residuals``), ``unmet`` (targets still missed, in
+    words), the optimisation losses, and the largest joint displacement (cm) on unconstrained frames and
+    outside every blend window."""
     targets = targets.validate(motion)
     m0 = motion.to(torch.float64)
     with single_thread():
         before = constraint_residuals(m0, targets)
-        m, info = optimise(m0, targets, iterations, lr, blend_seconds, closeness, smoothness)
-        m = exact_pass(m, targets, blend_seconds)
+        aim = replace(targets, joint_positions=clip_to_reach(m0, targets.joint_positions))
+        m, info = optimise(m0, aim, iterations, lr, blend_seconds, closeness, smoothness)
+        m = exact_pass(m, aim, blend_seconds)
         after = constraint_residuals(m, targets)
     T = m0.num_frames
     constrained = torch.zeros(T, dtype=torch.bool)
@@ -406,10 +323,13 @@ def hit_constraints(
     if targets.root_xz is not None:
         constrained[targets.root_xz[0]] = True
     change = (m.positions - m0.positions).norm(dim=-1).max(dim=-1).values * 100  # (T,) cm
-    outside = _support(targets, T, blend_seconds * m0.fps, math.ceil(3 * targets.root_sigma * m0.fps)) == 0
+    fps = m0.fps
+    outside = _support(targets, T, blend_seconds * fps, math.ceil(3 * targets.root_sigma * fps),
+                       reach_radius_seconds() * fps) == 0
     report = {
         "before": before,
         "after": after,
+        "unmet": unmet_targets(m, targets),
         "optimisation": info,
         "max_change_unconstrained_cm": float(change[~constrained].max()) if (~constrained).any() else 0.0,
         "max_change_outside_blend_cm": float(change[outside].max()) if outside.any() else 0.0,

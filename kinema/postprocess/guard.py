@@ -1,0 +1,103 @@
+"""The guard: post-processing never makes a motion less plausible than the raw one without saying so.
+
+Every post-processing stage (de-jittering, foot locking, exact constraint hitting) edits a motion the
+model already made plausible. A stage that goes wrong -- an ill-posed constraint, a target 50 m away,
+a foot lock fighting a constraint -- can throw the pelvis metres per frame while still reporting small
+residuals. So after each stage the motion's plausibility is compared with the *raw* motion's and the
+stage is undone (the motion before it is kept) when it exceeds a documented bound; the reason goes
+into the report's ``warnings`` (and the CLI prints it on stderr).
+
+Plausibility (``plausibility``), from global joint positions ``(T, J, 3)`` in metres:
+- ``pelvis_speed`` (m/s): the largest frame-to-frame speed of the pelvis;
+- ``added_pelvis_speed`` (m/s): the largest frame-to-frame speed of the *change* one stage made to the
+  pelvis (after - before the stage): how fast that stage drags the body, whatever the motion's own
+  speed (per stage, because de-jittering alone "moves" a jittery pelvis at up to 0.8 m/s);
+- ``joint_accel`` (m/s^2): the 99th percentile over frames and joints of the acceleration magnitude
+  (a percentile, not the maximum, so that one legitimately snapped frame does not trip it);
+
+and, for the exact stage, the report's ``max_change_outside_blend_cm``: how far any joint moved on
+frames no constraint may touch (it should be 0).
+
+Bounds (``GuardBounds``): a stage may drag the pelvis at most at 3 m/s (``added_pelvis_speed``), and
+the result may never be faster than 10 m/s (a sprint) unless the raw motion was already faster, may
+raise the joint acceleration to at most ``max(raw + 30 m/s^2, 2 x raw)``, and may not move frames
+outside its blend windows by more than 1 cm. Measured on the shipped model (5-s motions, the five
+examples with walk and run prompts, text-only walks, runs and dances): accepted stages add at most
+about 2 m/s; the failures this guards against added 14 m/s (a foot target 3.5 m behind a walk) to
+440 m/s (the inverted smoothing of a dense path).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from kinema.motion.core import Motion
+
+
+@dataclass(frozen=True)
+class GuardBounds:
+    """How much less plausible than the raw motion a post-processing stage may make it (SI units)."""
+
+    added_pelvis_speed: float = 3.0  # m/s, speed of the change made to the pelvis
+    pelvis_speed_cap: float = 10.0  # m/s, absolute (unless the raw motion is already faster)
+    accel_slack: float = 30.0  # m/s^2 over the raw 99th percentile
+    accel_ratio: float = 2.0  # x the raw 99th percentile
+    outside_change_cm: float = 1.0  # cm, frames outside every blend window
+
+
+DEFAULT_BOUNDS = GuardBounds()
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Peak pelvis speed (m/s), 99th-percentile joint acceleration (m/s^2) and pelvis positions (T, 3)."""
+
+    pelvis_speed: float
+    joint_accel: float
+    pelvis: torch.Tensor
+    fps: float
+
+    def as_dict(self) -> dict:
+        return {"pelvis_speed_m_s": round(self.pelvis_speed, 3), "joint_accel_m_s2": round(self.joint_accel, 2)}
+
+    def added_speed(self, raw: Plausibility) -> float:
+        """Peak speed (m/s) of the pelvis displacement from ``raw`` to this motion (same length)."""
+        if self.pelvis.shape != raw.pelvis.shape or self.pelvis.shape[0] < 2:
+            return 0.0
+        change = self.pelvis - raw.pelvis
+        return float((change[1:] - change[:-1]).norm(dim=-1).max()) * self.fps
+
+
+def plausibility(motion: Motion) -> Plausibility:
+    """Measure ``motion`` (any dtype; 0 for motions too short to have a speed or an acceleration)."""
+    P = motion.positions.to(torch.float64)  # (T, J, 3) metres
+    pelvis = P[:, motion.skeleton.roles.get("pelvis", 0)]
+    fps = float(motion.fps)
+    speed = (pelvis[1:] - pelvis[:-1]).norm(dim=-1) * fps if P.shape[0] > 1 else P.new_zeros(1)
+    if P.shape[0] > 2:
+        acc = ((P[2:] - 2 * P[1:-1] + P[:-2]).norm(dim=-1) * fps**2).flatten()
+        accel = float(torch.quantile(acc, 0.99))
+    else:
+        accel = 0.0
+    return Plausibility(float(speed.max()), accel, pelvis, fps)
+
+
+def violations(
+    raw: Plausibility, before: Plausibility, new: Plausibility, bounds: GuardBounds = DEFAULT_BOUNDS,
+) -> list[str]:
+    """Why ``new`` (a stage's output; ``before`` its input) is less plausible than ``raw`` beyond
+    ``bounds`` (empty when it is within them)."""
+    out = []
+    added = new.added_speed(before)
+    if not added <= bounds.added_pelvis_speed:
+        out.append(f"it drags the pelvis at {added:.2f} m/s (limit {bounds.added_pelvis_speed:g})")
+    cap = max(bounds.pelvis_speed_cap, raw.pelvis_speed)
+    if not new.pelvis_speed <= cap:
+        out.append(f"pelvis speed {new.pelvis_speed:.2f} m/s (raw {raw.pelvis_speed:.2f}, limit {cap:.2f})")
+    accel_limit = max(raw.joint_accel + bounds.accel_slack, raw.joint_accel * bounds.accel_ratio)
+    if not new.joint_accel <= accel_limit:
+        out.append(f"joint acceleration {new.joint_accel:.1f} m/s^2 (raw {raw.joint_accel:.1f}, "
+                   f"limit {accel_limit:.1f})")
+    return out
