@@ -47,6 +47,8 @@ def register(sub) -> None:
                    "(default: the model's fps)")
     p.add_argument("--no-postprocess", action="store_true", help="raw model output (no foot lock / IK)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
+    p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
+                   "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
 
 
@@ -91,14 +93,10 @@ def _from_kimodo_meta(args: argparse.Namespace):
     return path, filled
 
 
-def run(args: argparse.Namespace) -> int:
-    import math
-
-    from kinema.diffusion.guidance import Guidance
+def _check_inputs(args: argparse.Namespace) -> None:
+    """Output suffix, constraint and timeline files: checked before anything is loaded."""
     from kinema.errors import KinemaError
-    from kinema.generate.api import load_model
     from kinema.generate.timeline import parse_timeline
-    from kinema.io.atomic import check_output_path
 
     suffix = args.out.name.lower()
     if not (suffix.endswith(".bvh") or suffix.endswith(".bvh.gz") or suffix.endswith(".npz")):
@@ -111,6 +109,21 @@ def run(args: argparse.Namespace) -> int:
         if not args.timeline.is_file():
             raise KinemaError(f"{args.timeline}: no such timeline file")
         parse_timeline(args.timeline)  # a mistake in it fails now, not after loading the model
+
+
+def run(args: argparse.Namespace) -> int:
+    import math
+
+    from kinema.cli.report import print_warnings, residual_table, use_plain_warnings
+    from kinema.diffusion.guidance import Guidance
+    from kinema.errors import KinemaError
+    from kinema.generate.api import load_model
+    from kinema.io.atomic import check_output_path
+    from kinema.runtime import configure_threads
+
+    use_plain_warnings()
+    _check_inputs(args)
+    configure_threads(args.threads)
     meta_path, filled = _from_kimodo_meta(args)
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
     outputs = _outputs(args.out, samples)
@@ -146,7 +159,8 @@ def run(args: argparse.Namespace) -> int:
               f"{motion.num_joints} joints (lengths in metres)")
     rep = motions.report
     print(f"generated {len(motions)} motion(s), {rep.segments} segment(s) in {rep.seconds:.2f} s")
-    for i, r in enumerate(rep.residuals):
-        if r:
-            print(f"constraint residuals (sample {i}): " + ", ".join(f"{k} {v}" for k, v in r.items()))
+    table = residual_table(rep.residuals)
+    if table:
+        print(table)
+    print_warnings(rep.warnings)
     return 0

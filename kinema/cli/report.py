@@ -1,0 +1,59 @@
+"""How `kinema generate` shows a generation report: a short table of constraint residuals (cm,
+degrees) and the warnings, on stderr, that a user must not miss."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+#: residual key -> (what it measures, unit)
+KINDS = {
+    "full_body_position_cm": ("keyframe joint positions", "cm"),
+    "full_body_rotation_deg": ("keyframe joint rotations", "deg"),
+    "position_cm": ("joint position targets", "cm"),
+    "rotation_deg": ("joint rotation targets", "deg"),
+    "root_xz_cm": ("root path / waypoints", "cm"),
+    "contact_skate_cm_s": ("planted-foot skate", "cm/s"),
+}
+
+
+def residual_table(residuals: list[dict]) -> str:
+    """Rows ``sample, constraint, raw max, mean, max`` for every post-processed sample that had
+    constraints (``report.residuals``); "" when no sample had any."""
+    rows = []
+    for i, rep in enumerate(residuals):
+        exact = rep.get("exact") if rep else None
+        if not exact:
+            continue
+        for key, (what, unit) in KINDS.items():
+            after, before = exact["after"].get(key), exact["before"].get(key)
+            if after is None:
+                continue
+            raw = f"{before['max']:.2f} {unit}" if before else "-"
+            rows.append((str(i), what, raw, f"{after['mean']:.2f} {unit}", f"{after['max']:.2f} {unit}",
+                         str(after["count"])))
+    if not rows:
+        return ""
+    head = ("sample", "constraint", "raw max", "mean", "max", "count")
+    widths = [max(len(r[k]) for r in [head, *rows]) for k in range(len(head))]
+    lines = ["constraint residuals after post-processing (raw max: the model's own output):"]
+    for r in [head, *rows]:
+        lines.append("  " + "  ".join(c.ljust(w) if k < 2 else c.rjust(w) for k, (c, w) in
+                                      enumerate(zip(r, widths, strict=True))))
+    return "\n".join(lines)
+
+
+def print_warnings(messages: list[str]) -> None:
+    """Each warning once, as ``kinema: warning: ...`` on stderr."""
+    for msg in dict.fromkeys(messages):
+        print(f"kinema: warning: {msg}", file=sys.stderr)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"kinema: warning: {message}", file=sys.stderr if file is None else file)
+
+
+def use_plain_warnings() -> None:
+    """Python warnings raised while a command runs (e.g. a constraint file read at another fps) print as
+    one ``kinema: warning:`` line instead of Python's file:line format."""
+    warnings.showwarning = _show_warning
