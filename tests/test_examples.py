@@ -1,0 +1,170 @@
+"""Everything in examples/ runs as shipped, on the shipped default model, and gives plausible motion.
+
+* every constraints file (examples/constraints/*.json) with a prompt that fits it, post-processing on:
+  finite, the pelvis never faster than 10 m/s, no warnings, every target met (the post-processing
+  report's residuals after it);
+* every timeline (examples/timelines/*.json): its length, finite, plausible;
+* every numbered script (examples/NN_*.py) run as ``__main__`` in a scratch folder: it writes what it
+  says it wrote, and prints no warning.
+
+The constraints files and the scripts run with the model's own sampling settings (fewer steps hid a
+target that the model's 50 steps miss); the timelines with 10 DDIM steps.
+"""
+
+from __future__ import annotations
+
+import json
+import runpy
+from pathlib import Path
+
+import pytest
+import torch
+
+import kinema
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+CONSTRAINT_FILES = sorted((EXAMPLES / "constraints").glob("*.json"))
+TIMELINES = sorted((EXAMPLES / "timelines").glob("*.json"))
+SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
+
+#: a prompt that fits each constraints file (a file asking for a walk's path gets a walk, ...)
+PROMPTS = {
+    "dense_path": "A person walks forward.",
+    "waypoints": "A person walks forward.",
+    "hands": "A person raises their right hand.",
+    # it lifts the left ankle 40 cm at 3.5 s: "A person stands still." leaves that target 10-27 cm out of
+    # reach with the model's own 50 steps (seeds 0-2; met at 10 steps), this prompt meets it at 10-50 steps
+    "feet_contacts": "A person raises their left leg.",
+    "inbetween_from_bvh": "A person walks forward.",
+}
+SECONDS = 5.0  # the files' keyframes go up to 4.9 s
+STEPS = 10  # timelines (the constraints files run with the model's own steps, as `kinema generate` does)
+MAX_PELVIS_SPEED = 10.0  # m/s, frame to frame: far above a sprint, catches jumps and blow-ups
+#: largest residual after post-processing, per kind of target (cm, or degrees for rotations); a dense
+#: path is blended onto (measured max 2.3 cm), the other targets are met to round-off
+MAX_RESIDUAL = 5.0
+
+
+@pytest.fixture(scope="module")
+def model():
+    return kinema.load_model()
+
+
+def pelvis_speed(motion) -> torch.Tensor:
+    """Frame-to-frame speed of joint 0's global position, m/s, (T - 1,)."""
+    p = motion.positions[:, 0]
+    return (p[1:] - p[:-1]).norm(dim=-1) * motion.fps
+
+
+def check_plausible(motion, label: str) -> None:
+    assert motion.is_finite(), f"{label}: non-finite values"
+    assert torch.isfinite(motion.positions).all(), f"{label}: non-finite joint positions"
+    speed = pelvis_speed(motion)
+    worst, top = int(speed.argmax()), float(speed.max())
+    assert top < MAX_PELVIS_SPEED, f"{label}: pelvis moves at {top:.1f} m/s between frames {worst} and {worst + 1}"
+
+
+def test_every_example_file_is_tested():
+    """A new file in examples/ needs a prompt here (or a place in one of the lists)."""
+    assert {p.stem for p in CONSTRAINT_FILES} == set(PROMPTS)
+    assert TIMELINES and SCRIPTS
+    covered = set(CONSTRAINT_FILES) | set(TIMELINES) | set(SCRIPTS)
+    files = {p for p in EXAMPLES.rglob("*") if p.is_file() and "__pycache__" not in p.parts}
+    assert files <= covered, f"untested files in examples/: {sorted(map(str, files - covered))}"
+
+
+@pytest.mark.parametrize("path", CONSTRAINT_FILES, ids=lambda p: p.stem)
+def test_constraints_example(path, model, bandai_workdir, monkeypatch):
+    # inbetween_from_bvh.json names its clip as ../shared/datasets/... from the repository: run from a
+    # folder where that is the Bandai Namco data (the real one, else the synthetic one)
+    monkeypatch.chdir(bandai_workdir)
+    result = model.generate(PROMPTS[path.stem], seconds=SECONDS, constraints=path, seed=0)
+    try:
+        check_constraints_result(result, path.name, round(SECONDS * model.fps))
+    except AssertionError as err:
+        if path.stem == "inbetween_from_bvh" and bandai_workdir != REPO:
+            # The synthetic clip (kinema.data.synthetic) has Bandai's joint positions but not its bone frames
+            # (identity rest rotations; real Bandai's are not), so the global rotations that a fullbody
+            # constraint keeps mean other poses to the model: its root flies off (measured: 21 m/s, and the
+            # guard undoes the de-jittering with a warning). Only the real capture is a fair test.
+            first = str(err).splitlines()[0]
+            pytest.xfail(f"inbetween_from_bvh on the synthetic clip, whose bone frames differ from Bandai's: {first}")
+        raise
+
+
+def check_constraints_result(result, label: str, frames: int) -> None:
+    motion = result[0]
+    assert motion.num_frames == frames
+    exact = result.report.residuals[0]["exact"]
+    print(label, json.dumps({"before": exact["before"], "after": exact["after"]}), result.report.warnings)
+    check_plausible(motion, label)
+    assert result.report.warnings == []
+    assert exact["unmet"] == []
+    assert exact["after"], f"{label}: no residuals measured"
+    for name, res in exact["after"].items():
+        assert res["count"] > 0
+        assert res["max"] < MAX_RESIDUAL, f"{label}: {name} missed by up to {res['max']:.2f} after post-processing"
+
+
+@pytest.fixture(scope="module")
+def timelines(model):
+    """Each timeline example generated once (short sampling): {path: (segments, result)}."""
+    out = {}
+    for path in TIMELINES:
+        segments = json.loads(path.read_text())
+        out[path] = segments, model.generate(path, steps=STEPS, seed=0)
+    return out
+
+
+@pytest.mark.parametrize("path", TIMELINES, ids=lambda p: p.stem)
+def test_timeline_example(path, model, timelines):
+    segments, result = timelines[path]
+    motion = result[0]
+    seconds = sum(s["seconds"] for s in segments)
+    assert motion.num_frames == round(seconds * model.fps)
+    assert result.report.segments == len(segments)
+    check_plausible(motion, path.name)
+    assert result.report.warnings == []
+
+
+@pytest.mark.xfail(reason="with the model's saved guidance (w_constr 2) every segment after the first keeps "
+                          "doing what the first one did: the joins are constraints and constraint guidance "
+                          "outweighs the new prompt (with --guidance 2 0 the segments follow their prompts)",
+                   raises=AssertionError, strict=False)
+def test_bow_wave_walk_follows_each_prompt(model, timelines):
+    """examples/timelines/bow_wave_walk.json: a bow (trunk leans forward), then a raised right hand
+    (above the head), then a walk (the pelvis travels)."""
+    path = EXAMPLES / "timelines/bow_wave_walk.json"
+    motion = timelines[path][1][0]
+    names = list(motion.skeleton.names)
+    p = motion.positions
+    fps = motion.fps
+    up = p[:, names.index("Head")] - p[:, 0]
+    lean = torch.rad2deg(torch.acos(up[:, 1] / up.norm(dim=-1)))
+    hand_over_head = p[:, names.index("Hand_R"), 1] - p[:, names.index("Head"), 1]
+    speed = pelvis_speed(motion)
+    bow, wave, walk = slice(0, int(3 * fps)), slice(int(3 * fps), int(6 * fps)), slice(int(6.5 * fps), None)
+    found = {"bow: max lean (deg)": float(lean[bow].max()),
+             "wave: max right hand over head (m)": float(hand_over_head[wave].max()),
+             "walk: mean pelvis speed (m/s)": float(speed[walk].mean())}
+    print(found)
+    assert found["bow: max lean (deg)"] > 15
+    assert found["wave: max right hand over head (m)"] > 0.1
+    assert found["walk: mean pelvis speed (m/s)"] > 0.5
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_example_script(script, tmp_path, monkeypatch, capsys):
+    """Run as ``python examples/NN_name.py`` would, from an empty folder."""
+    monkeypatch.chdir(tmp_path)
+    runpy.run_path(str(script), run_name="__main__")
+    out = capsys.readouterr().out
+    print(out)
+    written = [line.split()[1].rstrip(":") for line in out.splitlines() if line.startswith("wrote ")]
+    assert written, f"{script.name} printed no 'wrote FILE' line"
+    for name in written:
+        path = tmp_path / name
+        assert path.is_file() and path.resolve().is_relative_to((tmp_path / "out").resolve()), f"{script.name}: {name}"
+        check_plausible(kinema.load_motion(path), f"{script.name}: {name}")
+    assert "warning" not in out.lower()
