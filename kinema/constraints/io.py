@@ -25,6 +25,7 @@ import torch
 
 from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
 from kinema.constraints.kimodo import adapt_pose_form, warn_foreign
+from kinema.constraints.retarget import rest_alignment, retarget_globals
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -100,7 +101,8 @@ def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skele
     are pruned (Bandai's static ``joint_Root`` above ``Hips`` included), the clip is resampled to
     ``fps`` and ``source_frames`` index that resampled clip (or ``source_times``: seconds into the clip,
     frame ``floor(t * fps + 0.5)``). Joints are matched by name; the model's
-    joints missing from the file are an error naming them. Global rotations are kept exactly and
+    joints missing from the file are an error naming them. Global rotations are kept exactly (after a
+    rest-pose alignment where the file's bones point elsewhere at rest: kinema.constraints.retarget) and
     turned into local rotations with the model's parents. ``recenter`` shifts the poses horizontally
     so that the first one's root is above the origin (where the model's training clips start).
     """
@@ -151,6 +153,7 @@ def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skele
         raise ConstraintError("needs at least one frame", field="source_frames")
     G, P = motion.global_transforms()
     G, P = G[frames][:, idx], P[frames][:, idx]
+    G = retarget_globals(G, rest_alignment(skeleton, motion.skeleton.offsets[idx]))
     parents = [max(p, 0) for p in skeleton.parents]
     local = quat_mul(quat_inverse(G[:, parents]), G)
     local[:, 0] = G[:, 0]
