@@ -15,11 +15,23 @@ from kinema.errors import KinemaError
 
 def build_parser() -> argparse.ArgumentParser:
     """Assemble the parser from the sub-command modules (imported lazily to keep start-up fast)."""
-    from kinema.cli import bench, convert, data, evaluate, evaluate_retrieval, export, generate, render, train
+    from kinema.cli import (
+        batch,
+        bench,
+        convert,
+        data,
+        evaluate,
+        evaluate_retrieval,
+        export,
+        generate,
+        render,
+        serve,
+        train,
+    )
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (generate, convert, data, train, export, bench, render, evaluate, evaluate_retrieval):
+    for module in (generate, convert, data, train, export, bench, render, evaluate, evaluate_retrieval, serve, batch):
         module.register(sub)
     return parser
 

@@ -1,0 +1,100 @@
+"""The worker side of `kinema batch`: load the model once per process, then turn payloads into file bytes.
+
+Why bytes back to the driver instead of files written here: the driver alone writes outputs (atomically)
+and the manifest, so a worker on another machine needs no shared output folder, and a crash can never
+leave a file without knowing which job it belongs to. Workers return errors as data (never raise for a
+bad job), so one bad line cannot take a worker down and every error crosses process boundaries intact.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import tempfile
+import time
+import traceback
+from pathlib import Path
+
+from kinema.errors import KinemaError
+
+
+class Worker:
+    """A loaded model plus its fingerprint; `run` does one job. Used in-process, per pool process, per Ray actor."""
+
+    def __init__(self, model_spec: str, threads: int = 1):
+        from kinema.generate.api import load_model
+        from kinema.runtime import configure_threads
+        from kinema.server.models import model_sha256
+
+        configure_threads(threads)
+        self.model = load_model(model_spec)
+        self.sha256 = model_sha256(self.model.loaded.path)
+        self.name = f"{socket.gethostname()}:{os.getpid()}"
+
+    def ping(self) -> str:
+        """This worker's name (host:pid), once its model is loaded (warm-up and start-up timing)."""
+        return self.name
+
+    def run(self, payload: dict) -> dict:
+        """Generate one job: ``{"files": [bytes, ...], "report": {...}, ...}`` or ``{"error": ...}``."""
+        t0 = time.perf_counter()
+        base = {"worker": self.name, "model_sha256": self.sha256}
+        try:
+            result = self.model.generate(payload["timeline"], constraints=payload["constraints"], progress=False,
+                                         **payload["settings"])
+            files = _encode(result, payload["outputs"])
+        except KinemaError as err:
+            return base | {"error": str(err), "error_type": type(err).__name__}
+        except Exception as err:  # a bug, reported per job (with its traceback) instead of killing the worker
+            return base | {"error": f"{type(err).__name__}: {err}", "error_type": "internal",
+                           "traceback": traceback.format_exc(limit=8)}
+        from kinema.server.encode import json_safe
+
+        rep = result.report
+        report = {"seconds": result[0].duration, "frames": rep.frames, "steps": rep.steps,
+                  "guidance": list(rep.guidance), "seed": rep.seed, "residuals": json_safe(rep.residuals),
+                  "warnings": [str(w) for w in rep.warnings]}
+        return base | {"files": files, "report": report, "elapsed_s": time.perf_counter() - t0}
+
+
+def _encode(result, names: list[str]) -> list[bytes]:
+    """Each motion as the bytes ``motion.save`` writes for its output name (format from the suffix)."""
+    out = []
+    with tempfile.TemporaryDirectory(prefix="kinema-batch-") as tmp:
+        for motion, name in zip(result, names, strict=True):
+            path = motion.save(Path(tmp) / name)
+            out.append(path.read_bytes())
+    return out
+
+
+# ----------------------------------------------------------------------------- process-pool entry points
+_WORKER: Worker | None = None
+
+
+def init_process(model_spec: str, threads: int) -> None:
+    """ProcessPoolExecutor initializer: load the model once; Ctrl-C is the driver's to handle; exit when
+    the driver is gone (killed or crashed: a pool process would otherwise wait for work forever)."""
+    import signal
+    import threading
+
+    global _WORKER
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True, name="kinema-parent-watch").start()
+    _WORKER = Worker(model_spec, threads)
+
+
+def _exit_with_parent(parent: int, every: float = 0.5) -> None:
+    """End this process once its parent has died (it is then re-parented, so ``getppid`` changes)."""
+    while os.getppid() == parent:
+        time.sleep(every)
+    os._exit(1)
+
+
+def process_ping() -> str:
+    assert _WORKER is not None
+    return _WORKER.ping()
+
+
+def process_run(payload: dict) -> dict:
+    assert _WORKER is not None
+    return _WORKER.run(payload)

@@ -1,0 +1,114 @@
+"""The models a server (or a batch) serves: loaded once, shared by every worker thread.
+
+Why a registry: `kinema serve --model A --model B=PATH` loads each model once at start-up (a
+`KinemaModel` is safe to share between threads), requests name a model and optionally a rig, and
+``GET /v1/models`` lists what is there with its limits. `model_sha256` fingerprints a checkpoint
+so a batch manifest (and /v1/models) says exactly which weights made a motion.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+from kinema.errors import KinemaError
+from kinema.server.errors import RequestError
+
+
+def model_sha256(folder: str | Path) -> str:
+    """SHA-256 over a checkpoint folder's ``*.json`` and ``*.safetensors`` files (names and bytes, sorted)."""
+    h = hashlib.sha256()
+    files = sorted(p for p in Path(folder).iterdir() if p.is_file() and p.suffix in (".json", ".safetensors"))
+    if not files:
+        raise KinemaError(f"{folder}: no checkpoint files to fingerprint")
+    for p in files:
+        h.update(p.name.encode() + b"\0")
+        with p.open("rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+    return h.hexdigest()
+
+
+def parse_model_spec(spec: str) -> tuple[str, str]:
+    """``NAME=PATH`` -> (NAME, PATH); ``default`` -> ("default", "default"); ``PATH`` -> (folder name, PATH)."""
+    if "=" in spec:
+        name, path = spec.split("=", 1)
+        if not name or not path:
+            raise KinemaError(f"--model {spec!r}: expected NAME=PATH, 'default' or PATH")
+        return name, path
+    if spec in ("", "default"):
+        return "default", "default"
+    return Path(spec).resolve().name or spec, spec
+
+
+@dataclass
+class ServedModel:
+    """A loaded model under the name clients use for it."""
+
+    name: str
+    model: object  # kinema.generate.api.KinemaModel (imported lazily: torch)
+    sha256: str
+
+    @property
+    def rig(self) -> str:
+        return self.model.skeleton.name or "unnamed"
+
+    def max_steps(self, server_max: int) -> int:
+        return min(server_max, self.model.max_steps)
+
+    def info(self, limits: dict) -> dict:
+        """``ModelOut`` for ``GET /v1/models``: the rig, the window and the limits that apply here."""
+        skel = self.model.skeleton
+        return {
+            "name": self.name,
+            "rig": {"name": self.rig, "joints": list(skel.names), "parents": [int(p) for p in skel.parents],
+                    "fps": float(self.model.fps)},
+            "text_encoder": str(self.model.loaded.text_encoder_id),
+            "sha256": self.sha256,
+            "window_seconds": float(self.model.max_seconds),
+            "default_steps": int(self.model.loaded.sampler.num_inference_steps),
+            "limits": limits | {"max_steps": self.max_steps(limits["max_steps"])},
+        }
+
+
+class ModelRegistry:
+    """Name -> ServedModel, in the order given (the first is the default)."""
+
+    def __init__(self, served: list[ServedModel]):
+        if not served:
+            raise KinemaError("no model to serve")
+        self.models = {s.name: s for s in served}
+        if len(self.models) != len(served):
+            raise KinemaError("two --model entries have the same name; use NAME=PATH to tell them apart")
+
+    @classmethod
+    def load(cls, specs: list[str]) -> ModelRegistry:
+        """Load every ``--model`` spec (see `parse_model_spec`)."""
+        from kinema.generate.api import load_model
+
+        served = []
+        for spec in specs or ["default"]:
+            name, path = parse_model_spec(spec)
+            model = load_model(path)
+            served.append(ServedModel(name, model, model_sha256(model.loaded.path)))
+        return cls(served)
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.models)
+
+    def resolve(self, name: str | None, rig: str | None) -> ServedModel:
+        """The model a request asks for: by name, else the first with that rig, else the first."""
+        if name is not None:
+            served = self.models.get(name)
+            if served is None:
+                raise RequestError.at(["body", "model"], f"unknown model; this server has {self.names}")
+            if rig is not None and rig != served.rig:
+                raise RequestError.at(["body", "rig"], f"model {name!r} drives rig {served.rig!r}, not this one")
+            return served
+        for served in self.models.values():
+            if rig is None or served.rig == rig:
+                return served
+        rigs = sorted({s.rig for s in self.models.values()})
+        raise RequestError.at(["body", "rig"], f"no model here drives this rig; rigs: {rigs}")

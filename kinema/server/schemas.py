@@ -1,0 +1,277 @@
+"""Request and response bodies of the HTTP API, as pydantic models that reject unknown keys.
+
+Why a factory: the request limits (seconds, samples, steps, prompt length, ...) are server settings
+(kinema.server.config), and putting them into the models puts them into the OpenAPI document too, so a
+client (or schemathesis) sees the same bounds the server enforces. `build_request_model` makes the
+generate-request class for one `ServerLimits`; everything else is static.
+
+Constraints are kinema's JSON constraint objects (docs/constraints.md), typed key by key here; kinema's
+own loader then checks shapes, joints and frames against the model. One difference from constraint
+files: a fullbody ``bvh`` must be the BVH text itself (inline), never a file name, since a request must
+not make the server read its own files.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, field_validator, model_validator
+from pydantic.json_schema import SkipJsonSchema
+
+from kinema.server.config import ServerLimits
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+PositiveFinite = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Vec = list[Finite]
+Mat = list[list[Finite]]
+Cube = list[list[list[Finite]]]
+ConstraintType = Literal["fullbody", "end-effector", "left-hand", "right-hand", "left-foot", "right-foot", "root2d",
+                         "foot-contact"]
+Format = Literal["bvh", "npz", "json"]
+#: Output formats named in requests that kinema cannot write yet (a clear 422 instead of a bare enum error).
+NOT_YET_FORMATS = {"glb": "glb export is not implemented in kinema yet; choose bvh, npz or json",
+                   "gltf": "glTF export is not implemented in kinema yet; choose bvh, npz or json"}
+MAX_SEED = 2**64 - 1
+
+
+class Strict(BaseModel):
+    """Base of every request model: unknown keys are errors (typos must not be silently ignored)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class ConstraintSpec(Strict):
+    """One kinema constraint object (docs/constraints.md); which keys apply depends on ``type``."""
+
+    type: ConstraintType
+    frame_indices: list[StrictInt] | None = None
+    times: list[Finite] | None = None
+    comment: str | None = None
+    local_joints_rot: Cube | None = None
+    local_rotations: Cube | None = None
+    root_positions: Mat | None = None
+    smooth_root_2d: Mat | None = None
+    joint: str | None = None
+    joint_names: list[str] | None = None
+    positions: Mat | None = None
+    rotations: Mat | None = None
+    global_root_heading: Mat | None = None
+    heading: Mat | None = None
+    dense: StrictBool | None = None
+    contacts: list[list[StrictBool | Finite]] | None = None
+    foot_contacts: list[list[StrictBool | Finite]] | None = None
+    bvh: str | None = Field(None, description="fullbody only: the BVH file's text (starting with HIERARCHY); "
+                                              "file names are rejected")
+    source_frames: list[StrictInt] | None = None
+    source_times: list[Finite] | None = None
+    scale: PositiveFinite | None = None
+    recenter: StrictBool | None = None
+
+    @field_validator("bvh")
+    @classmethod
+    def _inline_bvh_only(cls, value: str | None) -> str | None:
+        """Only inline BVH text: a file name would make the server read one of its own files."""
+        if value is not None and not value.lstrip().startswith("HIERARCHY"):
+            raise ValueError("must be the BVH text itself (starting with HIERARCHY); the server never reads "
+                             "files by name, so upload the file's content here")
+        return value
+
+    def to_kinema(self) -> dict:
+        """The object as kinema's constraint loader reads it (keys that were not given left out)."""
+        return self.model_dump(exclude_unset=True, exclude_none=True)
+
+
+class Segment(Strict):
+    """One timeline segment: a prompt held for ``seconds``."""
+
+    prompt: str
+    seconds: PositiveFinite
+
+
+class GenerateRequestBase(Strict):
+    """The limit-free part of a generate request: settings, and the checks across fields.
+
+    `build_request_model` adds the fields whose bounds are server limits (``limits``)."""
+
+    limits: ClassVar[ServerLimits] = ServerLimits()
+
+    model: str | None = Field(None, max_length=200, description="a name from GET /v1/models (default: the first)")
+    rig: str | None = Field(None, max_length=200, description="the rig (skeleton) name; must be the model's")
+    constraints_fps: PositiveFinite | None = Field(
+        None, description="the frame rate the constraints' frame_indices are written at (default: the model's)")
+    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = 0
+    guidance: tuple[Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)],
+                    Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]] | None = Field(
+        None, description="(w_text, w_constr); default: the model's setting")
+    heading: Annotated[float, Field(ge=-1000, le=1000, allow_inf_nan=False)] = Field(
+        0.0, description="first-frame facing, radians about +Y (0 faces +Z)")
+    postprocess: StrictBool = True
+    objectives: SkipJsonSchema[Any] = Field(None, exclude=True)
+    format: Format = Field("bvh", description="bvh (text), npz (base64) or json (arrays); glb is not implemented yet")
+
+    @field_validator("format", mode="before")
+    @classmethod
+    def _known_format(cls, value: Any) -> Any:
+        if isinstance(value, str) and value.lower() in NOT_YET_FORMATS:
+            raise ValueError(NOT_YET_FORMATS[value.lower()])
+        return value
+
+    @field_validator("objectives", mode="before")
+    @classmethod
+    def _no_objectives(cls, value: Any) -> Any:
+        raise ValueError("'objectives' are not supported by this server yet; use 'constraints'")
+
+    @model_validator(mode="after")
+    def _prompt_xor_timeline(self):
+        if (self.prompt is None) == (self.timeline is None):
+            raise ValueError("give exactly one of 'prompt' and 'timeline'")
+        if self.timeline is not None and self.seconds is not None:
+            raise ValueError("'seconds' is for a prompt; timeline segments carry their own seconds")
+        total, limit = self.total_seconds(), self.limits.max_seconds
+        if total > limit + 1e-9:
+            raise ValueError(f"the timeline lasts {total:g} s; this server's limit is {limit:g} s")
+        return self
+
+    def total_seconds(self) -> float:
+        """The output's duration: the prompt's seconds (or the default) or the segments added up."""
+        if self.timeline is not None:
+            return float(sum(s.seconds for s in self.timeline))
+        return float(self.seconds if self.seconds is not None else min(5.0, self.limits.max_seconds))
+
+    def timeline_json(self) -> list[dict]:
+        """Always a timeline list: kinema would read a prompt ending in ``.json`` as a file name."""
+        if self.timeline is not None:
+            return [{"prompt": s.prompt, "seconds": s.seconds} for s in self.timeline]
+        return [{"prompt": self.prompt, "seconds": self.total_seconds()}]
+
+
+def build_request_model(limits: ServerLimits) -> type[GenerateRequestBase]:
+    """The ``POST /v1/generate`` (and ``/v1/jobs``) body for these limits; see the field descriptions."""
+    prompt_t = Annotated[str, Field(max_length=limits.max_prompt_chars)]
+    seconds_t = Annotated[float, Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
+    these_limits = limits  # a class body cannot read an enclosing name it also assigns
+
+    class LimitedSegment(Segment):
+        prompt: prompt_t
+        seconds: seconds_t
+
+    class GenerateRequest(GenerateRequestBase):
+        """What to generate. Give ``prompt`` (+ ``seconds``) or ``timeline``; everything else is optional."""
+
+        limits: ClassVar[ServerLimits] = these_limits
+
+        prompt: prompt_t | None = Field(None, description='what the character does ("" = no text)')
+        seconds: seconds_t | None = Field(
+            None, description=f"duration for a prompt (default {min(5.0, limits.max_seconds):g})")
+        timeline: Annotated[list[LimitedSegment], Field(min_length=1, max_length=limits.max_segments)] | None = None
+        constraints: Annotated[list[ConstraintSpec], Field(max_length=limits.max_constraints)] | None = Field(
+            None, description="kinema constraint objects, inline (docs/constraints.md)")
+        samples: Annotated[int, Field(ge=1, le=limits.max_samples)] = 1
+        steps: Annotated[int, Field(ge=1, le=limits.max_steps)] | None = Field(
+            None, description="DDIM steps (default: the model's setting)")
+
+    return GenerateRequest
+
+
+# ----------------------------------------------------------------------------- responses
+class ErrorItem(BaseModel):
+    """One validation problem: ``loc`` as FastAPI gives it, ``path`` as a JSONPath (``$.constraints[0].bvh``)."""
+
+    loc: list[str | int]
+    path: str
+    msg: str
+    type: str
+
+
+class ValidationErrorOut(BaseModel):
+    """Body of every 422 answer."""
+
+    detail: list[ErrorItem]
+
+
+class ErrorOut(BaseModel):
+    """Body of the other error answers (401, 404, 409, 413, 429, 504)."""
+
+    detail: str
+
+
+class MotionOut(BaseModel):
+    """One generated motion: BVH text, base64 npz, or a JSON object of arrays (``format``)."""
+
+    index: int
+    format: Format
+    encoding: Literal["text", "base64", "json"]
+    filename: str
+    frames: int
+    fps: float
+    data: str | dict[str, Any]
+
+
+class ReportOut(BaseModel):
+    """kinema's GenerationReport: settings, timing, per-sample constraint residuals and warnings."""
+
+    seconds: float
+    segments: int
+    frames: int
+    steps: int
+    guidance: tuple[float, float]
+    seed: int
+    residuals: list[dict[str, Any]]
+    warnings: list[str]
+
+
+class GenerateResponse(BaseModel):
+    """The answer of ``POST /v1/generate`` and of ``GET /v1/jobs/{id}/result``."""
+
+    model: str
+    rig: str
+    format: Format
+    motions: list[MotionOut]
+    report: ReportOut
+
+
+class JobOut(BaseModel):
+    """A job's state; ``result`` and ``motions`` are the download links once it is ``done``."""
+
+    id: str
+    status: Literal["queued", "running", "done", "failed"]
+    created: float
+    started: float | None = None
+    finished: float | None = None
+    expires: float | None = None
+    error: list[ErrorItem] | str | None = None
+    result: str | None = None
+    motions: list[str] = []
+
+
+class RigOut(BaseModel):
+    name: str
+    joints: list[str]
+    parents: list[int]
+    fps: float
+
+
+class ModelOut(BaseModel):
+    """A served model, its rig and the limits that apply to it."""
+
+    name: str
+    rig: RigOut
+    text_encoder: str
+    sha256: str
+    window_seconds: float
+    default_steps: int
+    limits: dict[str, float | int]
+
+
+class ModelsOut(BaseModel):
+    models: list[ModelOut]
+    formats: list[str]
+    limits: dict[str, float | int]
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok"]
+    models: list[str]
+    pending: int
+    capacity: int
+    jobs: int
