@@ -13,6 +13,8 @@ Provided here:
 * :class:`HashTestEncoder` -- a tiny deterministic bag-of-words encoder for unit tests only.
 * :class:`CachedEncoder` -- wraps any encoder with an on-disk, pickle-free embedding cache, so
   dataset captions are embedded once rather than at every training run.
+* :class:`MemoryCachedEncoder` -- a thread-safe in-memory LRU in front of any encoder, so repeated
+  prompts in one process (``kinema.load_model``) are encoded once.
 * :func:`register_text_encoder` -- lets users plug in other encoders (a larger
   sentence-transformers model, LLM2Vec, ...) under their own id.
 """
@@ -24,6 +26,7 @@ import hashlib
 import io
 import re
 import threading
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -40,6 +43,7 @@ __all__ = [
     "MiniLMEncoder",
     "HashTestEncoder",
     "CachedEncoder",
+    "MemoryCachedEncoder",
     "get_text_encoder",
     "register_text_encoder",
     "known_text_encoders",
@@ -284,6 +288,63 @@ class CachedEncoder:
         if not texts:
             return torch.zeros((0, self.dim), dtype=torch.float32)
         return torch.from_numpy(np.stack([found[t] for t in texts]).astype(np.float32, copy=False))
+
+
+class MemoryCachedEncoder:
+    """Wrap an encoder with a thread-safe in-memory LRU of the last ``max_entries`` embeddings.
+
+    Generation encodes one prompt per timeline segment and call; an interactive session or a server
+    repeats prompts, and MiniLM costs milliseconds to tens of milliseconds per prompt on a loaded CPU.
+    ``kinema.load_model`` wraps its encoder in one (the CLI additionally passes a disk cache, which this
+    sits in front of). ``id`` and ``dim`` are the wrapped encoder's. Rows are returned as new tensors,
+    so a caller modifying its result cannot change the cache. Missing texts are encoded outside the
+    lock (encoders are thread-safe), so two threads may both encode a new prompt once; the result is
+    the same.
+    """
+
+    def __init__(self, encoder: TextEncoder, max_entries: int = 1024):
+        if max_entries < 1:
+            raise ValueError(f"max_entries must be >= 1, got {max_entries}")
+        self.encoder = encoder
+        self.max_entries = max_entries
+        self._entries: OrderedDict[str, torch.Tensor] = OrderedDict()
+        self._lock = threading.Lock()
+
+    @property
+    def id(self) -> str:
+        return self.encoder.id
+
+    @property
+    def dim(self) -> int:
+        return self.encoder.dim
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def encode(self, texts: list[str]) -> torch.Tensor:
+        """Embed ``texts`` (``(B, dim)`` float32), encoding only the texts not in memory."""
+        texts = _check_texts(texts)
+        if not texts:
+            return torch.zeros((0, self.dim), dtype=torch.float32)
+        found: dict[str, torch.Tensor] = {}
+        with self._lock:
+            for text in dict.fromkeys(texts):
+                if text in self._entries:
+                    self._entries.move_to_end(text)
+                    found[text] = self._entries[text]
+        missing = [t for t in dict.fromkeys(texts) if t not in found]
+        if missing:
+            new = self.encoder.encode(missing).detach().to("cpu", torch.float32)
+            if new.shape != (len(missing), self.dim):
+                raise KinemaError(f"encoder {self.id!r} returned shape {tuple(new.shape)} for "
+                                  f"{len(missing)} texts, expected ({len(missing)}, {self.dim})")
+            with self._lock:
+                for text, row in zip(missing, new, strict=True):
+                    found[text] = self._entries[text] = row.clone()
+                    self._entries.move_to_end(text)
+                while len(self._entries) > self.max_entries:
+                    self._entries.popitem(last=False)
+        return torch.stack([found[t] for t in texts])
 
 
 # --------------------------------------------------------------------------------------------------

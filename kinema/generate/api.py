@@ -27,10 +27,13 @@ from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_l
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.motion.core import Motion
 from kinema.motion.features import features_to_motion
-from kinema.text import TextEncoder, get_text_encoder
+from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
 
 #: seconds of overlap between consecutive timeline segments (constrained, then cross-faded)
 OVERLAP_SECONDS = 0.5
+
+#: prompt embeddings kept in memory by a loaded model (thread-safe LRU, kinema.text.MemoryCachedEncoder)
+TEXT_MEMORY_ENTRIES = 1024
 
 
 @dataclass
@@ -138,10 +141,12 @@ class KinemaModel:
                 docs/constraints.md); frames refer to the whole output at the model's fps unless the
                 file states its own ``fps`` or ``constraints_fps`` is given.
             constraints_fps: the frame rate the constraint file's ``frame_indices`` were written at.
-            samples: how many different motions (same constraints, different noise).
+            samples: how many different motions (same constraints, different noise), sampled as one
+                batch (faster per motion) and post-processed one by one.
             steps: DDIM steps for this call (default: the model's saved setting), 1..``max_steps``.
             guidance: ``(w_text, w_constr)`` >= 0 or a Guidance (default: the model's saved setting).
-            seed: fixes the result (0 <= seed < 2**64).
+            seed: fixes the result (0 <= seed < 2**64) for a given ``samples``: all samples draw their
+                noise from one generator stream, so sample i also depends on ``samples``.
             postprocess: foot locking + IK + exact constraint hitting, guarded (kinema.postprocess.guard).
             heading: first-frame facing in radians about +Y (0 faces +Z).
         """
@@ -152,8 +157,8 @@ class KinemaModel:
         plan = plan_segments(self, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
         motions, residuals = [], []
-        for _ in range(samples):
-            motion, report = self._generate_one(plan, guide, steps, g, heading, postprocess, progress)
+        for motion in self._sample_batch(plan, guide, steps, g, heading, samples, progress):
+            motion, report = plan.postprocess(motion) if postprocess else (motion, {})
             motions.append(motion)
             residuals.append(report)
         warnings = [w for r in residuals for w in r.get("warnings", [])]
@@ -209,27 +214,48 @@ class KinemaModel:
 
     def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
         """One motion (all segments, cross-faded) and its post-processing report ({} when off)."""
-        motion: Motion | None = None
+        motion = self._sample_batch(plan, guide, steps, g, heading, 1, progress)[0]
+        return plan.postprocess(motion) if postprocess else (motion, {})
+
+    def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress) -> list[Motion]:
+        """``samples`` raw motions (all segments, cross-faded), sampled as one batch per segment.
+
+        Sampling all motions in one denoiser batch is faster per motion than one after another (the
+        network runs on larger matrices). Segment k of every sample is sampled together, each row
+        conditioned on the end of its own motion so far. Noise: one ``(samples, T, D)`` draw per
+        segment from ``g``, so a seed fixes the result, but sample i is not what a call with fewer
+        samples returned for the same seed, nor what the earlier one-sample-after-another loop did.
+        """
+        motions: list[Motion] | None = None
+        poser = FeaturePoser(self.skeleton) if self.joint_sigma > 0 else None
         for k, seg in enumerate(plan.segments):
-            x_tgt, mask, world_xz, world_mask, c_dir, shift = plan.segment_targets(k, motion, heading)
+            x_tgt, mask, world_xz, world_mask, c_dir, shift = _stacked_targets(plan, k, motions, heading, samples)
             text = self.encode_text(seg.prompt)
             feats = sample_features(
-                self.loaded.denoiser, self.loaded.sampler, seg.num_frames, text, c_dir[None], guide,
-                x_tgt[None], mask[None], steps=steps, generator=g, progress=progress,
-                world_xz=None if world_xz is None else world_xz[None],
-                world_mask=None if world_mask is None else world_mask[None],
+                self.loaded.denoiser, self.loaded.sampler, seg.num_frames,
+                None if text is None else text.expand(samples, -1), c_dir, guide,
+                x_tgt, mask, steps=steps, generator=g, progress=progress, world_xz=world_xz, world_mask=world_mask,
                 root_displacement=self.root_displacement, anchor_start=self.root_displacement,
-                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma,
-                joint_poser=FeaturePoser(self.skeleton) if self.joint_sigma > 0 else None,
-            )[0]
-            feats[:, 0] += shift[0]
-            feats[:, 2] += shift[1]
-            part = features_to_motion(feats, self.skeleton, self.fps)
-            motion = part if motion is None else crossfade(motion, part, seg.overlap)
-        assert motion is not None
-        if postprocess:
-            return plan.postprocess(motion)
-        return motion, {}
+                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma, joint_poser=poser,
+            )
+            feats[:, :, 0] += shift[:, None, 0]
+            feats[:, :, 2] += shift[:, None, 1]
+            parts = [features_to_motion(f, self.skeleton, self.fps) for f in feats]
+            motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
+                                                                                                 strict=True)]
+        assert motions is not None
+        return motions
+
+
+def _stacked_targets(plan: SegmentPlan, k: int, motions: list[Motion] | None, heading: float, samples: int):
+    """Segment k's targets for every sample, stacked on a leading batch axis (see ``segment_targets``).
+
+    The first segment's targets are the same for every sample (computed once); later segments are
+    conditioned on each sample's own motion so far.
+    """
+    rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
+            else [plan.segment_targets(k, m, heading) for m in motions])
+    return tuple(None if row[0] is None else torch.stack(row) for row in zip(*rows, strict=True))
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:
@@ -247,8 +273,16 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     return path
 
 
-def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None) -> KinemaModel:
-    """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder."""
+def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
+               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel:
+    """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
+
+    Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
+    so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
+    behind it that persists between processes (the CLI passes ``cache/text``).
+    """
     loaded = load_denoiser(resolve_model_path(name_or_path))
     encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
+    if text_memory:
+        encoder = MemoryCachedEncoder(encoder, text_memory)
     return KinemaModel(loaded, encoder)

@@ -69,6 +69,37 @@ def _support(targets: PostTargets, T: int, blend: float, root_reach: float, reac
     return env
 
 
+class CosineAdam:
+    """Adam (torch.optim.Adam's defaults: betas 0.9 / 0.999, eps 1e-8) whose learning rate follows
+    ``lr * 0.5 (1 + cos(pi k / iterations))`` at step k, i.e. torch.optim.Adam + LambdaLR.
+
+    Hand-written because constructing the first ``torch.optim.Adam`` imports ``torch._dynamo``, which
+    cost 1.1-1.2 s of the first constrained generate in a process. The update is torch's single-tensor
+    CPU Adam operation for operation, so results match torch.optim.Adam + LambdaLR to float rounding
+    (tests/test_postprocess_adam.py).
+    """
+
+    def __init__(self, params: list[torch.Tensor], lr: float, iterations: int,
+                 betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-8):
+        self.params, self.lr, self.iterations = list(params), lr, iterations
+        self.betas, self.eps, self.k = betas, eps, 0
+        self.exp_avg = [torch.zeros_like(p) for p in self.params]
+        self.exp_avg_sq = [torch.zeros_like(p) for p in self.params]
+
+    @torch.no_grad()
+    def step(self, grads: tuple[torch.Tensor, ...] | list[torch.Tensor]) -> None:
+        """One update of every parameter in place from its gradient (same order as ``params``)."""
+        lr = self.lr * (0.5 * (1 + math.cos(math.pi * self.k / max(self.iterations, 1))))
+        self.k += 1
+        b1, b2 = self.betas
+        step_size = lr / (1 - b1**self.k)
+        bc2_sqrt = (1 - b2**self.k) ** 0.5
+        for p, g, m, v in zip(self.params, grads, self.exp_avg, self.exp_avg_sq, strict=True):
+            m.lerp_(g, 1 - b1)
+            v.mul_(b2).addcmul_(g, g, value=1 - b2)
+            p.addcdiv_(m, (v.sqrt() / bc2_sqrt).add_(self.eps), value=-step_size)
+
+
 #: Adam steps of stage (a). The exact pass makes constraints exact whatever this is; the optimisation
 #: only spreads the edit over the body. 80 -> 30 steps cut a 5-s motion's post-processing with two
 #: waypoints and a hand target from ~0.9 s to ~0.4 s with no measurable change in jerk (731 vs 730 m/s^3).
@@ -110,8 +141,7 @@ def optimise(
 
     aa = torch.zeros(T, skel.num_joints, 3, dtype=torch.float64, requires_grad=True)
     dr = torch.zeros(T, 3, dtype=torch.float64, requires_grad=True)
-    opt = torch.optim.Adam([aa, dr], lr=lr)
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda i: 0.5 * (1 + math.cos(math.pi * i / max(iterations, 1))))
+    opt = CosineAdam([aa, dr], lr=lr, iterations=iterations)
     cm, J, history = 0.01, skel.num_joints, []
 
     def deltas() -> tuple[torch.Tensor, torch.Tensor]:
@@ -145,11 +175,8 @@ def optimise(
 
     with single_thread():
         for _ in range(iterations):
-            opt.zero_grad()
             loss = loss_fn()
-            loss.backward()
-            opt.step()
-            sched.step()
+            opt.step(torch.autograd.grad(loss, [aa, dr]))
             history.append(float(loss.detach()))
     with torch.no_grad():
         d_rot, d_root = deltas()

@@ -1,0 +1,213 @@
+"""Issue 19 (speed): no constraint branch without constraints, batched samples, in-memory text cache."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+import torch
+
+import kinema.generate.api as api
+from kinema.diffusion.guidance import Guidance
+from kinema.generate.api import load_model
+from kinema.text import HashTestEncoder, MemoryCachedEncoder
+
+PROMPT = "A person walks forward."
+WAYPOINT = [{"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}]
+HAND = [{"type": "right-hand", "times": [0.6], "positions": [[-0.2, 1.2, 0.4]]}]
+
+
+@pytest.fixture(scope="module")
+def model(tiny_checkpoint):
+    return load_model(tiny_checkpoint)
+
+
+@pytest.fixture
+def batch_sizes(model, monkeypatch):
+    """Batch size of every denoiser forward pass during the test."""
+    sizes: list[int] = []
+    den = model.loaded.denoiser
+    forward = den.forward
+
+    def spy(x_t, *args, **kwargs):
+        sizes.append(x_t.shape[0])
+        return forward(x_t, *args, **kwargs)
+
+    monkeypatch.setattr(den, "forward", spy)
+    return sizes
+
+
+def _same(a, b) -> bool:
+    return torch.equal(a.local_rotations, b.local_rotations) and torch.equal(a.root_translation, b.root_translation)
+
+
+# ----------------------------------------------------------------------------- guidance branches
+@pytest.mark.parametrize("constraints, samples, per_step", [
+    (None, 1, 2), (WAYPOINT, 1, 3), (None, 3, 6), (HAND, 2, 6),
+])
+def test_branches_per_step(model, batch_sizes, constraints, samples, per_step):
+    model.generate(PROMPT, seconds=1.0, constraints=constraints, samples=samples, steps=4, postprocess=False)
+    assert batch_sizes == [per_step] * 4  # one batched pass per step for all samples
+
+
+def test_timeline_later_segments_keep_the_constraint_branch(model, batch_sizes):
+    model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], steps=3, postprocess=False)
+    assert batch_sizes == [2] * 3 + [3] * 3  # the second segment is constrained by the overlap frames
+
+
+def test_empty_prompt_without_constraints_runs_one_branch(model, batch_sizes):
+    model.generate("", seconds=1.0, steps=3, postprocess=False)
+    assert batch_sizes == [1] * 3
+
+
+def test_zero_mask_guidance_equals_two_branch_guidance(model):
+    """With an all-zero mask the constraint branch is the unconditional one, so separated guidance
+    equals regular CFG with w_text (up to float rounding): dropping the branch changes nothing."""
+    den = model.loaded.denoiser
+    g = torch.Generator().manual_seed(0)
+    B, T, D = 2, 20, den.config.feature_dim
+    x_t = torch.randn(B, T, D, generator=g)
+    text = torch.randn(B, den.config.text_dim, generator=g)
+    c_dir = torch.tensor([[1.0, 0.0], [0.0, 1.0]])
+    guide = Guidance("separated", 2.5, 1.7)
+    with torch.no_grad():
+        for t in (999, 500, 10):
+            tt = torch.full((B,), t)
+            three = den.forward_guided(x_t, tt, text, c_dir, torch.zeros_like(x_t), torch.zeros_like(x_t), None, guide)
+            two = den.forward_guided(x_t, tt, text, c_dir, None, None, None, guide)
+            assert torch.allclose(three, two, rtol=0, atol=1e-5), float((three - two).abs().max())
+
+
+# ----------------------------------------------------------------------------- batched samples
+def _rowwise(monkeypatch):
+    """Replace the batched sampling by one call per sample, fed the same noise rows from the same generator."""
+    real = api.sample_features
+
+    def one_by_one(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, *, generator, **kw):
+        B = c_dir.shape[0]
+        noise = torch.randn((B, T, denoiser.config.feature_dim), generator=generator)
+
+        def row(v, i):
+            return None if v is None else v[i : i + 1]
+
+        keys = ("world_xz", "world_mask")
+        rows = [real(denoiser, sampler, T, row(text, i), c_dir[i : i + 1], guide, row(x_tgt, i), row(mask, i),
+                     generator=generator, init_noise=noise[i : i + 1], **{k: row(v, i) if k in keys else v
+                                                                             for k, v in kw.items()})
+                for i in range(B)]
+        return torch.cat(rows)
+
+    monkeypatch.setattr(api, "sample_features", one_by_one)
+
+
+@pytest.mark.parametrize("what, constraints", [
+    (PROMPT, None), (PROMPT, HAND), ([(PROMPT, 1.0), ("A person waves.", 1.2)], None),
+])
+def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constraints):
+    kw = dict(seconds=1.5, constraints=constraints, samples=3, steps=4, seed=11, postprocess=False)
+    batched = model.generate(what, **kw)
+    _rowwise(monkeypatch)
+    rows = model.generate(what, **kw)
+    for a, b in zip(batched, rows, strict=True):
+        diff = float((a.positions - b.positions).abs().max())
+        assert diff < 1e-4, diff
+    assert not torch.allclose(batched[0].positions, batched[1].positions, atol=1e-3)
+    assert not torch.allclose(batched[1].positions, batched[2].positions, atol=1e-3)
+
+
+def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
+    seen = []
+    real = api.sample_features
+
+    def spy(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw):
+        seen.append((x_tgt.clone(), mask.clone(), c_dir.clone()))
+        return real(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw)
+
+    monkeypatch.setattr(api, "sample_features", spy)
+    model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=2, steps=3, seed=1, postprocess=False)
+    (x0, m0, c0), (x1, m1, c1) = seen
+    assert torch.equal(x0[0], x0[1]) and torch.equal(c0[0], c0[1])  # shared first-segment targets
+    ov = int(m1[0].amax(-1).gt(0).sum())
+    assert ov == 10 and torch.equal(m1[0], m1[1])
+    assert not torch.allclose(x1[0, :ov], x1[1, :ov], atol=1e-4)  # each sample's own join
+
+
+def test_chunked_batches_give_the_same_rows(model, batch_sizes):
+    from kinema.generate.sampling import sample_features
+
+    L = model.loaded
+    text = model.encode_text(PROMPT).expand(5, -1)
+    c_dir = torch.tensor([[1.0, 0.0]]).expand(5, 2)
+
+    def run(max_batch_frames):
+        return sample_features(L.denoiser, L.sampler, 20, text, c_dir, L.guidance, steps=3,
+                               generator=torch.Generator().manual_seed(2), max_batch_frames=max_batch_frames)
+
+    whole = run(10_000)
+    assert batch_sizes == [10] * 3
+    batch_sizes.clear()
+    chunked = run(2 * 20 * 2)  # two motions (two branches each) per pass
+    assert batch_sizes == [4] * 3 + [4] * 3 + [2] * 3
+    assert torch.allclose(whole, chunked, rtol=0, atol=1e-5)
+
+
+def test_batched_samples_are_reproducible(model):
+    a = model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=3, steps=3, seed=4)
+    b = model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=3, steps=3, seed=4)
+    c = model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=3, steps=3, seed=5)
+    assert all(_same(x, y) for x, y in zip(a, b, strict=True))
+    assert not _same(a[0], c[0])
+    assert len(a.report.residuals) == 3 and a[0].num_frames == 40
+
+
+# ----------------------------------------------------------------------------- text cache
+class _Counting(HashTestEncoder):
+    def __init__(self):
+        super().__init__(dim=8)
+        self.calls: list[list[str]] = []
+
+    def encode(self, texts):
+        self.calls.append(list(texts))
+        return super().encode(texts)
+
+
+def test_memory_cache_encodes_each_prompt_once_and_evicts_lru():
+    inner = _Counting()
+    enc = MemoryCachedEncoder(inner, max_entries=2)
+    assert enc.id == inner.id and enc.dim == 8
+    a = enc.encode(["a", "b", "a"])
+    assert inner.calls == [["a", "b"]] and torch.equal(a[0], a[2])
+    a[0] += 1  # results are copies: the cache is untouched
+    assert torch.equal(enc.encode(["a"])[0], inner.encode(["a"])[0])
+    inner.calls.clear()
+    enc.encode(["c"])  # evicts "b", the least recently used
+    enc.encode(["a", "b"])
+    assert inner.calls == [["c"], ["b"]] and len(enc) == 2
+    assert enc.encode([]).shape == (0, 8)
+
+
+def test_memory_cache_is_thread_safe():
+    enc = MemoryCachedEncoder(HashTestEncoder(dim=8), max_entries=16)
+    texts = [f"prompt {i % 24}" for i in range(400)]
+    out: dict[int, torch.Tensor] = {}
+
+    def work(k):
+        out[k] = enc.encode(texts[k::4])
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    ref = HashTestEncoder(dim=8)
+    for k in range(4):
+        assert torch.equal(out[k], ref.encode(texts[k::4]))
+    assert len(enc) <= 16
+
+
+def test_loaded_model_caches_prompts_in_memory(tiny_checkpoint):
+    m = load_model(tiny_checkpoint)
+    assert isinstance(m.text_encoder, MemoryCachedEncoder)
+    m.generate(PROMPT, seconds=0.5, steps=2, postprocess=False)
+    assert PROMPT in m.text_encoder._entries
+    assert not isinstance(load_model(tiny_checkpoint, text_memory=0).text_encoder, MemoryCachedEncoder)
