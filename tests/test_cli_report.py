@@ -69,3 +69,12 @@ def test_residual_table_rows():
     assert "joint rotation targets" in table and "30.00 deg" in table and "1.00 deg" in table
     assert table.splitlines()[2].split()[0] == "1"  # the second sample's row
     assert residual_table([{}, {}]) == ""
+
+
+def test_preview_runs_ten_steps(tiny_checkpoint, tmp_path, capsys):
+    args = ["generate", "A person walks.", "--model", str(tiny_checkpoint), "--seconds", "1", "--no-progress",
+            "--threads", "1", "--preview", "--out", str(tmp_path / "p.bvh")]
+    code, out, _ = _run(args, capsys)
+    assert code == 0 and "10 DDIM steps" in out
+    code, _, err = _run([*args[:-2], "--steps", "3", "--out", str(tmp_path / "q.bvh")], capsys)
+    assert code == 2 and "either --preview or --steps" in err and not (tmp_path / "q.bvh").exists()

@@ -17,6 +17,9 @@ from kinema.cli._args import finite_float, non_negative_float, positive_float, p
 DEFAULT_SECONDS = 5.0
 DEFAULT_SEED = 0
 DEFAULT_SAMPLES = 1
+#: DDIM steps of --preview: 0.18 s per prompt-only 5-s clip of sampling, about half of what 5 steps lose
+#: against 50 in FID, skate, jerk and end-effector error recovered (docs/speed.md)
+PREVIEW_STEPS = 10
 
 
 def register(sub) -> None:
@@ -34,6 +37,8 @@ def register(sub) -> None:
                         "the files get _00, _01, ... before the extension (out/motion_00.bvh, ...)")
     p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting; at most its "
                    "trained diffusion steps)")
+    p.add_argument("--preview", action="store_true", help=f"fast draft: {PREVIEW_STEPS} DDIM steps (about 0.2 s "
+                   "per 5-s clip of sampling; quality vs steps in docs/speed.md); not with --steps")
     p.add_argument("--seed", type=seed, help=f"random seed, 0 to 2**64 - 1 (default {DEFAULT_SEED})")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="separated guidance weights, finite and >= 0 (default: the model's setting)")
@@ -98,6 +103,10 @@ def _check_inputs(args: argparse.Namespace) -> None:
     from kinema.errors import KinemaError
     from kinema.generate.timeline import parse_timeline
 
+    if args.preview:
+        if args.steps is not None:
+            raise KinemaError("--preview sets the DDIM steps (10): give either --preview or --steps")
+        args.steps = PREVIEW_STEPS
     suffix = args.out.name.lower()
     if not (suffix.endswith(".bvh") or suffix.endswith(".bvh.gz") or suffix.endswith(".npz")):
         raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz or .npz")
@@ -158,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
               f"{motion.num_joints} joints (lengths in metres)")
     rep = motions.report
-    print(f"generated {len(motions)} motion(s), {rep.segments} segment(s) in {rep.seconds:.2f} s")
+    print(f"generated {len(motions)} motion(s), {rep.segments} segment(s), {rep.steps} DDIM steps in "
+          f"{rep.seconds:.2f} s")
     table = residual_table(rep.residuals)
     if table:
         print(table)
