@@ -213,7 +213,21 @@ class HashTestEncoder:
 # --------------------------------------------------------------------------------------------------
 
 
-class CachedEncoder:
+class _EncoderWrapper:
+    """Delegates ``id`` and ``dim`` to the wrapped encoder (a cache is the same encoder to a checkpoint)."""
+
+    encoder: TextEncoder
+
+    @property
+    def id(self) -> str:
+        return self.encoder.id
+
+    @property
+    def dim(self) -> int:
+        return self.encoder.dim
+
+
+class CachedEncoder(_EncoderWrapper):
     """Wrap an encoder with a persistent per-text embedding cache under ``cache_dir``.
 
     Each embedding is one small ``.npy`` file named by ``sha256(encoder.id + "\\0" + text)`` and
@@ -227,14 +241,6 @@ class CachedEncoder:
     def __init__(self, encoder: TextEncoder, cache_dir: str | Path):
         self.encoder = encoder
         self.cache_dir = Path(cache_dir)
-
-    @property
-    def id(self) -> str:
-        return self.encoder.id
-
-    @property
-    def dim(self) -> int:
-        return self.encoder.dim
 
     def key(self, text: str) -> str:
         """The cache key of ``text`` for this encoder (hex sha256 of ``id + NUL + text``)."""
@@ -290,7 +296,7 @@ class CachedEncoder:
         return torch.from_numpy(np.stack([found[t] for t in texts]).astype(np.float32, copy=False))
 
 
-class MemoryCachedEncoder:
+class MemoryCachedEncoder(_EncoderWrapper):
     """Wrap an encoder with a thread-safe in-memory LRU of the last ``max_entries`` embeddings.
 
     Generation encodes one prompt per timeline segment and call; an interactive session or a server
@@ -309,14 +315,6 @@ class MemoryCachedEncoder:
         self.max_entries = max_entries
         self._entries: OrderedDict[str, torch.Tensor] = OrderedDict()
         self._lock = threading.Lock()
-
-    @property
-    def id(self) -> str:
-        return self.encoder.id
-
-    @property
-    def dim(self) -> int:
-        return self.encoder.dim
 
     def __len__(self) -> int:
         return len(self._entries)

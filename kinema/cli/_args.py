@@ -6,15 +6,24 @@ import argparse
 import math
 
 
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1, with a clear message otherwise."""
+def _int_at_least(text: str, low: int, what: str) -> int:
     try:
         n = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {n}")
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if n < low:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {n}")
     return n
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1, with a clear message otherwise."""
+    return _int_at_least(text, 1, "a positive integer")
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0, with a clear message otherwise."""
+    return _int_at_least(text, 0, "an integer >= 0")
 
 
 def _number(text: str) -> float:

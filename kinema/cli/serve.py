@@ -10,23 +10,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import positive_float, positive_int
+from kinema.cli._args import non_negative_int, positive_float, positive_int
 
 MISSING_EXTRA = "kinema serve needs the server extra: pip install 'kinema[server]' (fastapi, uvicorn)"
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {n}")
-    return n
-
-
 def _port(text: str) -> int:
-    n = _non_negative_int(text)
+    n = non_negative_int(text)
     if not 1 <= n <= 65535:
         raise argparse.ArgumentTypeError(f"expected a TCP port 1..65535, got {n}")
     return n
@@ -45,7 +35,7 @@ def register(sub) -> None:
     p.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
     p.add_argument("--workers", type=positive_int, default=d.workers,
                    help=f"generation threads sharing the loaded models (default {d.workers})")
-    p.add_argument("--queue", type=_non_negative_int, default=d.queue,
+    p.add_argument("--queue", type=non_negative_int, default=d.queue,
                    help=f"requests that may wait for a worker; more get 429 + Retry-After (default {d.queue})")
     p.add_argument("--api-key-file", type=Path, help="file with API key(s), one per line; clients send "
                    "'Authorization: Bearer KEY' or 'X-API-Key: KEY' to /v1/*")
