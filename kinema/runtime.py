@@ -18,8 +18,8 @@ from kinema.errors import KinemaError
 #: Environment variable read when no thread count is given explicitly.
 ENV_VAR = "KINEMA_THREADS"
 
-#: Load (runnable processes, 1-minute average) per core above which a machine counts as busy.
-BUSY_LOAD_PER_CORE = 0.5
+#: Idle cores (cores minus the 1-minute load average) needed before a second thread is used.
+MIN_FREE_FOR_TWO = 1.75
 
 
 def _check_count(value, source: str) -> int:
@@ -53,20 +53,24 @@ def load_average() -> float | None:
         return None
 
 
-def default_threads(cores: int | None = None, load: float | None = None, cap: int = 2) -> int:
+def default_threads(cores: int | None = None, load: float | None = None, cap: int | None = 2) -> int:
     """The thread count used when neither an argument nor ``KINEMA_THREADS`` gives one.
 
-    ``min(cap, cores)`` on a quiet machine, 1 on a busy one (1-minute load average above
-    ``BUSY_LOAD_PER_CORE`` per core). Why: 2 threads make the small model 1.3-1.4x faster than 1 when the
-    cores are free, but several times slower when other processes compete for them; beyond 2 threads the
-    small model's matrices are too small to gain (docs/speed.md has the measurements). ``cores`` and
-    ``load`` default to this machine's; a machine without a load average counts as quiet.
+    The idle cores (``cores`` minus the 1-minute load average), rounded, at most ``cap`` (None: no cap),
+    and 1 unless at least ``MIN_FREE_FOR_TWO`` cores are idle. Why: on the 2-core development machine two
+    threads are 1.4x faster than one when it is idle, but 3-16x slower as soon as other processes want
+    the cores (every parallel region waits for its slowest thread), and a second thread only pays when
+    it surely gets a core of its own (docs/speed.md has the measurements). ``cap = 2`` suits generation
+    (the small model's matrices are small); training passes ``cap=None`` to keep using every idle core.
+    ``cores`` and ``load`` default to this machine's; a machine without a load average counts as idle.
     """
     cores = cpu_cores() if cores is None else cores
     load = load_average() if load is None else load
-    if load is not None and load > BUSY_LOAD_PER_CORE * cores:
+    free = cores - (load or 0.0)
+    if free < MIN_FREE_FOR_TWO:
         return 1
-    return max(1, min(cap, cores))
+    n = min(cores, int(free + 0.25))
+    return max(1, n if cap is None else min(cap, n))
 
 
 def _set_interop(n: int) -> None:
@@ -85,12 +89,12 @@ def _set_interop(n: int) -> None:
         pass
 
 
-def configure_threads(n: int | None = None) -> int:
+def configure_threads(n: int | None = None, *, cap: int | None = 2) -> int:
     """Set torch's intra-op thread count and return it.
 
     ``n`` when given (a positive int; anything else raises KinemaError naming ``--threads``), else the
     ``KINEMA_THREADS`` environment variable (a bad value raises KinemaError naming the variable), else
-    :func:`default_threads`. The inter-op pool is resized to match when torch still allows it.
+    :func:`default_threads` with ``cap``. The inter-op pool is resized to match when torch still allows it.
     """
     import torch
 
@@ -101,7 +105,7 @@ def configure_threads(n: int | None = None) -> int:
         if env is not None and env.strip():
             n = _check_count(env, f"the environment variable {ENV_VAR}")
         else:
-            n = default_threads()
+            n = default_threads(cap=cap)
     torch.set_num_threads(n)
     _set_interop(n)
     return n

@@ -179,7 +179,7 @@ def test_bench_all_writes_a_report(tiny_checkpoint, tmp_path):
     import json as _json
 
     rc = main(["bench", "all", "--model", str(tiny_checkpoint), "--out", str(tmp_path / "bench"),
-               "--steps", "2", "--repeats", "1"])
+               "--steps", "2", "--repeats", "1", "--quick"])
     assert rc == 0
     rep = _json.loads((tmp_path / "bench" / "report.json").read_text())
     assert {r["config"] for r in rep["train"]} == {"tiny", "small", "small-1stage"}

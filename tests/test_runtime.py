@@ -49,11 +49,14 @@ def test_empty_environment_value_means_the_default(monkeypatch):
     assert configure_threads() == default_threads()
 
 
-def test_default_is_two_threads_when_quiet_and_one_when_busy():
+def test_default_uses_a_second_thread_only_on_idle_cores():
     assert default_threads(cores=2, load=0.2) == 2
+    assert default_threads(cores=2, load=0.3) == 1  # under 1.75 idle cores: one thread
     assert default_threads(cores=2, load=1.5) == 1
-    assert default_threads(cores=16, load=0.0) == 2  # the small model gains nothing beyond 2
-    assert default_threads(cores=16, load=12.0) == 1
+    assert default_threads(cores=16, load=0.0) == 2  # generation: capped at 2
+    assert default_threads(cores=16, load=0.0, cap=None) == 16  # training: every idle core
+    assert default_threads(cores=16, load=10.0, cap=None) == 6
+    assert default_threads(cores=16, load=15.0, cap=None) == 1
     assert default_threads(cores=1, load=0.0) == 1
 
 

@@ -38,11 +38,9 @@ def _inputs(cfg, batch: int, frames: int, g: torch.Generator):
     )
 
 
-def bench_config(name: str, num_joints: int = 21, batch: int = 32, frames: int = 100, repeats: int = 3,
-                 fps: float = 20.0) -> TrainBenchRow:
-    """Time one preset; ``frames`` tokens per sample (100 = 5 s at 20 fps)."""
-    from torch.utils.flop_counter import FlopCounterMode
-
+def make_train_step(name: str, num_joints: int = 21, batch: int = 32, frames: int = 100, fps: float = 20.0):
+    """``(model, step, cfg, generator)`` for one preset: ``step()`` runs one full training step on fixed
+    synthetic inputs. Shared by the per-preset table and the threads measurement."""
     cfg = get_config(name, num_joints, fps=fps, max_frames=max(frames, 200))
     model = Denoiser(cfg)
     opt = torch.optim.AdamW(model.parameters(), lr=1e-4)
@@ -56,6 +54,15 @@ def bench_config(name: str, num_joints: int = 21, batch: int = 32, frames: int =
         loss.backward()
         opt.step()
 
+    return model, step, cfg, g
+
+
+def bench_config(name: str, num_joints: int = 21, batch: int = 32, frames: int = 100, repeats: int = 3,
+                 fps: float = 20.0) -> TrainBenchRow:
+    """Time one preset; ``frames`` tokens per sample (100 = 5 s at 20 fps)."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    model, step, cfg, g = make_train_step(name, num_joints, batch, frames, fps)
     counter = FlopCounterMode(display=False)
     with counter:
         step()
@@ -77,6 +84,7 @@ def bench_config(name: str, num_joints: int = 21, batch: int = 32, frames: int =
 
 
 def format_table(rows: list[TrainBenchRow]) -> str:
+    """One line per preset: parameters, step time, samples/s, FLOPs."""
     head = f"{'config':<14}{'params (M)':>11}{'batch x T':>11}{'step (s)':>10}{'samples/s':>11}" \
            f"{'GFLOP/step':>12}{'GFLOP/s':>9}{'fwd@3 (ms)':>12}"
     lines = [head, "-" * len(head)]

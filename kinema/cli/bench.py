@@ -1,8 +1,8 @@
 """`kinema bench TARGET`: timing benchmarks of kinema's hot paths on real data.
 
-Each target is a sub-command registered by a ``_register_<target>`` function below (``bench bvh``
-today; ``bench train`` and ``bench generate`` are meant to join it the same way), so a benchmark
-is always reproducible from the command line.
+Each target is a sub-command registered by a ``_register_<target>`` function below (``bench bvh``,
+``bench train``, ``bench generate``, ``bench all``), so a benchmark is always reproducible from the
+command line. Thread counts go through kinema.runtime.configure_threads like every other command.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from kinema.cli._args import positive_int
+from kinema.cli._args import positive_float, positive_int
+from kinema.cli.batch import register_bench as register_batch_bench
 from kinema.errors import DataError
 
 
@@ -23,7 +24,9 @@ def register(sub) -> None:
     targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
     _register_bvh(targets)
     _register_train(targets)
+    _register_train_modes(targets)
     _register_generate(targets)
+    register_batch_bench(targets)
     _register_all(targets)
 
 
@@ -71,12 +74,12 @@ def _text_bytes(path: Path) -> int:
 
 def run_bench_bvh(args) -> int:
     """Parse the files twice (raw, then to Motion) and print a throughput table."""
-    import torch
     from tqdm import tqdm
 
     from kinema.io.bvh import parse_bvh, read_bvh
+    from kinema.runtime import configure_threads
 
-    torch.set_num_threads(args.threads)
+    configure_threads(args.threads)
 
     root = args.root if args.root is not None else Path.cwd().parent / "shared" / "datasets" / "bandai-namco"
     files = sorted(root.rglob("*.bvh.gz")) if root.is_dir() else []
@@ -141,7 +144,12 @@ def _register_train(targets) -> None:
     p.add_argument("--frames", type=_positive_int, default=100, help="frames per sample (100 = 5 s @ 20 fps)")
     p.add_argument("--joints", type=_positive_int, default=21)
     p.add_argument("--repeats", type=_positive_int, default=3)
-    p.add_argument("--threads", type=_positive_int, default=None, help="torch threads (default: all cores)")
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)")
+    p.add_argument("--load", type=int, nargs="+", default=None, metavar="N",
+                   help="also compare thread counts (--thread-counts) on the first preset's step, with N "
+                        "busy-loop processes running (0 = quiet), interleaved")
+    p.add_argument("--thread-counts", type=_positive_int, nargs="+", default=[1, 2])
     p.set_defaults(func=_run_train)
 
 
@@ -150,41 +158,126 @@ def _run_train(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
     from kinema.bench.train import bench_config, format_table
+    from kinema.runtime import configure_threads
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    configure_threads(args.threads, cap=None)
     rows = [bench_config(c, args.joints, args.batch_size, args.frames, args.repeats)
             for c in tqdm(args.configs, desc="bench train")]
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     print(format_table(rows))
+    if args.load:
+        from kinema.bench.threads import bench_threads, format_threads
+        from kinema.bench.train import make_train_step
+
+        step = make_train_step(args.configs[0], args.joints, args.batch_size, args.frames)[1]
+        table = bench_threads(step, args.thread_counts, args.load, args.repeats)
+        print(format_threads(table, f"{args.configs[0]} train step"))
+    return 0
+
+
+def _register_train_modes(targets) -> None:
+    from kinema.bench.train_modes import MODES
+
+    p = targets.add_parser("train-modes", help="training speed and loss parity: fp32 vs bf16 autocast vs torch.compile",
+                           description="Train one Trainer per mode on the same data and seed, steps interleaved; "
+                           "prints seconds per step, speed-up over fp32 and the loss difference.")
+    p.add_argument("--data", type=Path, required=True, help="dataset folder from `kinema data build`")
+    p.add_argument("--configs", nargs="+", default=["small"], help="presets (default: small)")
+    p.add_argument("--modes", nargs="+", choices=list(MODES), default=["fp32", "bf16", "compile"])
+    p.add_argument("--steps", type=_positive_int, default=300)
+    p.add_argument("--batch-size", type=_positive_int, default=32)
+    p.add_argument("--warmup", type=_positive_int, default=20, help="first steps timed apart (compilation)")
+    p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    p.add_argument("--json", type=Path, help="also write rows and loss curves to this JSON file")
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)")
+    p.set_defaults(func=_run_train_modes)
+
+
+def _run_train_modes(args: argparse.Namespace) -> int:
+    import json
+    from dataclasses import asdict
+
+    import torch
+
+    from kinema.bench.train_modes import bench_train_modes, format_modes
+    from kinema.runtime import configure_threads
+
+    threads = configure_threads(args.threads, cap=None)
+    rows, curves = [], {}
+    for config in args.configs:
+        r, c = bench_train_modes(args.data, config, args.modes, args.steps, args.batch_size, args.warmup,
+                                 tail=min(100, args.steps), cache_dir=args.cache_dir)
+        rows += r
+        curves[config] = c
+        print(format_modes(r, min(100, args.steps)), flush=True)
+    print(f"torch {torch.__version__}, {threads} threads, batch {args.batch_size}")
+    print(format_modes(rows, min(100, args.steps)))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"rows": [asdict(r) for r in rows], "losses": curves}))
     return 0
 
 
 # ----------------------------------------------------------------------------- bench generate
 
 
+def _add_generate_options(p, model_default: str | None) -> None:
+    """Options shared by `bench generate` and `bench all` (see kinema.bench.suite)."""
+    from kinema.bench.suite import SECTIONS
+
+    p.add_argument("--model", default=model_default, help="'default' or a run/checkpoint folder")
+    p.add_argument("--sections", nargs="+", choices=SECTIONS, default=None,
+                   help=f"generation sections to run (default: all of {' '.join(SECTIONS)})")
+    p.add_argument("--quick", action="store_true", help="fewer settings and repeats (about a minute)")
+    p.add_argument("--steps", type=_positive_int, nargs="+", default=None, help="DDIM steps (default 10 25 50 100)")
+    p.add_argument("--repeats", type=_positive_int, default=None, help="repeats per steps setting (default 2)")
+    p.add_argument("--samples", type=_positive_int, nargs="+", default=None, help="samples per call (1 4 16)")
+    p.add_argument("--durations", type=positive_float, nargs="+", default=None, help="seconds (5 10 20 40)")
+    p.add_argument("--thread-counts", type=_positive_int, nargs="+", default=None, help="threads compared (1 2)")
+    p.add_argument("--load", type=int, nargs="+", default=None, metavar="N",
+                   help="busy-loop processes for the threads section; 0 = quiet (default 0 2)")
+    p.add_argument("--thread-repeats", type=_positive_int, default=None, help="rounds per thread count (3)")
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads outside the threads section (default: KINEMA_THREADS, else kinema.runtime)")
+
+
+def _suite_options(args: argparse.Namespace, sections: tuple[str, ...]):
+    """GenerateSuiteOptions from the shared options; unset ones keep the (quick) defaults."""
+    from kinema.bench.suite import GenerateSuiteOptions
+    from kinema.errors import KinemaError
+
+    given = {"steps": args.steps, "repeats": args.repeats, "samples": args.samples, "durations": args.durations,
+             "threads": args.thread_counts, "loads": args.load, "thread_repeats": args.thread_repeats}
+    if args.load is not None and any(n < 0 for n in args.load):
+        raise KinemaError("--load: busy-loop process counts must be >= 0")
+    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items() if v is not None}
+    kw.update(model=args.model, sections=tuple(args.sections or sections))
+    return GenerateSuiteOptions.quick(**kw) if args.quick else GenerateSuiteOptions(**kw)
+
+
 def _register_generate(targets) -> None:
-    p = targets.add_parser("generate", help="seconds per motion vs DDIM steps, constraints, post-processing")
-    p.add_argument("--model", default="default", help="'default' or a run/checkpoint folder")
-    p.add_argument("--steps", type=_positive_int, nargs="+", default=[10, 25, 50, 100])
-    p.add_argument("--seconds", type=float, default=5.0)
-    p.add_argument("--repeats", type=_positive_int, default=2)
-    p.add_argument("--no-cold-start", action="store_true")
-    p.add_argument("--threads", type=_positive_int, default=None)
+    p = targets.add_parser("generate", help="generation speed: DDIM steps, samples, durations, threads, cold start")
+    _add_generate_options(p, "default")
+    p.add_argument("--seconds", type=positive_float, default=5.0)
+    p.add_argument("--no-cold-start", action="store_true", help="skip the fresh-process section")
     p.set_defaults(func=_run_generate)
 
 
 def _run_generate(args: argparse.Namespace) -> int:
     import torch
 
-    from kinema.bench.generate import bench_generate, cold_start, format_table
+    from kinema.bench.suite import SECTIONS, format_generate_suite, run_generate_suite
+    from kinema.runtime import configure_threads
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    rows = bench_generate(args.model, args.steps, args.seconds, args.repeats)
-    cold = None if args.no_cold_start else cold_start(args.model, seconds=args.seconds)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, model {args.model}")
-    print(format_table(rows, cold, args.seconds))
+    threads = configure_threads(args.threads)
+    opts = _suite_options(args, SECTIONS)
+    opts.seconds = args.seconds
+    if args.no_cold_start:
+        opts.sections = tuple(s for s in opts.sections if s != "cold")
+    result = run_generate_suite(opts)
+    print(f"torch {torch.__version__}, {threads} threads, model {args.model}")
+    print(format_generate_suite(result))
     return 0
 
 
@@ -193,17 +286,19 @@ def _run_generate(args: argparse.Namespace) -> int:
 
 def _register_all(targets) -> None:
     p = targets.add_parser("all", help="training and generation benchmarks into one report (report.md/json)")
-    p.add_argument("--model", default=None, help="model for the generation part ('default' or a run folder)")
+    _add_generate_options(p, None)
     p.add_argument("--out", type=Path, default=Path("out/bench"), help="report folder (default out/bench)")
-    p.add_argument("--steps", type=_positive_int, nargs="+", default=[10, 25, 50, 100])
-    p.add_argument("--repeats", type=_positive_int, default=2)
     p.set_defaults(func=_run_all)
 
 
 def _run_all(args: argparse.Namespace) -> int:
     from kinema.bench.report import run_all, write_bench_report
+    from kinema.bench.suite import SECTIONS
+    from kinema.runtime import configure_threads
 
-    result = run_all(args.model, steps=args.steps, repeats=args.repeats)
+    configure_threads(args.threads)
+    opts = _suite_options(args, SECTIONS)
+    result = run_all(args.model, suite=opts)
     path = write_bench_report(result, args.out)
     print(path.read_text())
     print(f"wrote {path} and {path.with_name('report.json')}")

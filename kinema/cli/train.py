@@ -5,8 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from kinema.cli._args import positive_float, positive_int
+
 
 def register(sub) -> None:
+    """Add the `train` sub-command (runtime options: --threads, --device, --bf16, --minutes; docs/training.md)."""
     p = sub.add_parser("train", help="train a motion diffusion model (also: `kinema train plot RUN`)")
     p.add_argument("action", nargs="?", default="run", choices=["run", "plot"],
                    help="'plot' writes loss curves of an existing run (give the run folder with --out)")
@@ -31,7 +34,18 @@ def register(sub) -> None:
                                        "for the shipped one, or a run/checkpoint folder); optimiser and step "
                                        "start fresh")
     p.add_argument("--stop-after", type=int, help="stop after this many steps of this invocation")
-    p.add_argument("--threads", type=int, help="torch CPU threads (default: all cores)")
+    p.add_argument("--minutes", type=positive_float,
+                   help="time budget: stop cleanly after this many minutes of training (checkpoint written; "
+                        "--resume continues)")
+    p.add_argument("--device", default=None,
+                   help="torch device to train on: cpu (default) or cuda[:N]; batches are drawn on the CPU "
+                        "either way, so a run is reproducible across devices up to float rounding")
+    p.add_argument("--bf16", action="store_true",
+                   help="bfloat16 autocast of the forward pass (loss and weights stay float32): on CUDA, and on "
+                        "CPUs with AMX for presets from 'medium' up (1.22x there; no gain at 'small'; "
+                        "docs/training.md)")
+    p.add_argument("--threads", type=positive_int,
+                   help="torch CPU threads (default: KINEMA_THREADS, else chosen by kinema.runtime; see docs/speed.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -81,6 +95,7 @@ def _config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    """Plot a run's losses, or build a Trainer from the arguments (or the run being resumed) and train."""
     from kinema.errors import KinemaError
 
     if args.action == "plot":
@@ -90,16 +105,15 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.data is None:
         raise KinemaError("kinema train needs --data DIR (a folder made by `kinema data build`)")
-    import torch
-
+    from kinema.runtime import configure_threads, resolve_device
     from kinema.train.trainer import Trainer
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    configure_threads(args.threads, cap=None)
+    device = resolve_device(args.device)
     cfg = _config_from_args(args)
     if not args.resume and (args.out / "latest").exists():
         raise KinemaError(f"{args.out} already holds a run; pass --resume to continue it or choose another --out")
-    trainer = Trainer(cfg, args.data, args.out, cache_dir=args.cache_dir)
+    trainer = Trainer(cfg, args.data, args.out, cache_dir=args.cache_dir, device=device, bf16=args.bf16)
     if args.resume and trainer.resume():
         print(f"resumed {args.out} at step {trainer.step}")
     elif cfg.init_from:
@@ -108,7 +122,10 @@ def run(args: argparse.Namespace) -> int:
     if trainer.rank == 0:
         print(f"model {cfg.model}: {n / 1e6:.2f} M parameters; {len(trainer.dataset)} training clips; "
               f"{cfg.steps} steps (phase 1: {trainer.phase1_steps})")
-    last = trainer.run(progress=not args.no_progress, stop_after=args.stop_after)
+    last = trainer.run(progress=not args.no_progress, stop_after=args.stop_after, minutes=args.minutes)
+    if trainer.stopped_by_budget and trainer.rank == 0:
+        print(f"time budget of {args.minutes:g} min spent: stopped at step {trainer.step} of {cfg.steps} "
+              "(--resume continues)")
     if last is not None:
         print(f"checkpoint: {last}")
     return 0

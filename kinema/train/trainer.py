@@ -4,6 +4,12 @@ Runs on one CPU process or, under ``torchrun --nproc_per_node N``, as Distribute
 CPU, nccl on GPU) with rank-0-only checkpoints and logs. Resuming restores weights, EMA, optimizer and
 step; batches and noise are a pure function of (seed, rank, step) (see kinema.train.batching), so a
 resumed run continues exactly as the uninterrupted one would have.
+
+Runtime options that do not change what a run *is* (so they are not part of TrainConfig and a resumed run
+may change them): ``device`` (batches are drawn on the CPU, bit-identically, then moved), ``bf16``
+(autocast of the forward pass to bfloat16; the loss stays float32), ``compile`` (torch.compile of the
+training forward) and the time budget of :meth:`Trainer.run` (``minutes``: stop cleanly with a checkpoint
+when it is spent). docs/training.md has the measurements behind their defaults.
 """
 
 from __future__ import annotations
@@ -96,9 +102,17 @@ def _dist_info() -> tuple[int, int]:
 class Trainer:
     """Builds data, model, optimizer and EMA from a TrainConfig and runs the loop."""
 
-    def __init__(self, cfg: TrainConfig, data_dir: str | Path, out_dir: str | Path, cache_dir: Path | None = None):
+    def __init__(self, cfg: TrainConfig, data_dir: str | Path, out_dir: str | Path, cache_dir: Path | None = None,
+                 device: str | torch.device | None = None, bf16: bool = False, compile: bool = False):
         self.cfg, self.out_dir = cfg, Path(out_dir)
         self.rank, self.world = _dist_info()
+        self.device = torch.device(device if device is not None else "cpu")
+        if self.device.type == "cuda" and self.device.index is None and self.world > 1:
+            self.device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))  # one GPU per rank
+        if self.device.type == "cuda":
+            torch.cuda.set_device(self.device)
+        self.bf16, self.compile = bool(bf16), bool(compile)
+        self.stopped_by_budget = False  # set by run(): whether its time budget ended it
         ds = MotionDataset(data_dir, "train")
         if len(ds) == 0:
             raise KinemaError(f"{data_dir}: the train split is empty")
@@ -128,6 +142,7 @@ class Trainer:
         self.model.set_normalization(self.stats.mean, self.stats.std)
         lr_stats = local_root_stats(clips, self.fps)
         self.model.set_local_root_normalization(lr_stats.mean, lr_stats.std)
+        self.model.to(self.device)
         self.ema = make_ema(self.model)
         self.optimizer = build_optimizer(cfg.optimizer, self.model.parameters(), cfg.lr, cfg.weight_decay)
         self.schedule = NoiseSchedule()
@@ -188,6 +203,44 @@ class Trainer:
             return cfg.max_keyframes
         return max_keyframes_at(step, self.phase1_steps, cfg.steps - self.phase1_steps, 1, cfg.max_keyframes)
 
+    def set_total_steps(self, steps: int) -> None:
+        """Change the run's length (and with it the phase boundary) before the steps it affects.
+
+        Why: a time-budgeted run (scripts/train_gpu.py) knows how many steps fit only once it has timed
+        real steps (:meth:`time_steps`, then this at step 0). The schedule reads ``cfg.steps`` at every
+        step, so this is exactly the run that had been started with ``steps``, as long as the steps done
+        so far fall in the learning-rate warm-up and in phase 1 of both schedules (which is checked);
+        `--resume` changes ``--steps`` the same way between invocations.
+        """
+        new_phase1 = int(round(steps * self.cfg.phase1_fraction))
+        if steps <= self.step or self.step > min(self.cfg.warmup, self.phase1_steps, new_phase1):
+            raise KinemaError(f"cannot change the run length to {steps} steps at step {self.step}: only during "
+                              "the warm-up of phase 1 and before the end")
+        self.cfg.steps = steps
+        self.phase1_steps = new_phase1
+
+    def time_steps(self, n: int) -> float:
+        """Seconds per training step over ``n`` real steps, which are then undone (weights, EMA, optimizer
+        state and step counter restored), so the run starts from where it was.
+
+        Why: a time-budgeted run (scripts/train_gpu.py) needs its real step time (data drawing, device,
+        precision) to fit the run length to the budget before the schedule starts."""
+        import copy
+
+        saved = (copy.deepcopy(self.model.state_dict()), copy.deepcopy(self.ema.state_dict()),
+                 copy.deepcopy(self.optimizer.state_dict()), self.step)
+        model = torch.compile(self.model) if self.compile else self.model
+        self.train_step(model)  # warm-up: allocator, kernels, compilation
+        t0 = time.perf_counter()
+        for _ in range(n):
+            self.train_step(model)
+        seconds = (time.perf_counter() - t0) / n
+        self.model.load_state_dict(saved[0])
+        self.ema.load_state_dict(saved[1])
+        self.optimizer.load_state_dict(saved[2])
+        self.step = saved[3]
+        return seconds
+
     def save(self) -> Path | None:
         if self.rank != 0:
             return None
@@ -195,6 +248,11 @@ class Trainer:
 
     # ------------------------------------------------------------------ one step
     def train_step(self, model: torch.nn.Module) -> dict[str, float]:
+        """One optimisation step with ``model`` (``self.model``, or it wrapped by DDP / torch.compile).
+
+        Batch, mask, timesteps and noise are drawn on the CPU from the step's own generator (so runs are
+        reproducible and resumable), then moved to ``self.device``; the forward runs under bf16 autocast
+        when ``self.bf16``, the loss in float32. Returns the logged values of the step."""
         cfg, step = self.cfg, self.step
         g = step_generator(cfg.seed, self.rank, step)
         torch.manual_seed(int(torch.randint(0, 2**62, (1,), generator=g)))  # dropout masks
@@ -212,8 +270,13 @@ class Trainer:
         noise = torch.randn(x0.shape, generator=g)
         x_t = self.schedule.q_sample(x0, t, noise)
         text = self.text_table[batch.caption_index]
-        pred = model(x_t, t, text, batch.text_keep, batch.c_dir, x0, mask, batch.pad_mask)
-        loss, terms = motion_loss(pred, x0, batch.pad_mask, self.layout, self.skeleton, self.stats, self.weights,
+        inputs = [x_t, t, text, batch.text_keep, batch.c_dir, x0, mask, batch.pad_mask]
+        if self.device.type != "cpu":
+            inputs = [x.to(self.device, non_blocking=True) for x in inputs]
+        x0, mask, pad_mask = inputs[5], inputs[6], inputs[7]
+        with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.bf16):
+            pred = model(*inputs)
+        loss, terms = motion_loss(pred.float(), x0, pad_mask, self.layout, self.skeleton, self.stats, self.weights,
                                   constraint_mask=mask if phase == 2 else None)
         lr = lr_at(step, cfg.lr, cfg.warmup, cfg.steps)
         for group in self.optimizer.param_groups:
@@ -231,13 +294,35 @@ class Trainer:
         return out
 
     # ------------------------------------------------------------------ loop
-    def run(self, progress: bool = True, stop_after: int | None = None) -> Path | None:
-        """Train until ``cfg.steps`` (or ``stop_after`` more steps); returns the last checkpoint."""
+    def _out_of_time(self, deadline: float | None) -> bool:
+        """Whether the time budget is spent; under DDP every rank gets rank 0's answer (they must agree)."""
+        if deadline is None:
+            return False
+        late = time.monotonic() >= deadline
+        if self.world > 1:
+            import torch.distributed as dist
+
+            flag = torch.tensor([1.0 if late else 0.0], device=self.device)
+            dist.broadcast(flag, src=0)
+            late = bool(flag.item())
+        return late
+
+    def run(self, progress: bool = True, stop_after: int | None = None, minutes: float | None = None) -> Path | None:
+        """Train until ``cfg.steps`` (or ``stop_after`` more steps); returns the last checkpoint.
+
+        ``minutes``: a wall-clock budget from this call (compilation included); when it is spent the loop
+        stops after the current step, logs it and writes a checkpoint, so `--resume` continues from there.
+        ``self.stopped_by_budget`` tells the caller which way the loop ended.
+        """
         from tqdm.auto import tqdm
 
+        deadline = None if minutes is None else time.monotonic() + 60.0 * minutes
+        self.stopped_by_budget = False
         model: torch.nn.Module = self.model
         if self.world > 1:
             model = torch.nn.parallel.DistributedDataParallel(self.model)
+        if self.compile:
+            model = torch.compile(model)
         end = self.cfg.steps if stop_after is None else min(self.cfg.steps, self.step + stop_after)
         log_path = self.out_dir / "log.jsonl"
         if self.rank == 0:
@@ -252,11 +337,15 @@ class Trainer:
             ema_loss = rec["loss"] if ema_loss is None else 0.95 * ema_loss + 0.05 * rec["loss"]
             bar.update(1)
             bar.set_postfix(loss=f"{ema_loss:.4f}", phase=rec["phase"])
-            if self.rank == 0 and (self.step % self.cfg.log_every == 0 or self.step == end):
+            stop = self.step < end and self._out_of_time(deadline)
+            if self.rank == 0 and (self.step % self.cfg.log_every == 0 or self.step == end or stop):
                 rec.update(step=self.step, time=round(time.time() - t0, 2))
                 with open(log_path, "a") as fh:
                     fh.write(json.dumps(rec) + "\n")
-            if self.step % self.cfg.ckpt_every == 0 or self.step == end:
+            if self.step % self.cfg.ckpt_every == 0 or self.step == end or stop:
                 last = self.save() or last
+            if stop:
+                self.stopped_by_budget = True
+                break
         bar.close()
         return last
