@@ -150,27 +150,29 @@ def postprocess(
         motion = _guarded_foot_lock(motion, targets, guard, report)
     if exact and targets is not None and not targets.is_empty():
         motion = _guarded_exact(motion, targets, guard, report, exact_kwargs)
-    report["plausibility"] = {"raw": guard.raw.as_dict(), "final": plausibility(motion).as_dict()}
+    report["plausibility"] = {"raw": guard.raw.as_dict(), "final": guard.before.as_dict()}
     return motion, report
 
 
 class _Guard:
-    """Accepts a stage's output only while it stays within ``bounds`` of the raw motion's plausibility."""
+    """Accepts a stage's output only while it stays within ``bounds`` of the raw motion's plausibility;
+    ``before`` is the plausibility of the last motion accepted (the raw one to start with)."""
 
     def __init__(self, raw: Plausibility, bounds: GuardBounds, report: dict):
         self.raw, self.before, self.bounds, self.report = raw, raw, bounds, report
 
-    def problems(self, new: Motion, extra: list[str] = (), stage_report: dict | None = None) -> list[str]:
+    def check(self, new: Motion, extra: list[str] = ()) -> tuple[Plausibility, list[str]]:
+        """``new``'s plausibility and what is wrong with it as the next stage's output."""
         measured = plausibility(new)
-        if stage_report is not None:
-            stage_report["added_pelvis_speed_m_s"] = round(measured.added_speed(self.before), 3)
-        self.measured = measured
-        return violations(self.raw, self.before, measured, self.bounds) + list(extra)
+        return measured, violations(self.raw, self.before, measured, self.bounds) + list(extra)
 
-    def accept(self, stage: str, old: Motion, new: Motion, stage_report: dict, extra: list[str] = ()) -> Motion:
-        problems = self.problems(new, extra, stage_report)
+    def accept(self, stage: str, old: Motion, new: Motion, stage_report: dict, extra: list[str] = (),
+               checked: tuple[Plausibility, list[str]] | None = None) -> Motion:
+        """``new`` if it passes (``checked``: its ``check`` result when already known), else ``old``."""
+        measured, problems = checked if checked is not None else self.check(new, extra)
+        stage_report["added_pelvis_speed_m_s"] = round(measured.added_speed(self.before), 3)
         if not problems:
-            self.before = self.measured
+            self.before = measured
             return new
         stage_report["undone"] = problems
         self.report["warnings"].append(f"post-processing: {stage} undone, it would have made the motion worse "
@@ -192,26 +194,27 @@ def _guarded_foot_lock(motion: Motion, targets: PostTargets | None, guard: _Guar
         frames, flags = targets.contacts
         contacts[frames] = flags.to(contacts.dtype)
     new, rep = lock_feet(motion, contacts)
-    first = guard.problems(new)
-    if first:
+    checked = guard.check(new)
+    if checked[1]:
         new, rep = lock_feet(motion, contacts, reach_passes=0)
-        rep["pelvis_moves_off"] = first
+        rep["pelvis_moves_off"] = checked[1]
+        checked = None
     report["foot_lock"] = rep
-    return guard.accept("foot locking", motion, new, rep)
+    return guard.accept("foot locking", motion, new, rep, checked=checked)
 
 
 def _guarded_exact(motion: Motion, targets: PostTargets, guard: _Guard, report: dict, kwargs: dict) -> Motion:
     """The exact constraint pass, undone as a whole when it trips the guard; unmet targets are warned of."""
     from kinema.postprocess.exact import hit_constraints
-    from kinema.postprocess.residuals import constraint_residuals, unmet_targets
+    from kinema.postprocess.residuals import unmet_targets
 
     new, rep = hit_constraints(motion, targets, **kwargs)
     outside = rep["max_change_outside_blend_cm"]
     extra = [] if outside <= guard.bounds.outside_change_cm else [
         f"joints moved {outside:.1f} cm on frames no constraint may touch"]
     kept = guard.accept("the exact constraint pass", motion, new, rep, extra)
-    if kept is motion:  # undone: the residuals are those of the motion kept
-        rep["after"] = constraint_residuals(motion, targets)
+    if kept is motion:  # undone: the residuals are those of the motion kept, measured before the pass
+        rep["after"] = rep["before"]
         rep["unmet"] = unmet_targets(motion, targets)
     report["exact"] = rep
     report["warnings"] += [f"constraint not met: {u}" for u in rep["unmet"]]

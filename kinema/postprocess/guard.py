@@ -22,8 +22,8 @@ Bounds (``GuardBounds``): a stage may drag the pelvis at most at 3 m/s (``added_
 the result may never be faster than 10 m/s (a sprint) unless the raw motion was already faster, may
 raise the joint acceleration to at most ``max(raw + 30 m/s^2, 2 x raw)``, and may not move frames
 outside its blend windows by more than 1 cm. Measured on the shipped model (5-s motions, the five
-examples with walk and run prompts, text-only walks, runs and dances): accepted stages add at most
-about 2 m/s; the failures this guards against added 14 m/s (a foot target 3.5 m behind a walk) to
+examples with walk and run prompts, text-only walks, runs and dances): accepted stages dragged the
+pelvis at up to 2.7 m/s; the failures this guards against added 14 m/s (a foot target 3.5 m behind a walk) to
 440 m/s (the inverted smoothing of a dense path).
 """
 

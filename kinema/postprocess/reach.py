@@ -40,6 +40,23 @@ def _chain(skel, j: int, toes: dict) -> tuple[tuple[int, int, int], bool]:
     return chain_for_joint(skel, j), False
 
 
+def _limb_gap(skel, P: torch.Tensor, j: int, frames: torch.Tensor, targets: torch.Tensor, toes: dict):
+    """``(base, tip, d, dist, reach)`` of position targets ``(K, 3)`` of joint ``j``: the limb's base
+    position (shoulder or hip) ``(K, 3)``, the toe-to-ankle offset that turns a toe target into an ankle
+    goal (0 for other joints), ``d = goal - base`` ``(K, 3)``, its length ``(K, 1)`` and the reachable
+    length of the limb (metres)."""
+    (a, b, c), is_toe = _chain(skel, j, toes)
+    tip = (P[frames, j] - P[frames, c]).to(targets.dtype) if is_toe else 0.0
+    base = P[frames, a].to(targets.dtype)
+    d = targets - tip - base
+    reach = REACH * float(skel.offsets[b].norm() + skel.offsets[c].norm())
+    return base, tip, d, d.norm(dim=-1, keepdim=True).clamp_min(1e-9), reach
+
+
+def _toes(skel) -> dict:
+    return {skel.roles.get(f"{s}_toe"): s for s in ("left", "right")}
+
+
 def reach_shift(motion: Motion, joint_positions: dict, pinned: torch.Tensor, radius: float) -> torch.Tensor:
     """(T, 3) root translation offsets that put every positional target within its limb's reach.
 
@@ -47,8 +64,7 @@ def reach_shift(motion: Motion, joint_positions: dict, pinned: torch.Tensor, rad
     must not move (full-body keyframes)."""
     skel, T = motion.skeleton, motion.num_frames
     _, P = motion.global_transforms()
-    roles = skel.roles
-    toes = {roles.get(f"{s}_toe"): s for s in ("left", "right")}
+    toes = _toes(skel)
     frames_all, shifts_all = [], []
     for j, (frames, targets) in joint_positions.items():
         if j == 0 or skel.depths[j] < 2:
@@ -57,11 +73,7 @@ def reach_shift(motion: Motion, joint_positions: dict, pinned: torch.Tensor, rad
         frames, targets = frames[keep], targets[keep].to(P.dtype)
         if not frames.numel():
             continue
-        (a, b, c), is_toe = _chain(skel, j, toes)
-        goal = targets - (P[frames, j] - P[frames, c]) if is_toe else targets  # toe target -> ankle goal
-        reach = REACH * (skel.offsets[b].norm() + skel.offsets[c].norm()).to(P.dtype)
-        d = goal - P[frames, a]
-        dist = d.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        _, _, d, dist, reach = _limb_gap(skel, P, j, frames, targets, toes)
         excess = (dist - reach).clamp(min=0.0, max=MAX_SHIFT)
         frames_all.append(frames)
         shifts_all.append(d / dist * excess)
@@ -85,18 +97,13 @@ def clip_to_reach(motion: Motion, joint_positions: dict) -> dict:
     user's own targets."""
     skel = motion.skeleton
     _, P = motion.global_transforms()
-    roles = skel.roles
-    toes = {roles.get(f"{s}_toe"): s for s in ("left", "right")}
+    toes = _toes(skel)
     out = {}
     for j, (frames, targets) in joint_positions.items():
         if j == 0 or skel.depths[j] < 2:
             out[j] = (frames, targets)
             continue
-        (a, b, c), is_toe = _chain(skel, j, toes)
-        tip = (P[frames, j] - P[frames, c]).to(targets.dtype) if is_toe else 0.0  # toe target -> ankle goal
-        reach = REACH * float(skel.offsets[b].norm() + skel.offsets[c].norm()) + MAX_SHIFT
-        d = targets - tip - P[frames, a].to(targets.dtype)
-        dist = d.norm(dim=-1, keepdim=True).clamp_min(1e-9)
-        scale = (reach / dist).clamp(max=1.0)
-        out[j] = (frames, P[frames, a].to(targets.dtype) + tip + d * scale)
+        base, tip, d, dist, reach = _limb_gap(skel, P, j, frames, targets, toes)
+        scale = ((reach + MAX_SHIFT) / dist).clamp(max=1.0)
+        out[j] = (frames, base + tip + d * scale)
     return out
