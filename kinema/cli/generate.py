@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     if filled:
         print(f"using {', '.join(filled)} from Kimodo {meta_path} (give them on the command line to override)")
     model = load_model(args.model, text_cache=Path("cache/text"))
-    max_steps = model.max_steps
+    max_steps = model.loaded.sampler.num_train_steps
     if args.steps is not None and args.steps > max_steps:
         source = f" (from {meta_path})" if "steps" in filled else ""
         raise KinemaError(f"--steps {args.steps}{source}: at most {max_steps}, the model's trained diffusion steps")
