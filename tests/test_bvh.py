@@ -225,9 +225,15 @@ def test_static_root_carries_child_translation():
     np.testing.assert_allclose(motion.positions.numpy()[0], ref[0], atol=1e-9)
 
 
-def test_moving_position_channels_warn():
-    with pytest.warns(UserWarning, match="Arm"):
-        bvh.bvh_data_to_motion(parse_bvh(mixed_text(moving_arm=True), source_name="arm.bvh"), scale=0.01)
+def test_moving_position_channels_are_kept(tmp_path):
+    """A non-root joint whose position channels move keeps them per frame (Motion.local_translations):
+    forward kinematics matches the file, and written BVH carries them again."""
+    data = parse_bvh(mixed_text(moving_arm=True), source_name="arm.bvh")
+    motion = bvh.bvh_data_to_motion(data, scale=0.01)
+    assert motion.local_translations is not None
+    np.testing.assert_allclose(motion.positions.numpy(), reference_positions(data, 0.01), atol=1e-9)
+    again = read_bvh(write_bvh(motion, tmp_path / "arm.bvh"))
+    assert (again.positions - motion.positions).abs().max() < 1e-5
 
 
 def test_raw_format_round_trip():

@@ -2,7 +2,8 @@
 `write_bvh` (both, written atomically; a ``.gz`` name is gzip-compressed).
 
 Files are plain, widely readable BVH: the root has ``Xposition Yposition Zposition`` plus three
-rotation channels, every other joint three rotation channels, and each leaf joint an End Site.
+rotation channels, every other joint three rotation channels (plus position channels when the motion
+animates its translation, ``Motion.local_translations``), and each leaf joint an End Site.
 Lengths are written as ``metres * scale``: the default ``scale=1`` writes metres, which Blender's
 BVH importer (scale 1.0) brings in at the right size; ``scale=100`` writes centimetres.
 """
@@ -52,7 +53,16 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
     degrees = torch.rad2deg(quat_to_euler(quats, order)).numpy().reshape(T, J * 3)
     root = motion.root_translation.detach().to("cpu", torch.float64).numpy() * scale
     rot_names = [f"{axis}rotation" for axis in order]
-    channels = [["Xposition", "Yposition", "Zposition", *rot_names]] + [list(rot_names) for _ in range(J - 1)]
+    pos_names = ["Xposition", "Yposition", "Zposition"]
+    columns = [root, degrees[:, :3]]
+    channels = [[*pos_names, *rot_names]]
+    trans = None if motion.local_translations is None else motion.local_translations.detach().to("cpu", torch.float64)
+    for j in range(1, J):
+        moves = trans is not None and bool((trans[:, j] - sk.offsets[j]).abs().max() > 1e-9)
+        channels.append([*pos_names, *rot_names] if moves else list(rot_names))
+        if moves:
+            columns.append(trans[:, j].numpy() * scale)
+        columns.append(degrees[:, 3 * j : 3 * j + 3])
     has_child = {p for p in sk.parents if p >= 0}
     end_sites = {
         j: np.asarray(sk.end_sites.get(j, (0.0, 0.0, 0.0)), dtype=np.float64) * scale
@@ -66,7 +76,7 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
         channels=channels,
         end_sites=end_sites,
         frame_time=1.0 / motion.fps,
-        values=np.concatenate([root, degrees], axis=1),
+        values=np.concatenate(columns, axis=1),
         path="",
     )
 

@@ -265,8 +265,12 @@ class Motion:
             from kinema.io.npz import save_npz
 
             save_npz(self, path, **kwargs)
+        elif name.endswith(".glb"):
+            from kinema.io.gltf_writer import write_glb
+
+            write_glb(self, path, **kwargs)
         else:
-            raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz or .npz)")
+            raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz, .npz or .glb)")
         return path
 
     def __repr__(self) -> str:
@@ -274,7 +278,8 @@ class Motion:
 
 
 def load_motion(path: str | Path, *, scale: float = 1.0) -> Motion:
-    """Read a ``.bvh``/``.bvh.gz`` (lengths multiplied by ``scale``) or kinema ``.npz`` motion file."""
+    """Read a ``.bvh``/``.bvh.gz`` (lengths multiplied by ``scale``), kinema ``.npz`` or ``.glb``/``.gltf``
+    motion file (a glTF's first animation; kinema.io.gltf.read_gltf reads them all)."""
     path = Path(path)
     name = path.name.lower()
     if name.endswith(".bvh") or name.endswith(".bvh.gz"):
@@ -285,4 +290,11 @@ def load_motion(path: str | Path, *, scale: float = 1.0) -> Motion:
         from kinema.io.npz import load_npz
 
         return load_npz(path)
-    raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz or .npz)")
+    if name.endswith(".glb") or name.endswith(".gltf"):
+        from kinema.io.gltf import read_gltf
+
+        motions = read_gltf(path).motions
+        if not motions:
+            raise KinemaError(f"{path}: has no animations")
+        return next(iter(motions.values()))
+    raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz, .npz, .glb or .gltf)")
