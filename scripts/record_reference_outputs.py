@@ -15,9 +15,10 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from reference_cases import cases  # noqa: E402
+
 import kinema  # noqa: E402
 from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
-from reference_cases import cases  # noqa: E402
 
 
 def main(out: str) -> None:

@@ -15,8 +15,13 @@ STEPS = 5
 
 HANDS = [
     {"type": "right-hand", "times": [1.0], "positions": [[-0.2, 1.2, 0.5]]},
-    {"type": "left-hand", "times": [2.0], "positions": [[0.35, 0.9, 0.6]], "rotations": [[0.0, 0.0, 1.2]],
-     "smooth_root_2d": [[0.1, 0.6]]},
+    {
+        "type": "left-hand",
+        "times": [2.0],
+        "positions": [[0.35, 0.9, 0.6]],
+        "rotations": [[0.0, 0.0, 1.2]],
+        "smooth_root_2d": [[0.1, 0.6]],
+    },
     {"type": "foot-contact", "times": [0.5, 1.0], "contacts": [[1, 1, 1, 1], [1, 1, 0, 0]]},
 ]
 WAYPOINTS = [
@@ -28,8 +33,14 @@ TIMELINE = [{"prompt": "A person bows.", "seconds": 1.5}, {"prompt": "A person w
 
 def keyframes(kf_rot: np.ndarray, kf_root: np.ndarray) -> list[dict]:
     """Two full-body keyframes (frames 0 and 30) from stored poses."""
-    return [{"type": "fullbody", "frame_indices": [0, 30], "local_joints_rot": kf_rot.tolist(),
-             "root_positions": kf_root.tolist()}]
+    return [
+        {
+            "type": "fullbody",
+            "frame_indices": [0, 30],
+            "local_joints_rot": kf_rot.tolist(),
+            "root_positions": kf_root.tolist(),
+        }
+    ]
 
 
 def cases(kf_rot: np.ndarray, kf_root: np.ndarray) -> list[tuple[str, object, dict]]:
@@ -39,12 +50,21 @@ def cases(kf_rot: np.ndarray, kf_root: np.ndarray) -> list[tuple[str, object, di
         tag = "post" if post else "raw"
         out += [
             (f"text_{tag}", "A person walks forward.", {**base, "seconds": 2.5, "samples": 2, "postprocess": post}),
-            (f"keyframes_{tag}", "A person walks forward.",
-             {**base, "seconds": 2.0, "constraints": keyframes(kf_rot, kf_root), "postprocess": post}),
-            (f"hands_{tag}", "A person raises their right hand.",
-             {**base, "seconds": 2.5, "constraints": HANDS, "postprocess": post}),
-            (f"waypoints_{tag}", "A person walks forward.",
-             {**base, "seconds": 2.5, "constraints": WAYPOINTS, "postprocess": post}),
+            (
+                f"keyframes_{tag}",
+                "A person walks forward.",
+                {**base, "seconds": 2.0, "constraints": keyframes(kf_rot, kf_root), "postprocess": post},
+            ),
+            (
+                f"hands_{tag}",
+                "A person raises their right hand.",
+                {**base, "seconds": 2.5, "constraints": HANDS, "postprocess": post},
+            ),
+            (
+                f"waypoints_{tag}",
+                "A person walks forward.",
+                {**base, "seconds": 2.5, "constraints": WAYPOINTS, "postprocess": post},
+            ),
             (f"timeline_{tag}", TIMELINE, {**base, "postprocess": post}),
         ]
     return out

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from reference_cases import cases
 
 import kinema
-from reference_cases import cases
 
 FIXTURE = Path(__file__).parent / "data" / "reference_outputs.npz"
 TOL = 1e-5
