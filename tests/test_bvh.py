@@ -17,7 +17,7 @@ from kinema.cli import main
 from kinema.errors import BVHError, KinemaError
 from kinema.io import bvh
 from kinema.io.bvh import BVHData, parse_bvh, read_bvh
-from kinema.io.bvh_writer import format_bvh, write_bvh
+from kinema.io.bvh_writer import format_bvh, motion_to_bvh_data, write_bvh
 
 
 @pytest.fixture(scope="module")
@@ -387,7 +387,7 @@ def test_writer_leaves_no_partial_file(tmp_path):
     text = gzip.decompress((tmp_path / "sub" / "ok.bvh.gz").read_bytes()).decode()
     assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" in text
     assert "End Site" in text and "Frame Time: 0.03333333333" in text
-    raw = bvh.motion_to_bvh_data(motion, order="YXZ")
+    raw = motion_to_bvh_data(motion, order="YXZ")
     assert raw.channels[1] == ["Yrotation", "Xrotation", "Zrotation"] and raw.values.shape == (3, 9)
 
 

@@ -19,10 +19,11 @@ import torch
 from gltf_reference import world_positions
 from gltf_synthetic import write_synthetic_glb
 
+from kinema.io import load_motion
 from kinema.io.bvh import read_bvh
 from kinema.io.gltf import read_gltf
 from kinema.io.gltf_writer import write_glb
-from kinema.motion.core import Motion, load_motion
+from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
 REPO = Path(__file__).resolve().parents[1]
@@ -111,7 +112,8 @@ def test_bvh_rig_gets_a_generated_skin(walk_clip, tmp_path):
     motion = back.motions["walk"]
     assert motion.num_frames == human.num_frames and motion.fps == human.fps
     assert (motion.positions - human.positions).abs().max() < 1e-5
-    assert load_motion(out).num_frames == human.num_frames  # Motion.save/load_motion know .glb
+    assert load_motion(out).num_frames == human.num_frames  # the format registry knows .glb
+    assert load_motion(human.save(tmp_path / 'again.glb')).num_frames == human.num_frames
 
 
 def test_glb_to_bvh_and_back(synthetic, tmp_path):

@@ -31,8 +31,8 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from kinema.errors import KinemaError
+    from kinema.io import load_motion
     from kinema.io.atomic import check_output_path
-    from kinema.motion.core import load_motion
 
     if not args.input.exists():
         raise KinemaError(f"{args.input}: no such file")

@@ -31,8 +31,8 @@ def run(args: argparse.Namespace) -> int:
     import math
 
     from kinema.errors import KinemaError
+    from kinema.io import load_motion
     from kinema.io.atomic import check_output_path
-    from kinema.motion.core import load_motion
     from kinema.render import render_filmstrip, render_gif
 
     src: Path = args.motion

@@ -19,14 +19,13 @@ import re
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kinema.errors import BVHError
-
-if TYPE_CHECKING:
-    from kinema.motion.core import Motion
+from kinema.geometry.rotations import euler_to_quat, quat_rotate
+from kinema.motion.core import Motion
+from kinema.skeleton import Skeleton
 
 #: Channel names as written in files; matching is case-insensitive.
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
@@ -388,9 +387,6 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
     """
     import torch
 
-    from kinema.geometry.rotations import euler_to_quat, quat_rotate
-    from kinema.motion.core import Motion
-    from kinema.skeleton import Skeleton
 
     if not (math.isfinite(scale) and scale > 0):
         raise BVHError(f"scale must be a positive number, got {scale}", data.path)
@@ -465,9 +461,3 @@ def _check_lengths(data: BVHData, scale: float) -> None:
         raise BVHError(f"{data.names[j]} {chan} in frame {frame + 1} is {data.values[frame, cols[k][0]]:g} x scale "
                        f"{scale:g}: not a position within {MAX_METRES:g} m", data.path)
 
-
-def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY") -> BVHData:
-    """Raw BVH data for a motion (see kinema.io.bvh_writer, where it lives)."""
-    from kinema.io.bvh_writer import motion_to_bvh_data as convert
-
-    return convert(motion, scale=scale, order=order)

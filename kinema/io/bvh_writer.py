@@ -14,17 +14,16 @@ import gzip
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_to_euler
 from kinema.io.atomic import atomic_write_bytes
 from kinema.io.bvh import BVHData
-
-if TYPE_CHECKING:
-    from kinema.motion.core import Motion
+from kinema.motion.core import Motion
+from kinema.motion.rest import rebase_rest_pose
 
 _EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
@@ -35,8 +34,6 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
     Raises `KinemaError` (before anything is written) for a non-finite motion, a bad scale or
     order, or joint names that cannot appear in a BVH file.
     """
-    from kinema.geometry.rotations import quat_to_euler
-
     order = order.upper()
     if order not in _EULER_ORDERS:
         raise KinemaError(f"bad Euler order {order!r}; use one of {', '.join(_EULER_ORDERS)}")
@@ -148,3 +145,10 @@ def write_bvh(
         payload = gzip.compress(payload, compresslevel=6, mtime=0)
     atomic_write_bytes(path, payload)
     return path
+
+
+def save_bvh(motion: Motion, path: str | os.PathLike, *, clean_rest: bool = True, **options) -> Path:
+    """The registry's ``.bvh``/``.bvh.gz`` writer: :func:`write_bvh` of the motion re-based so that its
+    rest pose is the skeleton's clean standing pose when it carries ``rest_rotations``
+    (kinema.motion.rest; joint positions unchanged). ``options``: ``scale``, ``order``, ``precision``."""
+    return write_bvh(rebase_rest_pose(motion) if clean_rest else motion, path, **options)
