@@ -113,7 +113,7 @@ def test_bvh_rig_gets_a_generated_skin(walk_clip, tmp_path):
     assert motion.num_frames == human.num_frames and motion.fps == human.fps
     assert (motion.positions - human.positions).abs().max() < 1e-5
     assert load_motion(out).num_frames == human.num_frames  # the format registry knows .glb
-    assert load_motion(human.save(tmp_path / 'again.glb')).num_frames == human.num_frames
+    assert load_motion(human.save(tmp_path / "again.glb")).num_frames == human.num_frames
 
 
 def test_glb_to_bvh_and_back(synthetic, tmp_path):
@@ -137,3 +137,15 @@ def test_bvh_export_of_a_two_joint_rig_with_rest_rotations(tmp_path):
     back = read_bvh(motion.save(tmp_path / "lid.bvh"))
     assert back.skeleton.names == ("Base", "Lid") and back.num_frames == 9
     assert (back.positions - motion.positions).abs().max() < 1e-5
+
+
+def test_clips_on_skeletons_with_other_offsets_keep_their_bones(synthetic, tmp_path):
+    """Clips read from separate BVH files carry their own offsets; each must keep its joint positions."""
+    motion = read_gltf(synthetic, fps=10).motions["Rig|Move"]
+    longer = motion.skeleton.scaled(1.5)
+    other = Motion(
+        longer, motion.fps, motion.root_translation * 1.5, motion.local_rotations, None, motion.local_translations * 1.5
+    )
+    back = read_gltf(write_glb({"a": motion, "b": other}, tmp_path / "two.glb")).motions
+    assert (back["a"].positions - motion.positions).abs().max() < 1e-5
+    assert (back["b"].positions - other.positions).abs().max() < 1e-5

@@ -158,20 +158,21 @@ def _skin_and_mesh(b: _Builder, skeleton: Skeleton, mesh: SkinnedMesh) -> None:
     b.doc["nodes"].append({"name": f"{skeleton.name or 'rig'}_mesh", "mesh": 0, "skin": 0})
 
 
-def _animation(b: _Builder, name: str, motion: Motion) -> dict:
+def _animation(b: _Builder, name: str, motion: Motion, nodes: Skeleton) -> dict:
+    """One clip's channels; bone translations are written wherever they differ from the nodes' rest
+    translations (``nodes``: the file's skeleton, whose offsets may differ from this clip's own)."""
     T = motion.num_frames
     times = b.add(np.arange(T) / motion.fps, "SCALAR", _FLOAT, minmax=True)
     rots = quat_make_continuous(motion.local_rotations.detach().double().cpu(), dim=0).numpy()[..., [1, 2, 3, 0]]
     tracks = [(0, "translation", motion.root_translation.detach().double().cpu().numpy())]
     tracks += [(j, "rotation", rots[:, j]) for j in range(motion.num_joints)]
-    if motion.local_translations is not None:
-        trans = motion.local_translations.detach().double().cpu().numpy()
-        offsets = motion.skeleton.offsets.numpy()
-        tracks += [
-            (j, "translation", trans[:, j])
-            for j in range(1, motion.num_joints)
-            if np.abs(trans[:, j] - offsets[j]).max() > 1e-9
-        ]
+    trans = motion.translations_or_offsets().detach().double().cpu().numpy()
+    offsets = nodes.offsets.numpy()
+    tracks += [
+        (j, "translation", trans[:, j])
+        for j in range(1, motion.num_joints)
+        if np.abs(trans[:, j] - offsets[j]).max() > 1e-9
+    ]
     samplers, channels = [], []
     for node, path, values in tracks:
         out = b.add(values, "VEC4" if path == "rotation" else "VEC3", _FLOAT)
@@ -194,7 +195,7 @@ def glb_bytes(clips: Mapping[str, Motion], *, mesh: SkinnedMesh | None = None) -
     _nodes(b, skeleton)
     mesh = mesh or skeleton.mesh or bone_mesh(skeleton, rest_world(skeleton))
     _skin_and_mesh(b, skeleton, mesh)
-    b.doc["animations"] = [_animation(b, name, m) for name, m in clips.items()]
+    b.doc["animations"] = [_animation(b, name, m, skeleton) for name, m in clips.items()]
     b.doc["scenes"] = [{"name": skeleton.name or "kinema", "nodes": [0, len(b.doc["nodes"]) - 1]}]
     b.doc["scene"] = 0
     return b.glb()
