@@ -50,8 +50,8 @@ def _with_mesh(skeleton: Skeleton, source: Skeleton) -> Skeleton:
     )
 
 
-def sweep_file(src: Path, out: Path) -> tuple[int, float, Path]:
-    """(clips, worst position error in metres, written GLB) for one source file."""
+def sweep_file(src: Path, out: Path) -> tuple[int, float, Path, tuple[str, ...]]:
+    """(clips, worst position error in metres, written GLB, reader warnings) for one source file."""
     asset = read_gltf(src)
     back = {}
     for k, (clip, motion) in enumerate(asset.motions.items()):
@@ -70,7 +70,7 @@ def sweep_file(src: Path, out: Path) -> tuple[int, float, Path]:
         times = np.arange(motion.num_frames) / motion.fps
         a, b = world_positions(source, clip, times + start), world_positions(written, clip, times)
         worst = max(worst, max(float(np.abs(a[n] - b[n]).max()) for n in motion.skeleton.names if n in a))
-    return len(asset.motions), worst, glb
+    return len(asset.motions), worst, glb, asset.warnings
 
 
 def main() -> int:
@@ -88,14 +88,15 @@ def main() -> int:
         folder = args.out / rel.parent.name
         folder.mkdir(exist_ok=True)
         try:
-            n, err, glb = sweep_file(src, folder)
+            n, err, glb, warns = sweep_file(src, folder)
         except Exception as exc:  # report and go on: the summary lists every failure
             failures.append(f"{rel}: {type(exc).__name__}: {exc}")
             print(f"[{i + 1}/{len(files)}] {rel}: FAILED {exc}", flush=True)
             continue
         clips, worst, written = clips + n, max(worst, err), written + [glb]
         if err > args.tolerance:
-            failures.append(f"{rel}: joint positions differ by {err * 1000:.4f} mm")
+            why = f" (reader warnings: {'; '.join(warns)})" if warns else ""
+            failures.append(f"{rel}: joint positions differ by {err * 1000:.4f} mm{why}")
         print(f"[{i + 1}/{len(files)}] {rel}: {n} clips, max error {err * 1000:.5f} mm", flush=True)
     if args.validate and written:
         proc = subprocess.run(

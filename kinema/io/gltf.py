@@ -35,7 +35,7 @@ from kinema.skeleton import Skeleton
 
 __all__ = ["GltfAsset", "GltfError", "load_document", "load_gltf_motion", "read_gltf"]
 
-_SCALE_TOL = 1e-3
+_SCALE_TOL = 1e-5  # relative: float32 noise (1e-7) is quiet, a 1e-5 skew already moves a tail tip ~0.01 mm
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ class _Rig:
                 if n >= 0 and np.ptp(s) > _SCALE_TOL * abs(s).max():
                     warns.append(
                         f"{what or 'joint'} {_node_name(gltf, n)} has non-uniform scale "
-                        f"{np.round(s, 4).tolist()}; kinema uses its mean"
+                        f"[{', '.join(f'{x:.7g}' for x in s)}]; kinema uses its mean"
                     )
         self.base_scale = base_s.mean(axis=1)
         acc = np.ones(J)  # accumulated uniform scale of each joint's frame
@@ -341,7 +341,7 @@ def read_gltf(
     motions = {
         anim_names[i]: _clip(rig, skeleton, c, rate, index, scale_warn) for i, c in zip(chosen, chans, strict=True)
     }
-    warns += [f"scale animation of joint {n} (up to {100 * a:.1f} %) is ignored" for n, a in scaled.items()]
+    warns += [f"scale animation of joint {n} (up to {100 * a:.3g} %) is ignored" for n, a in scaled.items()]
     return GltfAsset(path, skeleton, motions, source_fps, rig.root_scale, helpers, tuple(warns))
 
 
