@@ -56,7 +56,7 @@ def sweep_file(src: Path, out: Path) -> tuple[int, float, Path, tuple[str, ...]]
     back = {}
     for k, (clip, motion) in enumerate(asset.motions.items()):
         bvh = motion.save(out / f"{src.stem}_{k}.bvh")
-        again = read_bvh(bvh)
+        again = read_bvh(bvh, root_follows_child=False)  # the root is a real bone here, not Bandai's dummy
         skeleton = _with_mesh(again.skeleton, asset.skeleton)
         back[clip] = type(again)(
             skeleton, again.fps, again.root_translation, again.local_rotations, None, again.local_translations

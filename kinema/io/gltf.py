@@ -318,10 +318,10 @@ def read_gltf(
     skin_nodes = {j for s in gltf.skins for j in s.joints}
     if any(not 0 <= j < len(gltf.nodes) for j in skin_nodes):
         raise GltfError(f"{path}: a skin names a joint node that does not exist")
-    parts = read_parts(buffers, world, parent, skin_nodes)
+    warns: list[str] = []
+    parts = read_parts(buffers, world, parent, skin_nodes, warns)
     kept, helpers = _select_joints(gltf, parent, parts, keep_helpers)
     order, kparents = _order(gltf, parent, kept)
-    warns: list[str] = []
     rig = _Rig(gltf, parent, world, order, kparents, warns)
     names = _unique(["root" if n < 0 else _node_name(gltf, n) for n in order])
     index = {n: j for j, n in enumerate(order)}
