@@ -235,7 +235,7 @@ def _clip(rig: _Rig, skeleton: Skeleton, chans: dict, fps: float, index: dict[in
     """Sample one animation's channels at ``fps`` into a Motion on ``skeleton``."""
     t0 = min(float(t[0]) for t, _, _ in chans.values()) if chans else 0.0
     t1 = max(float(t[-1]) for t, _, _ in chans.values()) if chans else 0.0
-    at = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-6)) + 1) / fps
+    at = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-3)) + 1) / fps  # 1e-3: float32 key times
     T = len(at)
     t = np.repeat(rig.rest_t[None], T, axis=0)
     r = np.repeat(rig.rest_r[None], T, axis=0)
