@@ -19,7 +19,7 @@ import torch
 from kinema import naming
 from kinema.errors import SkeletonError
 
-#: Roles every locomotion feature needs (see kinema.motion.features).
+#: Roles every locomotion feature needs (see kinema.representation.kimodo).
 LOCOMOTION_ROLES = ("pelvis", "left_hip", "right_hip", "left_ankle", "right_ankle", "left_toe", "right_toe")
 
 

@@ -15,15 +15,15 @@ from kinema.constraints import (
     FootContactConstraint,
     FullBodyConstraint,
     Root2DConstraint,
-    encode_constraints,
     load_constraints,
     save_constraints,
-    world_to_relative,
 )
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_to_axis_angle
 from kinema.io.bvh import read_bvh
-from kinema.motion.features import FeatureLayout, motion_to_features
+from kinema.representation.encode import encode_constraints, world_to_relative
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 
 REPO = Path(__file__).resolve().parents[1]

@@ -12,7 +12,7 @@ Each holds its keyframes as ``frame_indices`` (ints at the model fps) or ``times
 ``floor(t * fps + 0.5)``), exactly one of the two, and arrays with one row per keyframe (``K``).
 Units: metres, radians (axis-angle vectors), world frame Y up (docs/conventions.md). The objects are
 plain data: `check` validates them against a skeleton, fps and duration and returns the frames;
-kinema.constraints.encode turns them into model features; kinema.constraints.io reads/writes JSON.
+kinema.representation.encode turns them into model features; kinema.constraints.io reads/writes JSON.
 Errors are `ConstraintError` (a `KinemaError`) naming the constraint, the field and the reason.
 """
 
@@ -200,7 +200,7 @@ class FullBodyConstraint(Constraint):
     skeleton's joint order (parent frame -> joint frame, all zeros = rest pose).
     ``root_positions (K, 3)``: world position of the root joint (metres).
     ``smooth_root_2d (K, 2)``: optional smoothed-root (x, z); without it the pelvis ground projection
-    stands in (see kinema.constraints.encode).
+    stands in (see kinema.representation.encode).
     """
 
     kind: ClassVar[str] = "fullbody"

@@ -24,7 +24,7 @@ from kinema.errors import KinemaError
 from kinema.evaluate import metrics as M
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
 from kinema.motion.core import Motion
-from kinema.motion.features import motion_to_features
+from kinema.representation.kimodo import motion_to_features
 
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")
