@@ -37,8 +37,14 @@ class FeatureLayout:
     @property
     def slices(self) -> dict[str, slice]:
         J = self.num_joints
-        edges = {"root_pos": 3, "heading": 2, "joint_pos": 3 * J, "joint_vel": 3 * J, "joint_rot": 6 * J,
-                 "contacts": CONTACT_DIM}
+        edges = {
+            "root_pos": 3,
+            "heading": 2,
+            "joint_pos": 3 * J,
+            "joint_vel": 3 * J,
+            "joint_rot": 6 * J,
+            "contacts": CONTACT_DIM,
+        }
         out, start = {}, 0
         for name, size in edges.items():
             out[name] = slice(start, start + size)
@@ -109,7 +115,8 @@ class FeatureLayout:
         return pairs
 
     def to_dict(self) -> dict:
-        return {"num_joints": self.num_joints, "dim": self.dim,
-                "slices": {k: [v.start, v.stop] for k, v in self.slices.items()}}
-
-
+        return {
+            "num_joints": self.num_joints,
+            "dim": self.dim,
+            "slices": {k: [v.start, v.stop] for k, v in self.slices.items()},
+        }

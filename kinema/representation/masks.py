@@ -82,9 +82,7 @@ def root2d_mask(T: int, frames: Frames, layout: FeatureLayout, heading: bool = F
     return _mask(T, layout, frames, layout.root_xz + (layout.group("heading") if heading else []))
 
 
-def root_path_mask(
-    T: int, start: int, end: int, layout: FeatureLayout, heading: bool = False
-) -> torch.Tensor:
+def root_path_mask(T: int, start: int, end: int, layout: FeatureLayout, heading: bool = False) -> torch.Tensor:
     """(T, D): root_pos x/z (and heading) on every frame of ``[start, end)`` (a dense 2D path)."""
     if not 0 <= start <= end <= T:
         raise KinemaError(f"root path [{start}, {end}) does not fit a {T}-frame motion")
