@@ -10,13 +10,13 @@ Their encoding as model features lives with the representation (kinema.represent
 imports this package, never the reverse.
 """
 
-from kinema.constraints.fps import ConstraintWarning
 from kinema.constraints.io import constraint_to_json, dumps_constraints, load_constraints, save_constraints
 from kinema.constraints.kimodo import KIMODO_FPS, KimodoMeta, find_kimodo_meta, read_kimodo_meta
 from kinema.constraints.types import (
     CONTACT_NAMES,
     Constraint,
     ConstraintError,
+    ConstraintWarning,
     EndEffectorConstraint,
     FootContactConstraint,
     FullBodyConstraint,
