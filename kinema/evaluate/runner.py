@@ -179,7 +179,7 @@ def _post(model, motion: Motion, case: dict) -> Motion:
 
     cons = load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames) \
         if case["constraints"] else []
-    return run_postprocess(motion, cons, model)[0]
+    return run_postprocess(motion, cons, model.representation)[0]
 
 
 def _guidance_meta(model, guidance):
