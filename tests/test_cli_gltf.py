@@ -53,6 +53,7 @@ def test_inspect_shows_tree_rig_and_clips(rig, capsys):
     out = capsys.readouterr().out
     assert "armature scale 100 applied" in out and "helper joints dropped (no skin weight): Pole" in out
     assert "  Armature\n  ├─ Body\n  │  ├─ Neck\n  │  │  └─ Head\n  │  └─ Leg\n  └─ Foot" in out
+    assert "roles found by name: " in out and "head=Head" in out
     assert "contact joints" in out and "Rig|Move" in out and "5 frames @ 4 fps" in out  # keys every 0.25 s
 
 
