@@ -244,8 +244,11 @@ def creature_captions(path: str | PurePath, clip_name: str, *, in_place: bool = 
     noun = subject_for(path)
     action = clean_clip_name(clip_name)
     subjects = (f"{_article(noun)} {noun}", f"The {noun}")
+    phrases = action_phrases(action)
+    if in_place and action in LOCOMOTION:  # a clip animated on the spot does not go "forward"
+        phrases = tuple(p for p in phrases if "forward" not in p) or phrases[:1]
     out = []
-    for i, phrase in enumerate(action_phrases(action)):
+    for i, phrase in enumerate(phrases):
         out.append(f"{subjects[i % 2]} {phrase}.")
     if in_place and action in LOCOMOTION:
         out.append(f"{subjects[0]} {action_phrases(action)[0]} in place.")

@@ -23,7 +23,7 @@ from kinema.data.build import _prepare_out
 from kinema.data.folder_flat import flat_blocker, write_flat
 from kinema.data.multirig_build import Description, assemble, counts, write_build
 from kinema.data.sidecar import CaptionSource
-from kinema.data.sources import SUFFIXES, SourceFile, list_sources, load_source, units_message
+from kinema.data.sources import SUFFIXES, SourceFile, list_sources, load_source, units_messages
 from kinema.errors import DataError
 from kinema.motion.core import Motion
 
@@ -85,7 +85,7 @@ def build_folder(
         raise DataError(_missing_message(root, asm.uncaptioned))
     if not asm.writer.clips:
         raise DataError(f"{root}: no captioned clips left to build from")
-    messages = [m for m in [units_message(files, units)] if m]
+    messages = units_messages(files, units)
     messages += [f"skipped (no captions): {c}" for c in asm.uncaptioned]
     messages += [f"caption entry matches no clip: {k}" for k in captions.unused_keys()]
     messages += [f"{f.rel}: {w}" for f in files for w in f.warnings]

@@ -118,12 +118,12 @@ def load_source(path: Path, root: Path, *, fps: float, units: str = "auto") -> S
         raise DataError(f"{path}: {exc}") from None
 
 
-def units_message(files: list[SourceFile], given: str) -> str | None:
+def units_messages(files: list[SourceFile], given: str) -> list[str]:
     """One line per detected unit for the BVH files of a build, e.g. "detected centimetres from a
-    170-unit-tall first frame (walk.bvh, 12 files); pass --units m to override"; None when units
+    170-unit-tall first frame (walk.bvh, 12 files); pass --units m to override"; none when units
     were given or no BVH was read."""
     if given != "auto":
-        return None
+        return []
     lines = []
     for unit in UNITS:
         group = [f for f in files if f.kind == "bvh" and f.units == unit]
@@ -138,4 +138,4 @@ def units_message(files: list[SourceFile], given: str) -> str | None:
             f"detected {UNIT_WORDS[unit]} from a {size:.3g}-unit-{shape} first frame ({f.rel}{more}); "
             f"pass --units {other} to override"
         )
-    return "\n".join(lines) or None
+    return lines

@@ -160,17 +160,17 @@ def assign_rig_splits(rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1)) -> d
     if len(ranked) < 3:
         return result
     total = max(1, sum(rig_clips.values()))
-    for split, frac in (("test", f_test), ("val", f_val)):
-        if frac <= 0:
-            continue
-        free = [r for r in ranked if result[r] == "train"]
+    held = [(split, frac) for split, frac in (("test", f_test), ("val", f_val)) if frac > 0]
+    for k, (split, frac) in enumerate(held):
+        reserve = len(held) - k  # rigs still needed: one per later held-out split, one for train
         taken = 0
-        for r in free:
-            if taken / total >= frac or sum(v == "train" for v in result.values()) <= 1:
+        for r in [r for r in ranked if result[r] == "train"]:
+            if taken / total >= frac or sum(v == "train" for v in result.values()) <= reserve:
                 break
             if (taken + rig_clips[r]) / total <= 2 * frac:
                 result[r] = split
                 taken += rig_clips[r]
-        if taken == 0 and sum(v == "train" for v in result.values()) > 1:
+        free = [r for r in ranked if result[r] == "train"]
+        if taken == 0 and len(free) > reserve:
             result[min(free, key=lambda r: (rig_clips[r], _unit(r, "rig"), r))] = split
     return result
