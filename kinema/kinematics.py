@@ -1,7 +1,8 @@
 """Forward kinematics: local rotations + root translation -> global rotations and joint positions.
 
 Batched over any leading axes and differentiable. Shapes: local rotations ``(..., J, 4)`` wxyz,
-root translation ``(..., 3)`` metres, offsets ``(J, 3)`` metres, parents length J (root -1).
+root translation ``(..., 3)`` metres, offsets ``(J, 3)`` metres (or per frame ``(..., J, 3)``), parents
+length J (root -1).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def forward_kinematics(
             pos.append(root_translation.to(local_rotations.dtype))
         else:
             rots.append(quat_mul(rots[p], local_rotations[..., j, :]))
-            pos.append(pos[p] + quat_rotate(rots[p], offsets[j].expand_as(pos[p])))
+            pos.append(pos[p] + quat_rotate(rots[p], offsets[..., j, :].expand_as(pos[p])))
     return torch.stack(rots, dim=-2), torch.stack(pos, dim=-2)
 
 

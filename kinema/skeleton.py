@@ -13,11 +13,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import torch
 
 from kinema import naming
 from kinema.errors import SkeletonError
+
+if TYPE_CHECKING:
+    from kinema.mesh import SkinnedMesh
 
 #: Roles every locomotion feature needs (see kinema.motion.features).
 LOCOMOTION_ROLES = ("pelvis", "left_hip", "right_hip", "left_ankle", "right_ankle", "left_toe", "right_toe")
@@ -34,6 +38,7 @@ class Skeleton:
     end_sites: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     role_overrides: dict[str, str] = field(default_factory=dict)
     name: str = ""
+    mesh: SkinnedMesh | None = None  # the rig's skin (from a GLB), carried to written GLBs; not serialised
 
     def __init__(
         self,
@@ -44,6 +49,7 @@ class Skeleton:
         end_sites: Mapping[int, Sequence[float]] | None = None,
         role_overrides: Mapping[str, str] | None = None,
         name: str = "",
+        mesh: SkinnedMesh | None = None,
     ):
         self.names = tuple(str(n) for n in names)
         self.parents = tuple(int(p) for p in parents)
@@ -54,6 +60,7 @@ class Skeleton:
         self.end_sites = {int(k): tuple(float(x) for x in v) for k, v in (end_sites or {}).items()}
         self.role_overrides = dict(role_overrides or {})
         self.name = name
+        self.mesh = mesh
         self._validate()
 
     # ------------------------------------------------------------------ validation and basics
@@ -79,6 +86,8 @@ class Skeleton:
                 )
         if not torch.isfinite(self.offsets).all():
             raise SkeletonError("offsets contain NaN or inf")
+        if self.mesh is not None and self.mesh.max_joint() >= J:
+            raise SkeletonError(f"mesh is skinned to joint {self.mesh.max_joint()} but the skeleton has {J} joints")
         for role, joint in self.role_overrides.items():
             if joint not in self.names:
                 raise SkeletonError(f"role override {role!r} names unknown joint {joint!r}")
@@ -230,16 +239,36 @@ class Skeleton:
                 new_rest[0] = quat_mul(self.rest_rotations[a], new_rest[0])
         overrides = {r: n for r, n in self.role_overrides.items() if self.index(n) in old_to_new}
         ends = {old_to_new[j]: v for j, v in self.end_sites.items() if j in old_to_new}
+        # the skin stays valid when the rest pose is unchanged (folding rest rotations) and no weighted joint goes
+        same_rest = fold_rotations is None or (
+            self.rest_rotations is not None and torch.allclose(fold_rotations.double(), self.rest_rotations)
+        )
+        mesh = self.mesh.remap_joints(keep) if self.mesh is not None and same_rest else None
         new = Skeleton(
-            [self.names[j] for j in keep], new_parents, torch.stack(new_offsets), new_rest, ends, overrides, self.name
+            [self.names[j] for j in keep],
+            new_parents,
+            torch.stack(new_offsets),
+            new_rest,
+            ends,
+            overrides,
+            self.name,
+            mesh,
         )
         return new, keep
 
     def scaled(self, factor: float) -> Skeleton:
         """The same skeleton with every length multiplied by ``factor``."""
         ends = {j: tuple(factor * x for x in v) for j, v in self.end_sites.items()}
+        mesh = None if self.mesh is None else self.mesh.scaled(factor)
         return Skeleton(
-            self.names, self.parents, self.offsets * factor, self.rest_rotations, ends, self.role_overrides, self.name
+            self.names,
+            self.parents,
+            self.offsets * factor,
+            self.rest_rotations,
+            ends,
+            self.role_overrides,
+            self.name,
+            mesh,
         )
 
     # ------------------------------------------------------------------ serialisation

@@ -2,7 +2,8 @@
 
 Keys: ``joint_names`` (J,) str, ``parents`` (J,) int, ``fps`` float, ``positions`` (T, J, 3) global
 joint positions in metres Y-up, ``local_quats`` (T, J, 4) wxyz, ``root_translation`` (T, 3) metres,
-``offsets`` (J, 3) metres; optional ``foot_contacts`` (T, 4) [L heel, L toe, R heel, R toe].
+``offsets`` (J, 3) metres; optional ``foot_contacts`` (T, 4) [L heel, L toe, R heel, R toe] and
+``local_translations`` (T, J, 3) metres (animated bone translations, see kinema.motion.core).
 Arrays only, loaded with ``allow_pickle=False``.
 """
 
@@ -41,6 +42,8 @@ def save_npz(motion, path: str | Path) -> Path:
     }
     if motion.foot_contacts is not None:
         arrays["foot_contacts"] = motion.foot_contacts.detach().cpu().numpy().astype(np.float32)
+    if motion.local_translations is not None:
+        arrays["local_translations"] = _float32(motion.local_translations)
     for key, arr in arrays.items():
         if arr.dtype.kind == "f" and not np.isfinite(arr).all():
             raise KinemaError(f"{path}: '{key}' does not fit the npz format's float32 (values too large); "
@@ -53,7 +56,8 @@ def save_npz(motion, path: str | Path) -> Path:
 
 def _check_finite(path: Path, data) -> None:
     """Numeric arrays must be finite and fps positive: a one-line error naming the key and where."""
-    for key in ("fps", "offsets", "root_translation", "local_quats", "positions", "foot_contacts"):
+    for key in ("fps", "offsets", "root_translation", "local_quats", "positions", "foot_contacts",
+                "local_translations"):
         if key not in data.files:
             continue
         arr = data[key]
@@ -86,10 +90,14 @@ def load_npz(path: str | Path):
         names = [str(n) for n in data["joint_names"]]
         skel = Skeleton(names, data["parents"].tolist(), data["offsets"])
         contacts = torch.from_numpy(data["foot_contacts"]) if "foot_contacts" in data.files else None
+        trans = None
+        if "local_translations" in data.files:
+            trans = torch.from_numpy(data["local_translations"].astype(np.float32))
         return Motion(
             skel,
             float(data["fps"]),
             torch.from_numpy(data["root_translation"].astype(np.float32)),
             torch.from_numpy(data["local_quats"].astype(np.float32)),
             contacts,
+            trans,
         )

@@ -5,6 +5,9 @@ Shapes and units (the contract every other module relies on):
 - ``local_rotations`` ``(T, J, 4)`` quaternions ``(w, x, y, z)``: full local rotation of each joint
   (parent frame -> joint frame), so all-identity is the skeleton's rest pose.
 - ``foot_contacts`` optional ``(T, 4)`` in [0, 1]: left heel, left toe, right heel, right toe.
+- ``local_translations`` optional ``(T, J, 3)`` metres: each joint's translation in its parent's frame
+  for rigs that animate bone translations (glTF creatures: IK-driven feet, a moving body under a static
+  root); ``None`` means the skeleton's constant offsets. Row 0 is unused (the root is ``root_translation``).
 """
 
 from __future__ import annotations
@@ -17,7 +20,14 @@ from pathlib import Path
 import torch
 
 from kinema.errors import KinemaError
-from kinema.geometry.rotations import quat_inverse, quat_make_continuous, quat_mul, quat_normalize, quat_slerp
+from kinema.geometry.rotations import (
+    quat_inverse,
+    quat_make_continuous,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+    quat_slerp,
+)
 from kinema.kinematics import forward_kinematics
 from kinema.skeleton import Skeleton
 
@@ -31,6 +41,7 @@ class Motion:
     root_translation: torch.Tensor
     local_rotations: torch.Tensor
     foot_contacts: torch.Tensor | None = None
+    local_translations: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
         self.fps = float(self.fps)
@@ -54,6 +65,12 @@ class Motion:
             self.foot_contacts = torch.as_tensor(self.foot_contacts, dtype=self.local_rotations.dtype)
             if self.foot_contacts.shape != (T, 4):
                 raise KinemaError(f"foot_contacts must be ({T}, 4), got {tuple(self.foot_contacts.shape)}")
+        if self.local_translations is not None:
+            self.local_translations = torch.as_tensor(self.local_translations, dtype=self.local_rotations.dtype)
+            if self.local_translations.shape != (T, J, 3):
+                raise KinemaError(
+                    f"local_translations must be ({T}, {J}, 3), got {tuple(self.local_translations.shape)}"
+                )
 
     # ------------------------------------------------------------------ basics
     @property
@@ -78,9 +95,8 @@ class Motion:
 
     def global_transforms(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(global rotations (T, J, 4), global positions (T, J, 3)) by forward kinematics."""
-        return forward_kinematics(
-            self.local_rotations, self.root_translation, self.skeleton.offsets, self.skeleton.parents
-        )
+        offsets = self.skeleton.offsets if self.local_translations is None else self.local_translations
+        return forward_kinematics(self.local_rotations, self.root_translation, offsets, self.skeleton.parents)
 
     @property
     def positions(self) -> torch.Tensor:
@@ -94,23 +110,36 @@ class Motion:
 
     def to(self, dtype: torch.dtype) -> Motion:
         contacts = None if self.foot_contacts is None else self.foot_contacts.to(dtype)
+        trans = None if self.local_translations is None else self.local_translations.to(dtype)
         return replace(
             self,
             root_translation=self.root_translation.to(dtype),
             local_rotations=self.local_rotations.to(dtype),
             foot_contacts=contacts,
+            local_translations=trans,
         )
 
     @classmethod
     def from_global(
-        cls, skeleton: Skeleton, fps: float, root_translation, global_rotations, foot_contacts=None
+        cls, skeleton: Skeleton, fps: float, root_translation, global_rotations, foot_contacts=None, positions=None
     ) -> Motion:
-        """Build a motion from global rotations (T, J, 4): ``L_j = G_parent^-1 G_j``."""
+        """Build a motion from global rotations (T, J, 4): ``L_j = G_parent^-1 G_j``.
+
+        With global ``positions`` (T, J, 3) the bone translations are solved too
+        (``t_j = G_parent^-1 (p_j - p_parent)``) and kept as ``local_translations`` when they differ from
+        the skeleton's offsets by more than 1e-6 m."""
         G = torch.as_tensor(global_rotations)
         parents = [max(p, 0) for p in skeleton.parents]
         local = quat_mul(quat_inverse(G[:, parents]), G)
         local[:, 0] = G[:, 0]
-        return cls(skeleton, fps, root_translation, quat_normalize(local), foot_contacts)
+        trans = None
+        if positions is not None:
+            P = torch.as_tensor(positions).to(G.dtype)
+            trans = quat_rotate(quat_inverse(G[:, parents]), P - P[:, parents])
+            trans[:, 0] = skeleton.offsets[0].to(G.dtype)
+            if (trans - skeleton.offsets.to(G.dtype)).abs().max() <= 1e-6:
+                trans = None
+        return cls(skeleton, fps, root_translation, quat_normalize(local), foot_contacts, trans)
 
     # ------------------------------------------------------------------ time edits
     def crop(self, start: int = 0, end: int | None = None) -> Motion:
@@ -119,11 +148,13 @@ class Motion:
         if len(range(self.num_frames)[sl]) == 0:
             raise KinemaError(f"crop [{start}, {end}) of a {self.num_frames}-frame motion is empty")
         contacts = None if self.foot_contacts is None else self.foot_contacts[sl]
+        trans = None if self.local_translations is None else self.local_translations[sl]
         return replace(
             self,
             root_translation=self.root_translation[sl],
             local_rotations=self.local_rotations[sl],
             foot_contacts=contacts,
+            local_translations=trans,
         )
 
     def resample(self, fps: float, *, keep_duration: bool = False) -> Motion:
@@ -158,7 +189,12 @@ class Motion:
         contacts = None
         if self.foot_contacts is not None:
             contacts = self.foot_contacts[torch.where(w < 0.5, lo, hi)]
-        return Motion(self.skeleton, fps, root, quat_normalize(rots), contacts)
+        trans = None
+        if self.local_translations is not None:
+            trans = (
+                self.local_translations[lo] * (1 - w[:, None, None]) + self.local_translations[hi] * w[:, None, None]
+            )
+        return Motion(self.skeleton, fps, root, quat_normalize(rots), contacts, trans)
 
     def concatenate(self, other: Motion) -> Motion:
         """This motion followed by ``other`` (same skeleton topology and fps)."""
@@ -169,13 +205,23 @@ class Motion:
         contacts = None
         if self.foot_contacts is not None and other.foot_contacts is not None:
             contacts = torch.cat([self.foot_contacts, other.foot_contacts])
+        trans = None
+        if self.local_translations is not None or other.local_translations is not None:
+            trans = torch.cat([self.translations_or_offsets(), other.translations_or_offsets().to(self.dtype)])
         return Motion(
             self.skeleton,
             self.fps,
             torch.cat([self.root_translation, other.root_translation.to(self.dtype)]),
             torch.cat([self.local_rotations, other.local_rotations.to(self.dtype)]),
             contacts,
+            trans,
         )
+
+    def translations_or_offsets(self) -> torch.Tensor:
+        """(T, J, 3) bone translations: ``local_translations`` or the skeleton offsets repeated."""
+        if self.local_translations is not None:
+            return self.local_translations
+        return self.skeleton.offsets.to(self.dtype).expand(self.num_frames, -1, -1).clone()
 
     # ------------------------------------------------------------------ skeleton edits
     def prune(self, drop: list[str], tolerance: float = 1e-3) -> Motion:
@@ -189,7 +235,8 @@ class Motion:
             return self
         G, P = self.global_transforms()
         skel, keep = self.skeleton.prune(drop, fold_rotations=self.local_rotations[0].double())
-        out = Motion.from_global(skel, self.fps, P[:, keep[0]], G[:, keep], self.foot_contacts)
+        positions = None if self.local_translations is None else P[:, keep]
+        out = Motion.from_global(skel, self.fps, P[:, keep[0]], G[:, keep], self.foot_contacts, positions)
         err = (out.positions - P[:, keep]).norm(dim=-1).max().item()
         if err > tolerance:
             warnings.warn(f"pruning {drop} moves kept joints by up to {err * 1000:.1f} mm", stacklevel=2)

@@ -69,4 +69,7 @@ def mirror_motion(motion):
     G_new = quat_mul(mirror_quat_x(G[:, mmap]), B[mmap])
     root = motion.root_translation * _M.to(G.dtype)
     contacts = None if motion.foot_contacts is None else motion.foot_contacts[:, CONTACT_MIRROR]
-    return Motion.from_global(skel, motion.fps, root, G_new, contacts)
+    positions = None
+    if motion.local_translations is not None:  # animated bones: reflect the positions and solve translations
+        positions = motion.positions[:, mmap] * _M.to(G.dtype)
+    return Motion.from_global(skel, motion.fps, root, G_new, contacts, positions)

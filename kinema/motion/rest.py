@@ -44,8 +44,9 @@ def rebase_rest_pose(motion: Motion, rest_local: torch.Tensor | None = None) -> 
     G0 = rest_globals(skel, rest_local).to(motion.dtype)
     G, _ = motion.global_transforms()
     G_new = quat_mul(G, quat_inverse(G0)[None])
+    positions = None if motion.local_translations is None else motion.positions
     return Motion.from_global(clean_skeleton(skel, rest_local), motion.fps, motion.root_translation, G_new,
-                              motion.foot_contacts)
+                              motion.foot_contacts, positions)
 
 
 def standing_rest_pose(motion: Motion, frame: int = 0) -> torch.Tensor:
