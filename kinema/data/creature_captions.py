@@ -250,6 +250,6 @@ def creature_captions(path: str | PurePath, clip_name: str, *, in_place: bool = 
     out = []
     for i, phrase in enumerate(phrases):
         out.append(f"{subjects[i % 2]} {phrase}.")
-    if in_place and action in LOCOMOTION:
-        out.append(f"{subjects[0]} {action_phrases(action)[0]} in place.")
+    if in_place and action in LOCOMOTION:  # "A robot runs in place." (the gait alone, not "while carrying")
+        out.append(f"{subjects[0]} {ACTIONS[action.split('_')[0]][0]} in place.")
     return out

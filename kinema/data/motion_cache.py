@@ -3,7 +3,10 @@
 A cache written by ``kinema data build quaternius`` or ``kinema data build folder`` is a folder::
 
     DIR/motions.safetensors  per rig R: "R/root_translation" (N_R, 3) and "R/local_rotations"
-                             (N_R, J_R, 4) float32, the rig's clips end to end at the cache's fps
+                             (N_R, J_R, 4) float32, the rig's clips end to end at the cache's fps;
+                             "R/local_translations" (N_R, J_R, 3) too when some clip of the rig
+                             animates bone translations (Motion.local_translations; other clips
+                             of that rig store their rest offsets there)
     DIR/clips.json           one record per kept clip: rig, skeleton (a key of skeletons.json),
                              start/length (rows of its rig's tensors), fps, duration_s, captions,
                              flags, path (source file), clip_name, action, hash, duplicates, split
@@ -72,9 +75,14 @@ def rest_extent(skeleton: Skeleton, ignore: Iterable[str] = ()) -> float:
 
 
 def motion_hash(motion: Motion) -> str:
-    """SHA-256 (16 hex digits) of a motion's topology, rotations and root path, rounded to
-    `HASH_DECIMALS`: two clips with the same animation data on the same rig hash the same.
-    Rotations are sign-canonicalised (w >= 0) so q and -q agree."""
+    """SHA-256 (16 hex digits) of a clip's animation data: topology, local rotations and root path in
+    source units (hash before per-file normalisation), rounded to `HASH_DECIMALS`; rotations are
+    sign-canonicalised (w >= 0) so q and -q agree.
+
+    Bone lengths and bone translations are left out: files of one rig with other proportions
+    carry the same animation with translation channels that differ only by their rest offsets
+    (Bull and Cow's Attack_Kick, 20 cute fish's Attack: measured on the shared files), and those
+    count as one clip."""
     q = motion.local_rotations.double()
     q = torch.where(q[..., :1] < 0, -q, q)
     parts = (
@@ -89,9 +97,12 @@ def motion_hash(motion: Motion) -> str:
 
 
 def travel(motion: Motion) -> float:
-    """Largest horizontal (x, z) distance of the joints' centroid from its first-frame position."""
+    """Net horizontal (x, z) distance the joints' centroid moves from the first to the last frame.
+
+    Net rather than largest distance, so a run animated on the spot (whose centroid sways by up
+    to 0.2 body sizes within a stride, measured on the Quaternius runs) reads as ~0."""
     c = motion.positions.mean(dim=1)[:, [0, 2]]
-    return float((c - c[:1]).norm(dim=-1).max())
+    return float((c[-1] - c[0]).norm())
 
 
 @dataclass
@@ -108,6 +119,7 @@ class CacheWriter:
     clips: list[dict] = field(default_factory=list)
     _roots: dict[str, list] = field(default_factory=dict)
     _rots: dict[str, list] = field(default_factory=dict)
+    _trans: dict[str, list] = field(default_factory=dict)
 
     def add_skeleton(self, key: str, skeleton: Skeleton, scale: float, rig_id: str) -> None:
         """Register one source file's skeleton (normalised) under ``key`` on rig ``rig_id``."""
@@ -130,6 +142,7 @@ class CacheWriter:
                 "frames": 0,
                 "seconds": 0.0,
                 "split": None,
+                "animated_translations": False,
             },
         )
         if list(skeleton.names) != rig["names"] or list(skeleton.parents) != rig["parents"]:
@@ -150,6 +163,9 @@ class CacheWriter:
         record["duration_s"] = motion.num_frames / self.fps
         roots.append(motion.root_translation.to(torch.float32))
         rots.append(motion.local_rotations.to(torch.float32))
+        self._trans.setdefault(rig_id, []).append(motion.translations_or_offsets().to(torch.float32))
+        if motion.local_translations is not None:
+            rig["animated_translations"] = True
         rig["frames"] += motion.num_frames
         rig["clips"] += 1
         rig["seconds"] += record["duration_s"]
@@ -162,6 +178,8 @@ class CacheWriter:
             if rig_id in self._roots:
                 out[f"{rig_id}/root_translation"] = torch.cat(self._roots[rig_id]).contiguous()
                 out[f"{rig_id}/local_rotations"] = torch.cat(self._rots[rig_id]).contiguous()
+                if self.rigs[rig_id]["animated_translations"]:
+                    out[f"{rig_id}/local_translations"] = torch.cat(self._trans[rig_id]).contiguous()
         return out
 
     def write(self, folder: Path, meta: dict) -> dict:
@@ -235,7 +253,9 @@ class MotionCache:
         sl = slice(rec["start"], rec["start"] + rec["length"])
         root = self._tensors[f"{rec['rig']}/root_translation"][sl]
         rot = self._tensors[f"{rec['rig']}/local_rotations"][sl]
-        return Motion(self.skeleton(rec["skeleton"]), self.fps, root, rot)
+        trans = self._tensors.get(f"{rec['rig']}/local_translations")
+        trans = None if trans is None else trans[sl]
+        return Motion(self.skeleton(rec["skeleton"]), self.fps, root, rot, local_translations=trans)
 
     def __len__(self) -> int:
         return len(self.clips)

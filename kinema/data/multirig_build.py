@@ -24,11 +24,16 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
+
 from kinema.data.motion_cache import CacheWriter, motion_hash, rest_extent, topology_key, travel
-from kinema.data.sources import SourceFile
+from kinema.data.sources import SourceFile, scale_motion
 from kinema.data.split import assign_rig_splits, assign_splits
 from kinema.errors import DataError
 from kinema.motion.core import Motion
+
+#: Smallest rest-pose extent (metres) taken as a size; below it the skin's extent is used.
+MIN_EXTENT = 1e-4
 
 
 @dataclass
@@ -76,10 +81,15 @@ def _rig_ids(files: list[SourceFile]) -> dict[str, str]:
 
 
 def file_scale(f: SourceFile) -> float:
-    """Factor that makes the file's rest pose 1 unit across (helper joints ignored)."""
+    """Factor that makes the file's rest pose 1 unit across: the joints' extent (helper joints
+    ignored), or the skin's when the joints sit at one point (a lever's two bones coincide)."""
     extent = rest_extent(f.skeleton, f.helper_joints)
-    if not extent > 1e-9:
-        raise DataError(f"{f.rel}: rest pose has no extent (all joints at one point)")
+    mesh = getattr(f.skeleton, "mesh", None)
+    if extent < MIN_EXTENT and mesh is not None and len(mesh.vertices):
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        extent = float((v.max(0) - v.min(0)).max())
+    if not extent >= MIN_EXTENT:
+        raise DataError(f"{f.rel}: rest pose has no extent (all joints at one point, no skin)")
     return 1.0 / extent
 
 
@@ -97,8 +107,8 @@ def assemble(files: list[SourceFile], fps: float, describe: Describe) -> Assembl
         for name, motion in f.clips.items():
             total += 1
             clip_id = f.rel if f.kind == "bvh" else f"{f.rel}#{name}"
-            m = Motion(skeleton, motion.fps, motion.root_translation * scale, motion.local_rotations)
-            h = motion_hash(m)
+            h = motion_hash(motion)  # source metres: equal animations on differently sized files agree
+            m = scale_motion(motion, scale, skeleton)
             if h in seen:
                 seen[h]["duplicates"].append(clip_id)
                 dropped += 1

@@ -64,16 +64,19 @@ def detect_units(size: float) -> str:
     return "cm" if size > CM_ABOVE else "m"
 
 
-def scale_motion(motion: Motion, factor: float) -> Motion:
-    """The same motion with every length (offsets, end sites, root path) multiplied by ``factor``."""
-    if factor == 1.0:
+def scale_motion(motion: Motion, factor: float, skeleton=None) -> Motion:
+    """The same motion with every length (offsets, end sites, root path, animated bone translations)
+    multiplied by ``factor``; ``skeleton`` may pass the already scaled skeleton to share it."""
+    if factor == 1.0 and skeleton is None:
         return motion
+    trans = None if motion.local_translations is None else motion.local_translations * factor
     return Motion(
-        motion.skeleton.scaled(factor),
+        skeleton if skeleton is not None else motion.skeleton.scaled(factor),
         motion.fps,
         motion.root_translation * factor,
         motion.local_rotations,
         motion.foot_contacts,
+        trans,
     )
 
 
