@@ -12,12 +12,15 @@ import shutil
 from pathlib import Path
 
 import pytest
+import torch
 from gltf_synthetic import write_synthetic_glb
 
 from kinema.cli import main
 from kinema.data.folder import build_folder
 from kinema.data.motion_cache import MotionCache
 from kinema.data.quaternius import build_quaternius
+from kinema.errors import DataError
+from kinema.io.gltf import read_gltf
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("KINEMA_DATASETS") or REPO.parent / "shared/datasets") / "quaternius"
@@ -51,6 +54,11 @@ def test_build_three_files(quaternius_root, tmp_path, capsys) -> None:
     assert m.skeleton.names == tuple(cache.rigs[gallop["rig"]]["names"])
     extent = (m.positions[0].max(0).values - m.positions[0].min(0).values).max()
     assert 0.5 < float(extent) < 2.0  # normalised rest size 1; a gallop frame is about that
+    # the stored motion is the reader's, scaled by the file's factor (bone translations included)
+    source = read_gltf(quaternius_root / "animals_pack" / "Bull.glb", fps=20).motions["AnimalArmature|Attack_Kick"]
+    stored = cache.motion(cache.clips.index(kick))
+    scale = bull["file_scales"]["animals_pack/Bull.glb"]
+    assert torch.allclose(stored.positions.double(), source.positions * scale, atol=1e-5)
     assert main(["data", "stats", str(out)]) == 0
     table = capsys.readouterr().out
     assert "quaternius; 2 rigs" in table and "bull" in table and "flags: in_place" in table
@@ -81,6 +89,19 @@ def test_synthetic_glb_sidecar(tmp_path) -> None:
     cache = MotionCache(tmp_path / "out")
     assert cache.clips[0]["clip_id"] == "thing.glb#Rig|Move" and cache.clips[0]["captions"] == ["A thing moves."]
     assert meta["counts"]["rigs"] == 1 and not meta["trainable"]
+
+
+def test_refuses_foreign_output_before_reading(tmp_path) -> None:
+    out = tmp_path / "notes"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep me")
+    root = tmp_path / "d"
+    root.mkdir()
+    write_synthetic_glb(root / "thing.glb")  # uncaptioned: the output check must come first
+    for build in (build_folder, build_quaternius):
+        with pytest.raises(DataError, match="not empty and is not a kinema dataset build"):
+            build(root, out, progress=False)
+    assert (out / "mine.txt").read_text() == "keep me" and len(list(out.iterdir())) == 1
 
 
 def test_cli_errors(tmp_path, capsys) -> None:

@@ -30,18 +30,20 @@ def register(sub) -> None:
     dsub = p.add_subparsers(dest="data_command", required=True)
 
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
-    b.add_argument("dataset", choices=DATASETS, help="which dataset layout to read")
+    b.add_argument("dataset", choices=DATASETS, help="bandai-namco, quaternius, or folder (your own BVH/GLB files with captions)")
     b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
     b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
-    b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features (default 20)")
+    b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features / motions (default 20)")
     b.add_argument(
         "--limit",
         type=_positive_int,
         default=None,
         help="bandai-namco: a content-balanced subset of N clips; quaternius: the first N files",
     )
-    b.add_argument("--workers", type=_positive_int, default=2, help="worker processes (default 2)")
-    b.add_argument("--no-mirror", dest="mirror", action="store_false", help="do not add left/right mirrored copies")
+    b.add_argument("--workers", type=_positive_int, default=2, help="bandai-namco: worker processes (default 2)")
+    b.add_argument(
+        "--no-mirror", dest="mirror", action="store_false", help="bandai-namco: do not add left/right mirrored copies"
+    )
     b.add_argument(
         "--units",
         choices=("auto", "m", "cm", "mm"),

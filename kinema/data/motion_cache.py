@@ -237,6 +237,19 @@ class MotionCache:
         self._skeleton_dicts: dict[str, dict] = _read(self.dir / "skeletons.json")
         self._skeletons: dict[str, Skeleton] = {}
         self._tensors = _load_tensors(self.dir / "motions.safetensors")
+        self._check()
+
+    def _check(self) -> None:
+        """Every clip names a known rig and skeleton and lies inside its rig's tensors."""
+        for rec in self.clips:
+            try:
+                rows = self._tensors[f"{rec['rig']}/root_translation"].shape[0]
+                ok = rec["skeleton"] in self._skeleton_dicts and 0 <= rec["start"] and rec["length"] > 0
+                ok = ok and rec["start"] + rec["length"] <= rows
+            except (KeyError, TypeError):
+                ok = False
+            if not ok:
+                raise DataError(f"{self.dir / 'clips.json'}: bad record {str(rec)[:200]}; rebuild the cache")
 
     def skeleton(self, key: str) -> Skeleton:
         """The (normalised) skeleton stored under ``key`` (a source file)."""
