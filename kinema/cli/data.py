@@ -30,7 +30,9 @@ def register(sub) -> None:
     dsub = p.add_subparsers(dest="data_command", required=True)
 
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
-    b.add_argument("dataset", choices=DATASETS, help="bandai-namco, quaternius, or folder (your own BVH/GLB files with captions)")
+    b.add_argument(
+        "dataset", choices=DATASETS, help="bandai-namco, quaternius, or folder (your own BVH/GLB files with captions)"
+    )
     b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
     b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
     b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features / motions (default 20)")
