@@ -45,3 +45,39 @@ def test_bandai_build_joins_through_a_manifest(tiny_data, tmp_path, capsys) -> N
     assert main(["data", "stats", str(manifest)]) == 0
     out = capsys.readouterr().out
     assert "bandai-namco" in out and "1 rigs (21-21 joints)" in out
+
+
+def _chain(joints: int, seed: int, frames: int = 10) -> Motion:
+    """A random chain motion (metres, 20 fps) on a ``joints``-joint skeleton named by its size."""
+    from kinema.geometry.rotations import quat_normalize
+    from kinema.skeleton import Skeleton
+
+    g = torch.Generator().manual_seed(seed)
+    skel = Skeleton([f"j{i}" for i in range(joints)], [-1] + list(range(joints - 1)), [[0.0, 0.2, 0.0]] * joints)
+    rot = quat_normalize(torch.randn(frames, joints, 4, generator=g, dtype=torch.float64))
+    return Motion(skel, 20.0, torch.zeros(frames, 3, dtype=torch.float64), rot)
+
+
+def test_assemble_rigs_dedup_and_prop_rigs_stay_in_train(tmp_path) -> None:
+    from pathlib import Path
+
+    from kinema.data.multirig_build import Description, assemble
+    from kinema.data.sources import SourceFile
+
+    files = [SourceFile(Path(f"{j}.bvh"), f"r{j}.bvh", "bvh", {"a": _chain(j, j)}) for j in range(2, 9)]
+    files.append(SourceFile(Path("copy.bvh"), "copy.bvh", "bvh", {"a": _chain(5, 5)}))  # same data as r5
+    # counted like the others, rig "zz-lever" would be the val rig (checked): the prop rule keeps it in train
+    files.append(SourceFile(Path("zz-lever.bvh"), "zz-lever.bvh", "bvh", {"on": _chain(9, 1)}))
+
+    def describe(f, name, motion, travel):
+        return Description([f"{f.rel} moves."], flags=["prop"] if f.rel == "zz-lever.bvh" else [])
+
+    asm = assemble(files, 20.0, describe)
+    w = asm.writer
+    assert asm.duplicates == 1 and len(w.clips) == 8 and asm.total_clips == 9
+    assert next(r for r in w.clips if r["path"] == "r5.bvh")["duplicates"] == ["copy.bvh"]
+    assert len(w.rigs) == 8 and w.rigs["r5"]["files"] == ["r5.bvh", "copy.bvh"]
+    assert w.rigs["zz-lever"]["split"] == "train"  # props are never the held-out rig
+    assert {"val", "test"} <= {r["split"] for r in w.rigs.values()}
+    for rec in w.clips:
+        assert rec["split"] == w.rigs[rec["rig"]]["split"]

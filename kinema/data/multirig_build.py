@@ -140,15 +140,19 @@ def assemble(files: list[SourceFile], fps: float, describe: Describe) -> Assembl
 
 
 def _assign(writer: CacheWriter) -> str:
-    """Set every rig's and clip's split; returns the rule used, for meta.json."""
-    counts = {r: rig["clips"] for r, rig in writer.rigs.items() if rig["clips"]}
+    """Set every rig's and clip's split; returns the rule used, for meta.json. Clips flagged
+    ``prop`` do not count, and rigs with only props stay in train: a held-out lever says nothing."""
+    counts: dict[str, int] = {}
+    for rec in writer.clips:
+        if "prop" not in rec["flags"]:
+            counts[rec["rig"]] = counts.get(rec["rig"], 0) + 1
     if len(counts) >= 3:
         by_rig = assign_rig_splits(counts)
         for rid, rig in writer.rigs.items():
             rig["split"] = by_rig.get(rid, "train")
         for rec in writer.clips:
-            rec["split"] = by_rig[rec["rig"]]
-        return "kinema.data.split.assign_rig_splits: whole rigs, about 80/10/10 of clips"
+            rec["split"] = writer.rigs[rec["rig"]]["split"]
+        return "kinema.data.split.assign_rig_splits over non-prop clips: whole rigs, about 80/10/10 of clips"
     by_clip = assign_splits([(r["clip_id"], r["rig"]) for r in writer.clips])
     for rec in writer.clips:
         rec["split"] = by_clip[rec["clip_id"]]
