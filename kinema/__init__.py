@@ -12,12 +12,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from kinema import io  # noqa: F401  (torch-free: registers the file formats Motion.save reaches)
+from kinema.io import load_motion
+
 __version__ = "0.1.0"
 __all__ = ["load_model", "load_motion", "Motion", "Skeleton", "__version__"]
 
 if TYPE_CHECKING:  # pragma: no cover
     from kinema.generate.api import load_model
-    from kinema.motion.core import Motion, load_motion
+    from kinema.motion.core import Motion
     from kinema.skeleton import Skeleton
 
 
@@ -27,10 +30,10 @@ def __getattr__(name: str):
         from kinema.generate.api import load_model
 
         return load_model
-    if name in ("Motion", "load_motion"):
-        from kinema.motion import core
+    if name == "Motion":
+        from kinema.motion.core import Motion
 
-        return getattr(core, name)
+        return Motion
     if name == "Skeleton":
         from kinema.skeleton import Skeleton
 

@@ -101,3 +101,70 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         np.add.at(out, f[:, k], face_n)
     length = np.linalg.norm(out, axis=1, keepdims=True)
     return np.where(length > 1e-12, out / np.maximum(length, 1e-12), [0.0, 1.0, 0.0])
+
+
+def bone_mesh(skeleton, rest: tuple[np.ndarray, np.ndarray], *, color=(0.75, 0.75, 0.78, 1.0)) -> SkinnedMesh:
+    """A simple generated skin for rigs without one (the BVH human): a tapered box along every bone.
+
+    ``rest`` is (global rotations (J, 4) wxyz, positions (J, 3)) of the rest pose; each box runs from a
+    joint's parent to the joint, is as thick as 12 % of its length (0.5-4 cm) and is bound to the parent
+    with weight 1, so it turns exactly like the bone; each leaf joint gets a box along its End Site (or a
+    3 cm stub), so every joint carries weight. Faces do not share vertices (flat shading).
+    """
+    _, P = rest
+    tris: list[np.ndarray] = []
+    owners: list[int] = []
+    for j, p in enumerate(skeleton.parents):
+        bone = P[j] - P[p] if p >= 0 else None
+        if bone is None or np.linalg.norm(bone) < 1e-6:
+            continue
+        tris.append(_box(P[p], P[j]))
+        owners.append(p)
+    G = rest[0]
+    for j in range(skeleton.num_joints):  # leaves: a box along the End Site, or a 3 cm stub, bound to the leaf
+        if skeleton.children[j]:
+            continue
+        site = np.asarray(skeleton.end_sites.get(j, (0.0, 0.0, 0.0)), dtype=np.float64)
+        if np.linalg.norm(site) < 1e-3:
+            site = np.array([0.0, 0.03, 0.0])
+        w, x, y, z = G[j]
+        rot = np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+        tris.append(_box(P[j], P[j] + rot @ site))
+        owners.append(j)
+    verts = np.concatenate(tris).reshape(-1, 3)
+    faces = np.arange(len(verts)).reshape(-1, 3)
+    joints = np.zeros((len(verts), 4), dtype=np.int64)
+    joints[:, 0] = np.repeat(owners, 36)
+    weights = np.zeros((len(verts), 4), dtype=np.float32)
+    weights[:, 0] = 1.0
+    return SkinnedMesh(
+        verts.astype(np.float32),
+        vertex_normals(verts, faces).astype(np.float32),
+        faces,
+        joints,
+        weights,
+        np.zeros(len(faces), dtype=np.int64),
+        np.asarray([color], dtype=np.float32),
+    )
+
+
+def _box(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(12, 3, 3) triangles of a box from ``a`` to ``b``, wider at ``a``, outward-facing."""
+    d = b - a
+    length = float(np.linalg.norm(d))
+    axis = d / length
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    w = min(max(0.12 * length, 0.005), 0.04)
+    square = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+    c = [a + w * (x * u + y * v) for x, y in square] + [b + 0.5 * w * (x * u + y * v) for x, y in square]
+    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+    return np.array([[c[q[0]], c[q[k]], c[q[k + 1]]] for q in quads for k in (1, 2)])

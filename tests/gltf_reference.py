@@ -67,7 +67,8 @@ def _value(times, values, t, interp, rotation):
 
 
 def world_positions(path, clip: str | None, times) -> dict[str, np.ndarray]:
-    g = pygltflib.GLTF2().load(str(path))
+    """World positions of every skin joint of ``path`` (a file, or an already loaded pygltflib.GLTF2)."""
+    g = path if isinstance(path, pygltflib.GLTF2) else pygltflib.GLTF2().load(str(path))
     anim = None
     if clip is not None:
         anim = next(a for a in g.animations if a.name == clip)

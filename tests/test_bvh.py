@@ -17,7 +17,7 @@ from kinema.cli import main
 from kinema.errors import BVHError, KinemaError
 from kinema.io import bvh
 from kinema.io.bvh import BVHData, parse_bvh, read_bvh
-from kinema.io.bvh_writer import format_bvh, write_bvh
+from kinema.io.bvh_writer import format_bvh, motion_to_bvh_data, write_bvh
 
 
 @pytest.fixture(scope="module")
@@ -225,9 +225,15 @@ def test_static_root_carries_child_translation():
     np.testing.assert_allclose(motion.positions.numpy()[0], ref[0], atol=1e-9)
 
 
-def test_moving_position_channels_warn():
-    with pytest.warns(UserWarning, match="Arm"):
-        bvh.bvh_data_to_motion(parse_bvh(mixed_text(moving_arm=True), source_name="arm.bvh"), scale=0.01)
+def test_moving_position_channels_are_kept(tmp_path):
+    """A non-root joint whose position channels move keeps them per frame (Motion.local_translations):
+    forward kinematics matches the file, and written BVH carries them again."""
+    data = parse_bvh(mixed_text(moving_arm=True), source_name="arm.bvh")
+    motion = bvh.bvh_data_to_motion(data, scale=0.01)
+    assert motion.local_translations is not None
+    np.testing.assert_allclose(motion.positions.numpy(), reference_positions(data, 0.01), atol=1e-9)
+    again = read_bvh(write_bvh(motion, tmp_path / "arm.bvh"))
+    assert (again.positions - motion.positions).abs().max() < 1e-5
 
 
 def test_raw_format_round_trip():
@@ -381,7 +387,7 @@ def test_writer_leaves_no_partial_file(tmp_path):
     text = gzip.decompress((tmp_path / "sub" / "ok.bvh.gz").read_bytes()).decode()
     assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" in text
     assert "End Site" in text and "Frame Time: 0.03333333333" in text
-    raw = bvh.motion_to_bvh_data(motion, order="YXZ")
+    raw = motion_to_bvh_data(motion, order="YXZ")
     assert raw.channels[1] == ["Yrotation", "Xrotation", "Zrotation"] and raw.values.shape == (3, 9)
 
 

@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from kinema.cli import main
+from kinema.io import load_motion
 from kinema.io.bvh import read_bvh
-from kinema.motion.core import load_motion
 
 CLIP = "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_wave-right-hand_normal_002.bvh.gz"
 

@@ -10,7 +10,7 @@ import torch
 
 import kinema
 from kinema.cli import main
-from kinema.motion.core import load_motion
+from kinema.io import load_motion
 
 SHIPPED = Path(str(files("kinema") / "assets" / "models" / "default"))
 

@@ -11,7 +11,7 @@ import torch
 from kinema.cli import main
 from kinema.errors import KinemaError
 from kinema.generate.api import load_model
-from kinema.motion.core import load_motion
+from kinema.io import load_motion
 
 
 @pytest.fixture(scope="module")

@@ -15,8 +15,9 @@ from safetensors.torch import load_file, save
 
 from kinema.cli import main
 from kinema.errors import BVHError, KinemaError
+from kinema.io import load_motion
 from kinema.io.atomic import check_output_path
-from kinema.motion.core import Motion, load_motion
+from kinema.motion.core import Motion
 from tests.test_bvh import GOOD
 from tests.test_motion import random_motion
 
@@ -246,12 +247,12 @@ def test_generate_checks_output_path_before_loading_the_model(tmp_path, capsys, 
 
 
 def test_convert_and_render_check_output_path_first(tmp_path, bvh_file, capsys, monkeypatch):
-    import kinema.motion.core as core
+    import kinema.io as kio
 
     def boom(*a, **k):
         raise AssertionError("the input was read before the bad output was reported")
 
-    monkeypatch.setattr(core, "load_motion", boom)
+    monkeypatch.setattr(kio, "load_motion", boom)
     for out, msg in _bad_outputs(tmp_path, "m.npz"):
         assert main(["convert", str(bvh_file), str(out)]) == 2, out
         one_line_error(capsys, msg)

@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_normalize
-from kinema.motion.core import Motion, load_motion
+from kinema.io import load_motion
+from kinema.motion.core import Motion
 from tests.test_skeleton import SCHEMES, humanoid
 
 

@@ -16,8 +16,9 @@ from PIL import Image, ImageSequence
 
 from kinema.cli import main
 from kinema.errors import KinemaError
+from kinema.io import load_motion
 from kinema.motion.contacts import foot_contacts
-from kinema.motion.core import Motion, load_motion
+from kinema.motion.core import Motion
 from kinema.render import CONTACT_COLOUR, SIDE_COLOURS, TARGET_COLOUR, render_filmstrip, render_gif
 from kinema.skeleton import Skeleton
 

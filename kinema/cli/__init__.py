@@ -24,6 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
         evaluate_retrieval,
         export,
         generate,
+        inspect,
         render,
         serve,
         train,
@@ -31,7 +32,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (generate, convert, data, train, export, bench, render, evaluate, evaluate_retrieval, serve, batch):
+    for module in (
+        generate,
+        convert,
+        inspect,
+        data,
+        train,
+        export,
+        bench,
+        render,
+        evaluate,
+        evaluate_retrieval,
+        serve,
+        batch,
+    ):
         module.register(sub)
     return parser
 

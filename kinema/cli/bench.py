@@ -23,6 +23,8 @@ def register(sub) -> None:
     p = sub.add_parser("bench", help="time kinema's hot paths on real data", description=__doc__)
     targets = p.add_subparsers(dest="target", required=True, metavar="TARGET")
     _register_bvh(targets)
+    _register_gltf(targets)
+    _register_io(targets)
     _register_train(targets)
     _register_train_modes(targets)
     _register_generate(targets)
@@ -129,6 +131,45 @@ def run_bench_bvh(args) -> int:
     for label, n, frames, hours, elapsed, fps, mbps in rows:
         print(f"{label:<10} {n:>6} {frames:>9} {hours:>7.3f} {elapsed:>8.2f} {fps:>8.1f} {mbps:>7.1f}")
     return 0
+
+
+# ----------------------------------------------------------------------------- bench gltf / io
+
+
+def _register_gltf(targets) -> None:
+    p = targets.add_parser("gltf", help="read every *.glb/*.gltf of a folder (container, then rig + clips)",
+                           description="Time kinema.io.gltf over every glTF file under --root (kinema.bench.gltf).")
+    p.add_argument("--root", type=Path, default=None,
+                   help="folder searched recursively (default: ../shared/datasets/quaternius, from the cwd)")
+    p.add_argument("--limit", type=_positive_int, default=None, help="only the first N files (sorted by path)")
+    p.set_defaults(func=run_bench_gltf)
+
+
+def run_bench_gltf(args) -> int:
+    from kinema.bench.gltf import bench_gltf, format_rows, gltf_files
+    from kinema.runtime import configure_threads
+
+    configure_threads(1)
+    root = args.root if args.root is not None else Path.cwd().parent / "shared" / "datasets" / "quaternius"
+    files = gltf_files(root, args.limit)
+    print(format_rows(bench_gltf(files), root, sum(f.stat().st_size for f in files) / 1e6))
+    return 0
+
+
+def _register_io(targets) -> None:
+    p = targets.add_parser("io", help="bench bvh and bench gltf on their default datasets",
+                           description="Both file readers: `bench bvh` (Bandai Namco) then `bench gltf` (Quaternius).")
+    p.add_argument("--bvh-root", type=Path, default=None, help="BVH folder (default ../shared/datasets/bandai-namco)")
+    p.add_argument("--gltf-root", type=Path, default=None, help="glTF folder (default ../shared/datasets/quaternius)")
+    p.add_argument("--limit", type=_positive_int, default=None, help="only the first N files of each")
+    p.set_defaults(func=run_bench_io)
+
+
+def run_bench_io(args) -> int:
+    bvh = argparse.Namespace(root=args.bvh_root, limit=args.limit, scale=0.01, threads=1)
+    run_bench_bvh(bvh)
+    print()
+    return run_bench_gltf(argparse.Namespace(root=args.gltf_root, limit=args.limit))
 
 
 # ----------------------------------------------------------------------------- bench train

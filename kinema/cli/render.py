@@ -2,8 +2,9 @@
 
 A ``.png`` output is a filmstrip of ``--frames`` evenly spaced poses, a ``.gif`` an animation at
 ``--fps`` (see kinema.render for what is drawn and how the camera is chosen). BVH inputs are read in
-the file's unit times ``--scale`` (0.01 for centimetre files such as Bandai Namco); npz files are
-already metres. ``--constraints c.json`` (docs/constraints.md) marks what the constraints ask for:
+the file's unit times ``--scale`` (0.01 for centimetre files such as Bandai Namco); npz and glTF files
+are already metres (``--animation NAME`` picks a glTF clip, default the first). Any rig is drawn.
+``--constraints c.json`` (docs/constraints.md) marks what the constraints ask for:
 end-effector positions and full-body root positions as targets, root waypoints/paths on the ground;
 keyframes given as ``times`` are placed at the motion's fps, ``frame_indices`` are taken as its frames.
 """
@@ -17,7 +18,8 @@ from pathlib import Path
 def register(sub) -> None:
     """Add the `render` sub-command to the top-level parser."""
     p = sub.add_parser("render", help="draw a motion as a filmstrip PNG or an animated GIF")
-    p.add_argument("motion", type=Path, help=".bvh, .bvh.gz or .npz")
+    p.add_argument("motion", type=Path, help=".bvh, .bvh.gz, .npz, .glb or .gltf")
+    p.add_argument("--animation", metavar="NAME", help="glTF input: the clip to draw (default: the first)")
     p.add_argument("--out", type=Path, required=True, help="strip.png (filmstrip) or anim.gif (animation)")
     p.add_argument("--frames", type=int, help="poses in a filmstrip (default 8; PNG only)")
     p.add_argument("--scale", type=float, help="multiply BVH lengths by this to get metres (default 1; 0.01 for cm)")
@@ -31,8 +33,8 @@ def run(args: argparse.Namespace) -> int:
     import math
 
     from kinema.errors import KinemaError
+    from kinema.io import load_motion
     from kinema.io.atomic import check_output_path
-    from kinema.motion.core import load_motion
     from kinema.render import render_filmstrip, render_gif
 
     src: Path = args.motion
@@ -40,15 +42,18 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(f"{src}: no such file")
     name = src.name.lower()
     is_bvh = name.endswith(".bvh") or name.endswith(".bvh.gz")
-    if not (is_bvh or name.endswith(".npz")):
-        raise KinemaError(f"{src}: unknown motion format (use .bvh, .bvh.gz or .npz)")
+    is_gltf = name.endswith(".glb") or name.endswith(".gltf")
+    if not (is_bvh or is_gltf or name.endswith(".npz")):
+        raise KinemaError(f"{src}: unknown motion format (use .bvh, .bvh.gz, .npz, .glb or .gltf)")
+    if args.animation is not None and not is_gltf:
+        raise KinemaError("--animation applies to glTF input only (.glb, .gltf)")
     if src.stat().st_size == 0:
         raise KinemaError(f"{src}: file is empty")
     kind = args.out.suffix.lower()
     if kind not in (".png", ".gif"):
         raise KinemaError(f"{args.out}: output must be .png (filmstrip) or .gif (animation)")
     if args.scale is not None and not is_bvh:
-        raise KinemaError("--scale applies to BVH input only (npz files are in metres)")
+        raise KinemaError("--scale applies to BVH input only (npz and glTF files are in metres)")
     if args.frames is not None and kind == ".gif":
         raise KinemaError("--frames applies to a .png filmstrip only (use --fps for a GIF)")
     if args.fps is not None and kind == ".png":
@@ -58,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(f"--scale must be a positive number, got {scale}")
     check_output_path(args.out)
     try:
-        motion = load_motion(src, scale=scale)
+        motion = load_motion(src, animation=args.animation) if is_gltf else load_motion(src, scale=scale)
     except (EOFError, OSError) as err:  # e.g. a truncated .gz
         raise KinemaError(f"{src}: cannot read ({err})") from None
     targets = None if args.constraints is None else constraint_targets(args.constraints, motion)

@@ -16,18 +16,16 @@ import io
 import math
 import os
 import re
-import warnings
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from kinema.errors import BVHError
-
-if TYPE_CHECKING:
-    from kinema.motion.core import Motion
+from kinema.geometry.rotations import euler_to_quat, quat_rotate
+from kinema.motion.core import Motion
+from kinema.skeleton import Skeleton
 
 #: Channel names as written in files; matching is case-insensitive.
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
@@ -376,23 +374,19 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
       (``ZXY`` means ``R = Rz @ Rx @ Ry``); missing rotation axes count as zero, no rotation
       channels give the identity.
     - Position channels replace the joint's offset (missing axes keep the OFFSET value). A
-      `Skeleton` has constant offsets, so the first frame's values become the offset.
+      `Skeleton` has constant offsets, so the first frame's values become the offset; channels that
+      move (by more than 1e-6 m) are kept per frame in ``Motion.local_translations``.
     - The root's world position is its position channels (its OFFSET when it has none).
     - When the root has a single child with position channels (Bandai Namco: a static
       ``joint_Root`` whose child ``Hips`` carries the translation), that child's movement is moved
       into ``root_translation``: every joint below the root keeps its exact file position, and only
       the root joint itself is displaced by the child's movement since frame 1 (Bandai's dummy root
       then follows the hips). ``Motion.prune(["joint_Root"])`` removes it exactly.
-    - Any other joint whose position channels move by more than 1 mm (after scaling) gets a
-      warning: its forward kinematics cannot match the file.
     - ``fps = 1 / frame_time``, snapped to the nearest integer when within 0.01 % (``0.0333333``
       is 30 fps).
     """
     import torch
 
-    from kinema.geometry.rotations import euler_to_quat, quat_rotate
-    from kinema.motion.core import Motion
-    from kinema.skeleton import Skeleton
 
     if not (math.isfinite(scale) and scale > 0):
         raise BVHError(f"scale must be a positive number, got {scale}", data.path)
@@ -428,15 +422,12 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
     if carried is not None:
         moved = torch.from_numpy(positions[carried] - positions[carried][:1])
         root = root + quat_rotate(quats[:, 0], moved)
-    for j, p in positions.items():
-        drift = float(np.abs(p - p[:1]).max()) if j not in (0, carried) else 0.0
-        if drift > 1e-3:
-            warnings.warn(
-                f"{data.path}: joint {data.names[j]} has position channels that move by up to "
-                f"{drift * 1000:.1f} mm; its offset is taken from frame 1, so forward kinematics will "
-                "differ from the file",
-                stacklevel=2,
-            )
+    moving = [j for j, p in positions.items() if j not in (0, carried) and float(np.abs(p - p[:1]).max()) > 1e-6]
+    local_t = None
+    if moving:  # bones whose translation is animated (e.g. glTF creatures written by kinema)
+        local_t = torch.from_numpy(np.repeat(offsets[None], T, axis=0))
+        for j in moving:
+            local_t[:, j] = torch.from_numpy(positions[j])
     fps = 1.0 / data.frame_time
     if round(fps) > 0 and abs(fps - round(fps)) <= 1e-4 * fps:
         fps = float(round(fps))
@@ -445,7 +436,7 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
         name = name[: -len(suffix)] if name.lower().endswith(suffix) else name
     ends = {j: tuple(float(x) for x in v * scale) for j, v in data.end_sites.items()}
     skeleton = Skeleton(data.names, data.parents, offsets, end_sites=ends, name=name)
-    return Motion(skeleton, fps, root, quats)
+    return Motion(skeleton, fps, root, quats, None, local_t)
 
 
 def _check_lengths(data: BVHData, scale: float) -> None:
@@ -470,9 +461,3 @@ def _check_lengths(data: BVHData, scale: float) -> None:
         raise BVHError(f"{data.names[j]} {chan} in frame {frame + 1} is {data.values[frame, cols[k][0]]:g} x scale "
                        f"{scale:g}: not a position within {MAX_METRES:g} m", data.path)
 
-
-def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY") -> BVHData:
-    """Raw BVH data for a motion (see kinema.io.bvh_writer, where it lives)."""
-    from kinema.io.bvh_writer import motion_to_bvh_data as convert
-
-    return convert(motion, scale=scale, order=order)

@@ -2,7 +2,8 @@
 `write_bvh` (both, written atomically; a ``.gz`` name is gzip-compressed).
 
 Files are plain, widely readable BVH: the root has ``Xposition Yposition Zposition`` plus three
-rotation channels, every other joint three rotation channels, and each leaf joint an End Site.
+rotation channels, every other joint three rotation channels (plus position channels when the motion
+animates its translation, ``Motion.local_translations``), and each leaf joint an End Site.
 Lengths are written as ``metres * scale``: the default ``scale=1`` writes metres, which Blender's
 BVH importer (scale 1.0) brings in at the right size; ``scale=100`` writes centimetres.
 """
@@ -13,17 +14,16 @@ import gzip
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_to_euler
 from kinema.io.atomic import atomic_write_bytes
 from kinema.io.bvh import BVHData
-
-if TYPE_CHECKING:
-    from kinema.motion.core import Motion
+from kinema.motion.core import Motion
+from kinema.motion.rest import rebase_rest_pose
 
 _EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
@@ -34,8 +34,6 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
     Raises `KinemaError` (before anything is written) for a non-finite motion, a bad scale or
     order, or joint names that cannot appear in a BVH file.
     """
-    from kinema.geometry.rotations import quat_to_euler
-
     order = order.upper()
     if order not in _EULER_ORDERS:
         raise KinemaError(f"bad Euler order {order!r}; use one of {', '.join(_EULER_ORDERS)}")
@@ -52,7 +50,16 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
     degrees = torch.rad2deg(quat_to_euler(quats, order)).numpy().reshape(T, J * 3)
     root = motion.root_translation.detach().to("cpu", torch.float64).numpy() * scale
     rot_names = [f"{axis}rotation" for axis in order]
-    channels = [["Xposition", "Yposition", "Zposition", *rot_names]] + [list(rot_names) for _ in range(J - 1)]
+    pos_names = ["Xposition", "Yposition", "Zposition"]
+    columns = [root, degrees[:, :3]]
+    channels = [[*pos_names, *rot_names]]
+    trans = None if motion.local_translations is None else motion.local_translations.detach().to("cpu", torch.float64)
+    for j in range(1, J):
+        moves = trans is not None and bool((trans[:, j] - sk.offsets[j]).abs().max() > 1e-9)
+        channels.append([*pos_names, *rot_names] if moves else list(rot_names))
+        if moves:
+            columns.append(trans[:, j].numpy() * scale)
+        columns.append(degrees[:, 3 * j : 3 * j + 3])
     has_child = {p for p in sk.parents if p >= 0}
     end_sites = {
         j: np.asarray(sk.end_sites.get(j, (0.0, 0.0, 0.0)), dtype=np.float64) * scale
@@ -66,7 +73,7 @@ def motion_to_bvh_data(motion: Motion, *, scale: float = 1.0, order: str = "ZXY"
         channels=channels,
         end_sites=end_sites,
         frame_time=1.0 / motion.fps,
-        values=np.concatenate([root, degrees], axis=1),
+        values=np.concatenate(columns, axis=1),
         path="",
     )
 
@@ -138,3 +145,10 @@ def write_bvh(
         payload = gzip.compress(payload, compresslevel=6, mtime=0)
     atomic_write_bytes(path, payload)
     return path
+
+
+def save_bvh(motion: Motion, path: str | os.PathLike, *, clean_rest: bool = True, **options) -> Path:
+    """The registry's ``.bvh``/``.bvh.gz`` writer: :func:`write_bvh` of the motion re-based so that its
+    rest pose is the skeleton's clean standing pose when it carries ``rest_rotations``
+    (kinema.motion.rest; joint positions unchanged). ``options``: ``scale``, ``order``, ``precision``."""
+    return write_bvh(rebase_rest_pose(motion) if clean_rest else motion, path, **options)

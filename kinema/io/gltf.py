@@ -33,7 +33,7 @@ from kinema.mesh import SkinnedMesh, vertex_normals
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
-__all__ = ["GltfAsset", "GltfError", "read_gltf", "load_document"]
+__all__ = ["GltfAsset", "GltfError", "load_document", "load_gltf_motion", "read_gltf"]
 
 _SCALE_TOL = 1e-3
 
@@ -343,3 +343,11 @@ def read_gltf(
     }
     warns += [f"scale animation of joint {n} (up to {100 * a:.1f} %) is ignored" for n, a in scaled.items()]
     return GltfAsset(path, skeleton, motions, source_fps, rig.root_scale, helpers, tuple(warns))
+
+
+def load_gltf_motion(path: str | Path, *, animation: str | None = None, fps: float | None = None) -> Motion:
+    """One clip of a glTF file as a Motion (the format registry's reader): ``animation`` by name, else the first."""
+    asset = read_gltf(path, fps=fps, animations=None if animation is None else [animation])
+    if not asset.motions:
+        raise GltfError(f"{path}: has no animations")
+    return next(iter(asset.motions.values()))

@@ -119,5 +119,9 @@ def read_parts(buffers: GltfBuffers, world: np.ndarray, parent: dict[int, int], 
             if "NORMAL" in attrs:
                 nr = np.einsum("vab,vb->va", m[:, :3, :3], attrs["NORMAL"].astype(np.float64))
                 normals = nr / np.linalg.norm(nr, axis=1, keepdims=True).clip(min=1e-12)
-            parts.append(RawPart(verts, normals, faces, nodes, w, _color(gltf, prim)))
+            # keep only the vertices this primitive's triangles use (primitives may share one vertex array)
+            used, faces = np.unique(faces, return_inverse=True)
+            normals = None if normals is None else normals[used]
+            part = RawPart(verts[used], normals, faces.reshape(-1, 3), nodes[used], w[used], _color(gltf, prim))
+            parts.append(part)
     return parts

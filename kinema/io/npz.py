@@ -2,7 +2,8 @@
 
 Keys: ``joint_names`` (J,) str, ``parents`` (J,) int, ``fps`` float, ``positions`` (T, J, 3) global
 joint positions in metres Y-up, ``local_quats`` (T, J, 4) wxyz, ``root_translation`` (T, 3) metres,
-``offsets`` (J, 3) metres; optional ``foot_contacts`` (T, 4) [L heel, L toe, R heel, R toe] and
+``offsets`` (J, 3) metres; optional ``foot_contacts`` (T, C), one column per contact joint of the rig
+(human: [L heel, L toe, R heel, R toe]), and
 ``local_translations`` (T, J, 3) metres (animated bone translations, see kinema.motion.core).
 Arrays only, loaded with ``allow_pickle=False``.
 """
@@ -10,6 +11,7 @@ Arrays only, loaded with ``allow_pickle=False``.
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +19,8 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_write_bytes
+from kinema.motion.core import Motion
+from kinema.skeleton import Skeleton
 
 REQUIRED_KEYS = ("joint_names", "parents", "fps", "local_quats", "root_translation", "offsets")
 
@@ -26,7 +30,7 @@ def _float32(t: torch.Tensor) -> np.ndarray:
         return t.detach().cpu().numpy().astype(np.float32)
 
 
-def save_npz(motion, path: str | Path) -> Path:
+def save_npz(motion: Motion, path: str | Path) -> Path:
     """Write a Motion as ``.npz`` atomically (compressed)."""
     if not motion.is_finite():
         raise KinemaError(f"{path}: motion contains NaN or inf values; nothing written")
@@ -72,11 +76,11 @@ def _check_finite(path: Path, data) -> None:
         raise KinemaError(f"{path}: 'fps' must be one positive number, got {fps.tolist()}")
 
 
-def load_npz(path: str | Path):
-    """Read a kinema ``.npz`` motion; missing keys or bad shapes raise KinemaError naming the key."""
-    from kinema.motion.core import Motion
-    from kinema.skeleton import Skeleton
-
+def load_npz(path: str | Path, *, scale: float = 1.0) -> Motion:
+    """Read a kinema ``.npz`` motion (lengths multiplied by ``scale``, which is 1 for files kinema
+    wrote: they are in metres); missing keys or bad shapes raise KinemaError naming the key."""
+    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+        raise KinemaError(f"scale must be a positive number, got {scale!r}")
     path = Path(path)
     try:
         data = np.load(path, allow_pickle=False)
@@ -88,7 +92,7 @@ def load_npz(path: str | Path):
             raise KinemaError(f"{path}: missing keys {missing} (see docs/formats.md)")
         _check_finite(path, data)
         names = [str(n) for n in data["joint_names"]]
-        skel = Skeleton(names, data["parents"].tolist(), data["offsets"])
+        skel = Skeleton(names, data["parents"].tolist(), data["offsets"] * scale)
         contacts = torch.from_numpy(data["foot_contacts"]) if "foot_contacts" in data.files else None
         trans = None
         if "local_translations" in data.files:
@@ -96,7 +100,7 @@ def load_npz(path: str | Path):
         return Motion(
             skel,
             float(data["fps"]),
-            torch.from_numpy(data["root_translation"].astype(np.float32)),
+            torch.from_numpy(data["root_translation"].astype(np.float32) * np.float32(scale)),
             torch.from_numpy(data["local_quats"].astype(np.float32)),
             contacts,
             trans,

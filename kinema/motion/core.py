@@ -4,7 +4,8 @@ Shapes and units (the contract every other module relies on):
 - ``root_translation`` ``(T, 3)`` metres: world position of the root joint, Y up.
 - ``local_rotations`` ``(T, J, 4)`` quaternions ``(w, x, y, z)``: full local rotation of each joint
   (parent frame -> joint frame), so all-identity is the skeleton's rest pose.
-- ``foot_contacts`` optional ``(T, 4)`` in [0, 1]: left heel, left toe, right heel, right toe.
+- ``foot_contacts`` optional ``(T, C)`` in [0, 1], one channel per contact joint of the rig
+  (kinema.rig.Rig.contacts); the human rig has C = 4: left heel, left toe, right heel, right toe.
 - ``local_translations`` optional ``(T, J, 3)`` metres: each joint's translation in its parent's frame
   for rigs that animate bone translations (glTF creatures: IK-driven feet, a moving body under a static
   root); ``None`` means the skeleton's constant offsets. Row 0 is unused (the root is ``root_translation``).
@@ -29,6 +30,8 @@ from kinema.geometry.rotations import (
     quat_slerp,
 )
 from kinema.kinematics import forward_kinematics
+from kinema.motion.mirror import mirror_motion
+from kinema.motion.writer import write_motion
 from kinema.skeleton import Skeleton
 
 
@@ -63,8 +66,11 @@ class Motion:
             raise KinemaError(f"fps must be positive, got {self.fps}")
         if self.foot_contacts is not None:
             self.foot_contacts = torch.as_tensor(self.foot_contacts, dtype=self.local_rotations.dtype)
-            if self.foot_contacts.shape != (T, 4):
-                raise KinemaError(f"foot_contacts must be ({T}, 4), got {tuple(self.foot_contacts.shape)}")
+            if self.foot_contacts.ndim != 2 or self.foot_contacts.shape[0] != T:
+                raise KinemaError(
+                    f"foot_contacts must be ({T}, C), one column per contact joint, got "
+                    f"{tuple(self.foot_contacts.shape)}"
+                )
         if self.local_translations is not None:
             self.local_translations = torch.as_tensor(self.local_translations, dtype=self.local_rotations.dtype)
             if self.local_translations.shape != (T, J, 3):
@@ -244,45 +250,14 @@ class Motion:
 
     def mirror(self) -> Motion:
         """Left/right mirror image (reflection x -> -x, joints swapped); mirroring twice is the identity."""
-        from kinema.motion.mirror import mirror_motion
-
         return mirror_motion(self)
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | Path, clean_rest: bool = True, **kwargs) -> Path:
-        """Write ``.bvh`` / ``.bvh.gz`` (see kinema.io.bvh_writer) or ``.npz`` (see docs/formats.md).
-
-        BVH output of a skeleton that carries ``rest_rotations`` is re-based so that its rest pose is that
-        clean standing pose (kinema.motion.rest); joint positions are unchanged."""
-        path = Path(path)
-        name = path.name.lower()
-        if name.endswith(".bvh") or name.endswith(".bvh.gz"):
-            from kinema.io.bvh_writer import write_bvh
-            from kinema.motion.rest import rebase_rest_pose
-
-            write_bvh(rebase_rest_pose(self) if clean_rest else self, path, **kwargs)
-        elif name.endswith(".npz"):
-            from kinema.io.npz import save_npz
-
-            save_npz(self, path, **kwargs)
-        else:
-            raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz or .npz)")
-        return path
+    def save(self, path: str | Path, **options) -> Path:
+        """Write the motion in the format its suffix names (``.bvh``, ``.bvh.gz``, ``.npz`` and whatever
+        else is registered in kinema.io; docs/formats.md). ``options`` go to that format's writer (BVH:
+        ``clean_rest``, ``scale``, ``order``). Motion knows no format: see kinema.motion.writer."""
+        return write_motion(self, path, **options)
 
     def __repr__(self) -> str:
         return f"Motion({self.skeleton!r}, {self.num_frames} frames @ {self.fps:g} fps)"
-
-
-def load_motion(path: str | Path, *, scale: float = 1.0) -> Motion:
-    """Read a ``.bvh``/``.bvh.gz`` (lengths multiplied by ``scale``) or kinema ``.npz`` motion file."""
-    path = Path(path)
-    name = path.name.lower()
-    if name.endswith(".bvh") or name.endswith(".bvh.gz"):
-        from kinema.io.bvh import read_bvh
-
-        return read_bvh(path, scale=scale)
-    if name.endswith(".npz"):
-        from kinema.io.npz import load_npz
-
-        return load_npz(path)
-    raise KinemaError(f"{path}: unknown motion format (use .bvh, .bvh.gz or .npz)")

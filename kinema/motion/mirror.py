@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from kinema.errors import KinemaError
 from kinema.geometry.rotations import matrix_to_quat, mirror_quat_x, quat_between, quat_mul, quat_rotate
 from kinema.skeleton import Skeleton
 
@@ -57,10 +58,12 @@ def mirror_corrections(skeleton: Skeleton) -> torch.Tensor:
     return B
 
 
-def mirror_motion(motion):
-    """The mirror image of ``motion`` (a kinema Motion) on the same skeleton."""
-    from kinema.motion.core import Motion
+def mirror_motion(motion, contact_map: list[int] | None = None):
+    """The mirror image of ``motion`` (a kinema Motion) on the same skeleton.
 
+    Contact channels are swapped left <-> right with ``contact_map`` (channel i of the result is channel
+    ``contact_map[i]`` of the input); the default fits the human rig's 4 channels [L heel, L toe, R heel,
+    R toe]. Other rigs pass their own (kinema.rig.Rig.contact_mirror)."""
     skel = motion.skeleton
     mmap = list(skel.mirror_map)
     G, _ = motion.global_transforms()
@@ -68,8 +71,14 @@ def mirror_motion(motion):
     # G'[m(j)] = mirror(G[j]) * B[j]  ->  gather: G'[k] = mirror(G[m(k)]) * B[m(k)]
     G_new = quat_mul(mirror_quat_x(G[:, mmap]), B[mmap])
     root = motion.root_translation * _M.to(G.dtype)
-    contacts = None if motion.foot_contacts is None else motion.foot_contacts[:, CONTACT_MIRROR]
+    contacts = motion.foot_contacts
+    if contacts is not None:
+        if contact_map is None and contacts.shape[1] != len(CONTACT_MIRROR):
+            raise KinemaError(
+                f"mirroring {contacts.shape[1]} contact channels needs a contact_map (kinema.rig.Rig.contact_mirror)"
+            )
+        contacts = contacts[:, CONTACT_MIRROR if contact_map is None else list(contact_map)]
     positions = None
     if motion.local_translations is not None:  # animated bones: reflect the positions and solve translations
         positions = motion.positions[:, mmap] * _M.to(G.dtype)
-    return Motion.from_global(skel, motion.fps, root, G_new, contacts, positions)
+    return type(motion).from_global(skel, motion.fps, root, G_new, contacts, positions)

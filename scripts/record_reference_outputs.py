@@ -1,0 +1,43 @@
+"""Record the shipped human model's outputs for the fixed cases of tests/reference_cases.py.
+
+Run once, from the code *before* a refactor that must not change behaviour:
+``OMP_NUM_THREADS=1 python scripts/record_reference_outputs.py tests/data/reference_outputs.npz``.
+tests/test_reference_outputs.py then checks every later commit against the file.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from reference_cases import cases  # noqa: E402
+
+import kinema  # noqa: E402
+from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
+
+
+def main(out: str) -> None:
+    torch.set_num_threads(1)
+    model = kinema.load_model()
+    seed_motion = model.generate("A person walks forward.", seconds=2.0, steps=5, seed=11, postprocess=False)[0]
+    kf_rot = quat_to_axis_angle(seed_motion.local_rotations[[0, 30]].double()).numpy()
+    kf_root = seed_motion.root_translation[[0, 30]].double().numpy()
+    arrays = {"input_kf_rot": kf_rot, "input_kf_root": kf_root}
+    for name, prompt, kwargs in cases(kf_rot, kf_root):
+        result = model.generate(prompt, **kwargs)
+        for i, m in enumerate(result):
+            arrays[f"{name}_{i}_root"] = m.root_translation.float().numpy()
+            arrays[f"{name}_{i}_rot"] = m.local_rotations.float().numpy()
+            arrays[f"{name}_{i}_pos"] = m.positions.float().numpy()
+            arrays[f"{name}_{i}_contacts"] = m.foot_contacts.float().numpy()
+        print(name, len(result), result.report.seconds)
+    np.savez_compressed(out, **arrays)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
