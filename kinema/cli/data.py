@@ -1,7 +1,10 @@
 """`kinema data`: build the training cache of a motion dataset and summarise a build.
 
     kinema data build bandai-namco --root PATH --out DIR [--fps 20] [--limit N] [--workers 2] [--no-mirror]
-    kinema data stats DIR
+    kinema data build quaternius --root PATH --out DIR [--fps 20] [--limit N]
+    kinema data build folder --root DIR --out DIR [--fps 20] [--units m|cm|mm|auto] [--skip-uncaptioned]
+    kinema data stats DIR|MANIFEST.json
+    kinema data manifest --out MANIFEST.json DIR [DIR ...]
 
 See docs/dataset.md for what a build contains and how splits, mirroring and ``--limit`` work.
 """
@@ -11,9 +14,10 @@ from __future__ import annotations
 import time
 from collections import defaultdict
 
+from kinema.cli import data_multirig
 from kinema.cli._args import positive_int
 
-DATASETS = ("bandai-namco",)
+DATASETS = ("bandai-namco", "quaternius", "folder")
 
 
 def register(sub) -> None:
@@ -26,26 +30,45 @@ def register(sub) -> None:
     dsub = p.add_subparsers(dest="data_command", required=True)
 
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
-    b.add_argument("dataset", choices=DATASETS, help="which dataset layout to read")
+    b.add_argument(
+        "dataset", choices=DATASETS, help="bandai-namco, quaternius, or folder (your own BVH/GLB files with captions)"
+    )
     b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
     b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
-    b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features (default 20)")
+    b.add_argument("--fps", type=float, default=20.0, help="frame rate of the features / motions (default 20)")
     b.add_argument(
         "--limit",
         type=_positive_int,
         default=None,
-        help="keep a deterministic, content-balanced subset of N clips",
+        help="bandai-namco: a content-balanced subset of N clips; quaternius: the first N files",
     )
-    b.add_argument("--workers", type=_positive_int, default=2, help="worker processes (default 2)")
+    b.add_argument("--workers", type=_positive_int, default=2, help="bandai-namco: worker processes (default 2)")
     b.add_argument(
-        "--no-mirror", dest="mirror", action="store_false", help="do not add left/right mirrored copies"
+        "--no-mirror", dest="mirror", action="store_false", help="bandai-namco: do not add left/right mirrored copies"
+    )
+    b.add_argument(
+        "--units",
+        choices=("auto", "m", "cm", "mm"),
+        default="auto",
+        help="folder: length unit of BVH files (default auto: detected from the first frame's size)",
+    )
+    b.add_argument(
+        "--skip-uncaptioned",
+        action="store_true",
+        help="folder: leave out clips without captions (listed) instead of stopping",
     )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=_build)
 
-    s = dsub.add_parser("stats", help="clips and hours per content, style and split of a build")
-    s.add_argument("dir", help="a folder written by `kinema data build`")
+    s = dsub.add_parser("stats", help="what a build holds: per content/style/split, or per rig")
+    s.add_argument("dir", help="a folder written by `kinema data build`, or a manifest file")
     s.set_defaults(func=_stats)
+
+    m = dsub.add_parser("manifest", help="list several builds as one multi-rig training set")
+    m.add_argument("dirs", nargs="+", help="build folders (motion caches or bandai-namco builds)")
+    m.add_argument("--out", required=True, help="manifest file to write (JSON)")
+    m.add_argument("--include-props", action="store_true", help="keep clips flagged 'prop' (excluded by default)")
+    m.set_defaults(func=data_multirig.manifest)
 
 
 _positive_int = positive_int
@@ -54,6 +77,8 @@ _positive_int = positive_int
 def _build(args) -> int:
     from kinema.data.build import build_dataset
 
+    if args.dataset != "bandai-namco":
+        return data_multirig.build(args)
     t0 = time.time()
     meta = build_dataset(
         args.root,
@@ -89,6 +114,8 @@ def _stats(args) -> int:
     from kinema.data.dataset import load_clip_table
     from kinema.data.split import SPLITS
 
+    if data_multirig.is_multirig(args.dir):
+        return data_multirig.stats(args)
     meta, clips = load_clip_table(args.dir)
     by: dict[str, dict[str, list[dict]]] = {
         "content": defaultdict(list),

@@ -48,6 +48,21 @@ def load_clip_table(dir: str | Path) -> tuple[dict, list[dict]]:
     return meta, clips
 
 
+def _refuse_multirig(d: Path) -> None:
+    """A multi-rig motion cache without flat features cannot train today's flat human model: say why."""
+    meta_path = d / "meta.json"
+    if (d / "features.safetensors").is_file() or not meta_path.is_file():
+        return
+    meta = _read_json(meta_path)
+    if isinstance(meta, dict) and meta.get("format") == "kinema-motions":
+        why = meta.get("not_trainable_because") or "it holds motions on several skeletons"
+        raise DataError(
+            f"{d}: a multi-rig motion cache ({meta.get('dataset', '?')}) that the current flat human trainer "
+            f"cannot use: {why}; it needs one skeleton with pelvis, hips, ankles and toes "
+            "(the any-rig trainer comes in the next issue)"
+        )
+
+
 class MotionDataset(torch.utils.data.Dataset):
     """Clips of one split (``"train"``, ``"val"``, ``"test"`` or ``"all"``) of a dataset build.
 
@@ -63,6 +78,7 @@ class MotionDataset(torch.utils.data.Dataset):
             raise DataError(f"unknown split {split!r}; choose one of {', '.join(SPLIT_CHOICES)}")
         if not self.dir.is_dir():
             raise DataError(f"{self.dir}: dataset folder does not exist (run `kinema data build` first)")
+        _refuse_multirig(self.dir)
         for name in FILES:
             if not (self.dir / name).is_file():
                 raise DataError(f"{self.dir / name}: missing (is this a `kinema data build` output folder?)")
@@ -100,9 +116,7 @@ class MotionDataset(torch.utils.data.Dataset):
             except (KeyError, TypeError):
                 ok = False
             if not ok:
-                raise DataError(
-                    f"{self.dir / 'clips.json'}: bad record {str(r)[:200]} for {total} feature rows"
-                )
+                raise DataError(f"{self.dir / 'clips.json'}: bad record {str(r)[:200]} for {total} feature rows")
         self.clips = records if split == "all" else [r for r in records if r["split"] == split]
 
     def _load_features(self, D: int) -> torch.Tensor:

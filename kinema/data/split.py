@@ -40,9 +40,7 @@ def parse_clip_name(filename: str) -> dict:
     name = PurePath(str(filename)).name
     m = _CLIP_NAME.match(name)
     if m is None:
-        raise DataError(
-            f"{name!r} is not a clip name of the form dataset-N_<content>_<style>_<take>[.bvh.gz]"
-        )
+        raise DataError(f"{name!r} is not a clip name of the form dataset-N_<content>_<style>_<take>[.bvh.gz]")
     take_text = m.group("take")
     return {
         "dataset": m.group("dataset"),
@@ -142,4 +140,37 @@ def assign_splits(clips: list[tuple[str, str]], fractions=(0.8, 0.1, 0.1)) -> di
                 result[clip_id] = "val"
             else:
                 result[clip_id] = "test"
+    return result
+
+
+def assign_rig_splits(rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1)) -> dict[str, str]:
+    """Split whole rigs (skeletons) of a multi-rig dataset: {rig_id: "train" | "val" | "test"}.
+
+    Every clip of a rig lands in its rig's split, so val and test measure how a model does on
+    skeletons it never saw. ``rig_clips`` maps each rig id to its clip count. Rule: rigs are ranked
+    by a SHA-256 of their id (as in `assign_splits`; ties by id); walking that order, a rig goes to
+    "test" while test holds fewer than ``test`` of all clips and the rig would not take test past
+    twice that share, then likewise to "val"; every other rig is "train". With three or more rigs,
+    val and test get at least one rig each (the first in hash order that fits, else the smallest)
+    and at least one rig stays in train. Fewer than three rigs are all train. Deterministic.
+    """
+    _, f_val, f_test = _check_fractions(fractions)
+    ranked = sorted(rig_clips, key=lambda r: (_unit(r, "rig"), r))
+    result = dict.fromkeys(ranked, "train")
+    if len(ranked) < 3:
+        return result
+    total = max(1, sum(rig_clips.values()))
+    held = [(split, frac) for split, frac in (("test", f_test), ("val", f_val)) if frac > 0]
+    for k, (split, frac) in enumerate(held):
+        reserve = len(held) - k  # rigs still needed: one per later held-out split, one for train
+        taken = 0
+        for r in [r for r in ranked if result[r] == "train"]:
+            if taken / total >= frac or sum(v == "train" for v in result.values()) <= reserve:
+                break
+            if (taken + rig_clips[r]) / total <= 2 * frac:
+                result[r] = split
+                taken += rig_clips[r]
+        free = [r for r in ranked if result[r] == "train"]
+        if taken == 0 and len(free) > reserve:
+            result[min(free, key=lambda r: (rig_clips[r], _unit(r, "rig"), r))] = split
     return result
