@@ -9,7 +9,7 @@ from kinema.data.dataset import MotionDataset
 from kinema.data.motion_cache import motion_hash, rest_extent
 from kinema.data.multirig import MultiRigData, write_manifest
 from kinema.motion.core import Motion
-from kinema.motion.features import FeatureLayout
+from kinema.representation.layout import FeatureLayout
 
 
 def test_motion_hash_finds_exact_duplicates(tiny_data) -> None:

@@ -22,10 +22,11 @@ from kinema.data.sources import SourceFile
 from kinema.errors import DataError, KinemaError
 from kinema.motion.contacts import ContactThresholds
 from kinema.motion.core import Motion
-from kinema.motion.features import FeatureLayout, motion_to_features
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
-from kinema.motion.stats import NormStats
-from kinema.motion.transform import canonicalize_start
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
+from kinema.representation.transform import canonicalize_start
 from kinema.skeleton import LOCOMOTION_ROLES, Skeleton
 
 

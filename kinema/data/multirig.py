@@ -24,6 +24,7 @@ from pathlib import Path
 from kinema.data.motion_cache import MotionCache, is_motion_cache, rest_extent, topology_key
 from kinema.errors import DataError
 from kinema.motion.core import Motion
+from kinema.representation.kimodo import features_to_motion
 
 MANIFEST_FORMAT = "kinema-manifest"
 DEFAULT_EXCLUDE = ("prop",)
@@ -91,8 +92,6 @@ class _FlatSource:
         self.clips = [dict(r, rig=self.dataset, flags=r.get("flags", [])) for r in self.ds.clips]
 
     def motion(self, i: int) -> Motion:
-        from kinema.motion.features import features_to_motion
-
         m = features_to_motion(self.ds[i]["features"].double(), self.ds.skeleton, self.ds.fps)
         return Motion(self.skeleton, m.fps, m.root_translation * self.scale, m.local_rotations)
 
