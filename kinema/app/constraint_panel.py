@@ -154,10 +154,10 @@ class ConstraintPanel:
             depth_test=False,
         )
 
-        @self.gizmo.on_drag_end
-        def _(_) -> None:
+        @self.gizmo.on_update
+        def _(event) -> None:
             j = self.selected_index()
-            if j is None:
+            if j is None or event.phase != "end":
                 return
             self.constraints[j] = edits.moved(self.constraints[j], self.gizmo.position, self.gizmo.wxyz)
             self.refresh(select=j)

@@ -65,7 +65,7 @@ class FilesPanel:
         npz.on_click(lambda e: self._download(e.client, ".npz"))
         session.on_click(
             lambda e: e.client.send_file_download(
-                "kinema_session.json", host.doc.to_json(host.model.fps).encode("utf-8")
+                "kinema_session.json", host.doc.to_json(host.model.fps).encode("utf-8"), save_immediately=True
             )
         )
         load.on_upload(lambda e: self._guard(lambda: host.load_session(load.value.name, load.value.content)))
@@ -82,7 +82,7 @@ class FilesPanel:
         if motion is None:
             self.host.notify("Nothing to download", "generate a motion first", error=True)
             return
-        client.send_file_download(f"kinema_motion{suffix}", motion_bytes(motion, suffix))
+        client.send_file_download(f"kinema_motion{suffix}", motion_bytes(motion, suffix), save_immediately=True)
 
     def _clip(self, name: str, content: bytes) -> None:
         m = self.host.model

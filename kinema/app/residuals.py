@@ -1,7 +1,8 @@
 """How far the shown motion is from each constraint, in words for the constraint list.
 
-Waypoints and paths: pelvis ground distance (cm) at their frames (the generator targets the smoothed
-root, a few cm from the pelvis in walking); targets: joint position (cm) and rotation (degrees);
+Waypoints and paths: ground distance (cm) of the smoothed root at their frames (the pelvis x/z under a
+Gaussian of ``DEFAULT_ROOT_SIGMA_SECONDS``, what waypoints target; the pelvis itself sways and, when the
+motion speeds up, lags or leads it by up to a few tens of cm); targets: joint position (cm) and rotation (degrees);
 poses: mean joint position error (cm); foot contacts: frames whose detected contacts disagree."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import torch
 from kinema.constraints.types import resolve_joint
 from kinema.geometry.rotations import axis_angle_to_quat, quat_inverse, quat_mul
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 
 
 def _angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> float:
@@ -28,7 +30,8 @@ def residual(c: dict, motion: Motion) -> str:
     G, P = motion.to(torch.float64).global_transforms()
     if c["type"] == "root2d":
         pelvis = motion.skeleton.roles.get("pelvis", 0)
-        err = np.linalg.norm(P[frames, pelvis][:, [0, 2]].numpy() - np.asarray(c["smooth_root_2d"]), axis=1)
+        root = smooth_time(P[:, pelvis][:, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * motion.fps)
+        err = np.linalg.norm(root[frames].numpy() - np.asarray(c["smooth_root_2d"]), axis=1)
         return f"{100 * err.max():.1f} cm"
     if c["type"] == "end-effector":
         j = resolve_joint(motion.skeleton, c["joint"])

@@ -12,6 +12,9 @@ from kinema.app.session import Session
 
 #: generations that may run at once (across tabs); more wait in the pool's queue
 WORKERS = 2
+#: where a new tab's camera stands and looks (world metres, Y up): in front of and above the start
+CAMERA_POSITION = (3.0, 2.4, 6.5)
+CAMERA_LOOK_AT = (0.0, 0.8, 1.2)
 
 
 class AppServer:
@@ -27,6 +30,9 @@ class AppServer:
         self.seconds_per_work = 2e-4  # refined by learn_rate after each generation
         self._lock = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="kinema", verbose=verbose)
+        self.server.scene.set_up_direction("+y")
+        self.server.initial_camera.position = CAMERA_POSITION
+        self.server.initial_camera.look_at = CAMERA_LOOK_AT
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 

@@ -44,9 +44,8 @@ class Session:
             plane_color=(235, 235, 240),
             plane_opacity=0.6,
         )
-        client.camera.position = (3.2, 2.6, 7.0)
-        client.camera.look_at = (0.0, 0.8, 1.5)
-        gui.configure_theme(control_layout="fixed", control_width="large", show_logo=False, show_share_button=False)
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        gui.main_panel.dock_right()
         self.views: list[SkeletonView] = []
         self.markers = Markers(scene, self.model.skeleton, self.model.fps)
         self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True))
