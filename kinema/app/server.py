@@ -12,9 +12,10 @@ from kinema.app.session import Session
 
 #: generations that may run at once (across tabs); more wait in the pool's queue
 WORKERS = 2
-#: where a new tab's camera stands and looks (world metres, Y up): in front of and above the start
-CAMERA_POSITION = (3.0, 2.4, 6.5)
-CAMERA_LOOK_AT = (0.0, 0.8, 1.2)
+#: where a new tab's camera stands and looks (world metres, Y up): to the character's left (+X), above
+#: the first metres of a walk along +Z, so that paths across the ground read left to right
+CAMERA_POSITION = (4.4, 2.7, 1.6)
+CAMERA_LOOK_AT = (0.3, 0.6, 2.7)
 
 
 class AppServer:

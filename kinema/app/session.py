@@ -18,7 +18,7 @@ from kinema.app.timeline_panel import TimelinePanel
 from kinema.app.views import OTHER_COLOR, SELECTED_COLOR, SkeletonView, rest_motion
 from kinema.errors import KinemaError
 
-#: lateral spacing (metres, +X) of the samples not selected, drawn side by side with the selected one
+#: spacing (metres, towards -X, away from the camera) of the samples not selected, drawn beside the selected one
 SAMPLE_SPACING = 1.6
 SAMPLE_NAMES = ("1", "2", "3", "4")
 
@@ -113,7 +113,7 @@ class Session:
         self.select_sample(0)
         if source is not None and report is None:
             self.status.content = f"Showing {source}."
-        self.player.set_length(self.shown_motion().num_frames)
+        self._length_changed()
 
     def select_sample(self, i: int) -> None:
         with self.lock:
@@ -123,9 +123,11 @@ class Session:
                 lane = 0 if k == self.selected else others.index(k) + 1
                 view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
                 view.remove()
-                view.set_motion(self.motions[k], offset=(lane * SAMPLE_SPACING, 0.0, 0.0))
+                view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
         self.show_frame(self.player.frame)
         self.constraints.show_residuals()
+        if len(self.motions) > 1:
+            self.pick.label = f"Show sample ({self.selected + 1} in orange)"
 
     def show_frame(self, frame: int) -> None:
         with self.lock:
@@ -135,7 +137,11 @@ class Session:
         self.markers.draw_contacts(self.shown_motion(), frame, flags)
 
     def _length_changed(self) -> None:
-        self.constraints.set_length(self.doc.num_frames(self.model.fps))
+        """The slider spans the shown motion, or the timeline before anything is generated (so that
+        constraints can be laid out in time first; the rest pose stands in for every frame)."""
+        frames = self.doc.num_frames(self.model.fps)
+        self.player.set_length(self.shown_motion().num_frames if self.generated else frames)
+        self.constraints.set_length(frames)
 
     # ------------------------------------------------------------------ generation
     def generate(self) -> None:
