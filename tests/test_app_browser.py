@@ -29,6 +29,7 @@ else:
     if chromium_path() is None:
         pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
 
+from kinema.app.residuals import residual  # noqa: E402
 from kinema.app.server import AppServer  # noqa: E402
 from kinema.io.bvh import read_bvh  # noqa: E402
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time  # noqa: E402
@@ -248,3 +249,27 @@ def test_session_saves_and_loads_back(tab, tmp_path):
     assert session.doc.timeline == saved["timeline"]
     assert session.doc.constraints[0]["smooth_root_2d"] == saved["constraints"][0]["smooth_root_2d"]
     assert row_input(page, "Prompt 1").input_value() == "A person jogs forward."
+
+
+def test_uploaded_clip_keyframes_and_inbetweening(tab, tmp_path, default_model):
+    page, session, _ = tab
+    clip = default_model.generate("A person walks forward.", seconds=3, steps=2, seed=5)[0]
+    path = tmp_path / "clip.bvh"
+    clip.save(path, scale=100.0)  # centimetres: the panel's default BVH units
+    with page.expect_file_chooser() as fc:
+        button(page, "Upload BVH clip").click()
+    fc.value.set_files(path)
+    wait_for(lambda: "clip.bvh" in session.status.content, what="the clip to show")
+    shown = session.shown_motion()
+    assert shown.num_frames == clip.num_frames
+    assert float((shown.positions - clip.positions).abs().max()) < 2e-3  # same poses, first one over the origin
+    page.get_by_role("button", name="clear all").click()
+    for frame in (0, 50):
+        seek(page, frame)
+        wait_for(lambda f=frame: session.player.frame == f, what=f"frame {frame}")
+        button(page, "Keyframe pose").click()
+        wait_for(lambda f=frame: any(c["frame_indices"] == [f] for c in session.doc.constraints), what="a pose")
+    generate(page, session)
+    for c in session.doc.constraints:
+        cm = float(residual(c, session.shown_motion()).split()[0])
+        assert cm < 5.0, f"the in-between misses the clip's pose at frame {c['frame_indices']} by {cm} cm"

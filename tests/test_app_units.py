@@ -66,13 +66,19 @@ def test_scene_constraints_are_valid_and_hit_what_was_shown(model, motion):
     )
     assert edits.moved(made[0], (1.5, 0.0, 2.0))["smooth_root_2d"] == [[1.5, 2.0]]
     assert edits.retimed(made[3], 5)["frame_indices"] == list(range(5, 16))
-    assert [edits.label(c) for c in made] == [
-        "waypoint @ 20",
-        "pose @ 10",
-        "Hand_R pos+rot @ 30",
-        "left foot planted @ 30-40",
+    assert [edits.label(c, 20) for c in made] == [
+        "waypoint @ 20 (1.0 s)",
+        "pose @ 10 (0.5 s)",
+        "Hand_R pos+rot @ 30 (1.5 s)",
+        "left foot planted @ 30-40 (1.5-2.0 s)",
     ]
     assert residual(edits.waypoint(500, 0, 0), motion) == "beyond the motion"
+    assert edits.spanned(made[3], 5, 8)["frame_indices"] == [5, 6, 7, 8]
+    assert edits.spanned(made[3], 5, 8)["contacts"] == [[1, 1, 0, 0]] * 4
+    walk = edits.path([(0, 0), (0, 2)], 0, 10, headings=True)
+    assert edits.spanned(walk, 20, 60)["frame_indices"] == [20, 60]
+    with pytest.raises(KinemaError, match="only foot contacts and paths"):
+        edits.spanned(made[0], 0, 5)
 
 
 def test_session_file_round_trip_and_errors(model, motion):

@@ -65,7 +65,7 @@ class ConstraintPanel:
                 visible=False,
                 hint="facing of the selected waypoint (0 = +Z)",
             )
-            row = gui.add_button_group("Edit", ("to this frame", "delete", "clear all"))
+            row = gui.add_button_group("Edit", ("to this frame", "to range", "delete", "clear all"))
             self.residual_md = gui.add_markdown("")
         self.mode.on_update(lambda _: self._mode_changed())
         self.finish_path.on_click(lambda _: self._safely(self._finish_path))
@@ -97,7 +97,7 @@ class ConstraintPanel:
         return labels.index(self.items.value) if self.items.value in labels else None
 
     def _labels(self) -> list[str]:
-        return [f"{i + 1}. {edits.label(c)}" for i, c in enumerate(self.constraints)]
+        return [f"{i + 1}. {edits.label(c, self.host.model.fps)}" for i, c in enumerate(self.constraints)]
 
     def set_length(self, num_frames: int) -> None:
         """Frame ranges follow the timeline's length."""
@@ -179,6 +179,8 @@ class ConstraintPanel:
         elif action == "delete":
             del self.constraints[i]
             i = min(i, len(self.constraints) - 1) if self.constraints else None
+        elif action == "to range":
+            self.constraints[i] = edits.spanned(self.constraints[i], *self.range.value)
         else:
             self.constraints[i] = edits.retimed(self.constraints[i], self.host.player.frame)
         self.refresh(select=i)

@@ -110,10 +110,11 @@ def contacts(start: int, end: int, preset: str) -> dict:
     }
 
 
-def label(c: dict) -> str:
-    """A short description for the constraint list, e.g. ``waypoint @ 40`` or ``Hand_R target @ 12``."""
+def label(c: dict, fps: float) -> str:
+    """A short description for the constraint list: kind, frame(s) and time, e.g. ``waypoint @ 40 (2.0 s)``
+    or ``Hand_R pos @ 12 (0.6 s)``."""
     f = c.get("frame_indices", [0])
-    span = f"{f[0]}" if len(f) == 1 else f"{f[0]}-{f[-1]}"
+    span = f"{f[0]} ({f[0] / fps:.1f} s)" if len(f) == 1 else f"{f[0]}-{f[-1]} ({f[0] / fps:.1f}-{f[-1] / fps:.1f} s)"
     kind = c["type"]
     if kind == "root2d":
         return f"{'path' if c.get('dense') else 'waypoint'} @ {span}"
@@ -175,6 +176,20 @@ def retimed(c: dict, frame: int) -> dict:
     return {**c, "frame_indices": [int(x) + shift for x in f]}
 
 
+def spanned(c: dict, start: int, end: int) -> dict:
+    """A foot-contact range or a dense path stretched over frames ``start..end`` (a path keeps its points
+    and headings choice, a contact range its flags)."""
+    if c["type"] == "foot-contact":
+        flags = tuple(int(v) for v in c["contacts"][0])
+        preset = next((n for n, p in CONTACT_PRESETS.items() if p == flags), None)
+        out = contacts(start, end, preset or "both feet planted")
+        out["contacts"] = [list(flags)] * len(out["frame_indices"])
+        return out
+    if c["type"] == "root2d" and c.get("dense"):
+        return path(c["smooth_root_2d"], int(start), int(end), headings="global_root_heading" in c)
+    raise KinemaError("only foot contacts and paths span a frame range; use 'to this frame' to move the others")
+
+
 __all__ = [
     "CONTACT_PRESETS",
     "anchor",
@@ -186,6 +201,7 @@ __all__ = [
     "moved",
     "path",
     "retimed",
+    "spanned",
     "rotation_wxyz",
     "target",
     "waypoint",

@@ -25,7 +25,7 @@ class Player:
         self.fps, self.on_frame = fps, on_frame
         self.num_frames = 1
         with gui.add_folder("Playback"):
-            self.play_btn = gui.add_button("Play", icon="player-play", hint="play / pause (space)")
+            self.play_btn = gui.add_button("Play", icon="player-play", hint="play / pause")
             self.slider = gui.add_slider(
                 "Frame", min=0, max=1, step=1, initial_value=0, hint="scrub through the motion"
             )

@@ -62,7 +62,7 @@ class Session:
         with gui.add_folder("Generate"):
             self.gen_btn = gui.add_button(
                 "Generate",
-                icon="player-play",
+                icon="wand",
                 color="green",
                 hint="generate from the timeline, keeping the constraints",
             )

@@ -52,7 +52,7 @@ class TimelinePanel:
             step=0.5,
             hint="duration of this segment",
         )
-        acts = self.gui.add_button_group(f"Move {i + 1}", ROW_ACTIONS, hint="move up, move down, remove")
+        acts = self.gui.add_button_group(f"Segment {i + 1}", ROW_ACTIONS, hint="move up, move down, remove")
         self.handles += [text, secs, acts]
 
         @text.on_update

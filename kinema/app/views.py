@@ -77,7 +77,7 @@ class SkeletonView:
         if self.bones is None:
             self.bones = self.scene.add_line_segments(f"{self.name}/bones", segs, self.color, thickness=self.thickness)
             self.joints = self.scene.add_point_cloud(
-                f"{self.name}/joints", P, self.color, point_size=0.045, point_shape="circle"
+                f"{self.name}/joints", P, self.color, point_size=0.035, point_shape="circle"
             )
         else:
             self.bones.points = segs
