@@ -127,7 +127,7 @@ class Markers:
             return
         p = tuple(float(v) for v in c["positions"][0])
         self.handles.append(self.scene.add_icosphere(f"{name}/ball", radius=0.05, color=color, position=p))
-        self._label(name, f"{c['joint']} {c['frame_indices'][0] / self.fps:.1f} s", (p[0], p[1] + 0.12, p[2]))
+        self._label(name, f"{c['joint']} {c['frame_indices'][0] / self.fps:.1f} s", (p[0], p[1] + 0.3, p[2]))
 
     def _pose(self, name: str, c: dict, color) -> None:
         for k, P in enumerate(pose_points(c, self.skeleton, self.fps)):

@@ -122,6 +122,7 @@ class Session:
             for k, view in enumerate(self.views):
                 lane = 0 if k == self.selected else others.index(k) + 1
                 view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
+                view.trail = k == self.selected
                 view.remove()
                 view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
         self.show_frame(self.player.frame)

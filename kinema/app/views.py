@@ -50,13 +50,22 @@ def bone_pairs(skeleton: Skeleton) -> np.ndarray:
 class SkeletonView:
     """Bones as lines, joints as dots, planted contact joints as green dots (``motion.foot_contacts``)."""
 
-    def __init__(self, scene, name: str, skeleton: Skeleton, *, color=SELECTED_COLOR, thickness: float = 0.025):
-        self.scene, self.name, self.color, self.thickness = scene, name, color, thickness
+    def __init__(
+        self,
+        scene,
+        name: str,
+        skeleton: Skeleton,
+        *,
+        color=SELECTED_COLOR,
+        thickness: float = 0.025,
+        trail: bool = False,
+    ):
+        self.scene, self.name, self.color, self.thickness, self.trail = scene, name, color, thickness, trail
         self.pairs = bone_pairs(skeleton)
         self.contact_idx = contact_joints(skeleton)
         self.positions: np.ndarray | None = None  # (T, J, 3)
         self.contacts: np.ndarray | None = None  # (T, 4)
-        self.bones = self.joints = self.planted = None
+        self.bones = self.joints = self.planted = self.path = None
 
     def set_motion(self, motion: Motion, offset=(0.0, 0.0, 0.0)) -> None:
         self.positions = motion.positions.detach().double().numpy() + np.asarray(offset, dtype=np.float64)
@@ -74,6 +83,8 @@ class SkeletonView:
             return
         P, planted = self._frame_points(frame)
         segs = P[self.pairs]
+        if self.trail and self.path is None and len(self.positions) > 1:
+            self._add_trail()
         if self.bones is None:
             self.bones = self.scene.add_line_segments(f"{self.name}/bones", segs, self.color, thickness=self.thickness)
             self.joints = self.scene.add_point_cloud(
@@ -83,6 +94,14 @@ class SkeletonView:
             self.bones.points = segs
             self.joints.points = P
         self._show_contacts(planted)
+
+    def _add_trail(self) -> None:
+        """The pelvis' ground track over the whole motion (to compare with waypoints and paths)."""
+        assert self.positions is not None
+        track = self.positions[:, 0].astype(np.float32).copy()
+        track[:, 1] = 0.005
+        segs = np.stack([track[:-1], track[1:]], axis=1)
+        self.path = self.scene.add_line_segments(f"{self.name}/trail", segs, self.color, thickness=0.012)
 
     def _show_contacts(self, planted: np.ndarray) -> None:
         if self.planted is not None:
@@ -94,7 +113,7 @@ class SkeletonView:
             )
 
     def remove(self) -> None:
-        for h in (self.bones, self.joints, self.planted):
+        for h in (self.bones, self.joints, self.planted, self.path):
             if h is not None:
                 h.remove()
-        self.bones = self.joints = self.planted = None
+        self.bones = self.joints = self.planted = self.path = None
