@@ -198,9 +198,11 @@ def test_drag_target_gizmo(tab):
     p0 = torch.tensor(c0["positions"][0], dtype=torch.float64)
     hand = session.shown_motion().positions[60, session.model.skeleton.index(c0["joint"])]
     assert float(torch.linalg.vector_norm(p0 - hand)) < 1e-4  # pinned where the joint is
-    time.sleep(0.5)
-    box = page.locator("canvas").first.bounding_box()
     cam = session.client.camera
+    cam.look_at = p0.tolist()  # come close, as a user would orbit and zoom in, so the gizmo is large
+    cam.position = (p0 + torch.tensor([2.0, 0.8, -0.8], dtype=torch.float64)).tolist()
+    time.sleep(1.0)
+    box = page.locator("canvas").first.bounding_box()
     axis = max((0, 2), key=lambda a: screen_step(cam, p0, a, box))  # the ground axis seen most across
     unit = torch.zeros(3, dtype=torch.float64)
     unit[axis] = 1.0
