@@ -14,8 +14,8 @@ from kinema.app.session import Session
 WORKERS = 2
 #: where a new tab's camera stands and looks (world metres, Y up): to the character's left (+X), above
 #: the first metres of a walk along +Z, so that paths across the ground read left to right
-CAMERA_POSITION = (5.0, 3.2, 0.6)
-CAMERA_LOOK_AT = (0.0, 0.4, 3.2)
+CAMERA_POSITION = (4.4, 4.6, 1.0)
+CAMERA_LOOK_AT = (0.0, 0.2, 3.4)
 
 
 class AppServer:
