@@ -36,7 +36,7 @@ def launch(playwright):
 def row_input(page, label: str):
     """The input on the panel row labelled ``label`` (viser's labels are not tied to their inputs)."""
     row = page.locator("div.mantine-Flex-root").filter(has=page.get_by_text(label, exact=True))
-    return row.locator("input").last
+    return row.locator("input:not([type=hidden])").last
 
 
 def button(page, text: str):

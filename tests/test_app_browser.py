@@ -291,3 +291,27 @@ def test_uploaded_clip_keyframes_and_inbetweening(tab, tmp_path, default_model):
     for c in session.doc.constraints:
         cm = float(residual(c, session.shown_motion()).split()[0])
         assert cm < 5.0, f"the in-between misses the clip's pose at frame {c['frame_indices']} by {cm} cm"
+
+
+def test_path_mode_clicks_make_a_dense_path(tab):
+    page, session, _ = tab
+    page.get_by_role("button", name="clear all").click()
+    wait_for(lambda: not session.doc.constraints, what="constraints to clear")
+    row_input(page, "Click ground").click()
+    page.get_by_role("option", name="path", exact=True).click()
+    wait_for(lambda: session.constraints.mode.value == "path", what="path mode")
+    cam = session.client.camera
+    cam.look_at, cam.position = (0.0, 0.0, 1.0), (3.5, 3.5, -1.0)
+    time.sleep(1.0)
+    box = page.locator("canvas").first.bounding_box()
+    aimed = ((0.0, 0.5), (0.5, 1.5), (0.0, 2.5))
+    for k, (x, z) in enumerate(aimed):
+        page.mouse.click(*world_to_screen(cam, (x, 0.0, z), box))
+        wait_for(lambda n=k + 1: len(session.constraints.path_points) == n, what=f"path point {k + 1}")
+    button(page, "Finish path").click()
+    c = wait_for(lambda: session.doc.constraints and session.doc.constraints[0], what="the path")
+    lo, hi = session.constraints.range.value
+    assert c["type"] == "root2d" and c["dense"] is True
+    assert c["frame_indices"][0] == lo and c["frame_indices"][-1] == hi
+    for (x, z), (cx, cz) in zip(aimed, c["smooth_root_2d"], strict=True):
+        assert abs(cx - x) < 0.05 and abs(cz - z) < 0.05

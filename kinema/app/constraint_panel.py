@@ -100,11 +100,13 @@ class ConstraintPanel:
         return [f"{i + 1}. {edits.label(c, self.host.model.fps)}" for i, c in enumerate(self.constraints)]
 
     def set_length(self, num_frames: int) -> None:
-        """Frame ranges follow the timeline's length."""
+        """Frame ranges follow the timeline's length; a range that reached the old end keeps reaching it."""
         hi = max(1, num_frames - 1)
         lo_v, hi_v = self.range.value
+        old_end = self.range.max
         self.range.max = hi
-        self.range.value = (min(lo_v, hi - 1), hi if hi_v >= hi or hi_v <= lo_v else hi_v)
+        lo_v = min(lo_v, hi - 1)
+        self.range.value = (lo_v, hi if hi_v >= old_end or hi_v > hi or hi_v <= lo_v else hi_v)
 
     # ------------------------------------------------------------------ list
     def refresh(self, select: int | None = None) -> None:
