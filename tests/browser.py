@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -58,3 +59,21 @@ def world_to_screen(camera, point, box: dict) -> tuple[float, float]:
     H, W = box["height"], box["width"]
     f = (H / 2) / math.tan(camera.fov / 2)
     return box["x"] + W / 2 + f * pc[0] / pc[2], box["y"] + H / 2 + f * pc[1] / pc[2]
+
+
+def set_camera(camera, position, look_at, timeout: float = 30.0) -> None:
+    """Move a tab's camera from the server and wait until the browser reports that pose back (clicks are
+    aimed with the camera state the tab reports, which lags an assignment under load)."""
+    camera.position = tuple(float(v) for v in position)  # (viser moves look_at along with the position)
+    camera.look_at = tuple(float(v) for v in look_at)
+    sent = time.time()
+    while time.time() - sent < timeout:
+        if (
+            camera.update_timestamp > sent
+            and np.allclose(camera.position, position, atol=1e-3)
+            and np.allclose(camera.look_at, look_at, atol=1e-3)
+        ):
+            time.sleep(0.3)  # let the frame with that pose render
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"the browser did not report the camera at {position} looking at {look_at}")

@@ -16,7 +16,7 @@ import pytest
 import torch
 
 import kinema
-from tests.browser import button, chromium_path, launch, row_input, world_to_screen
+from tests.browser import button, chromium_path, launch, row_input, set_camera, world_to_screen
 
 if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
     import viser  # noqa: F401
@@ -117,10 +117,18 @@ def drag(page, start, end, steps: int = 10) -> None:
     page.mouse.up()
 
 
-def seek(page, frame: int) -> None:
-    box = row_input(page, "Frame")
-    box.fill(str(frame))
-    box.press("Enter")
+def seek(page, frame: int, session=None) -> None:
+    """Type a frame into the Frame box; with ``session``, wait until the tab shows it (typing again if
+    the first entry was lost on a loaded machine)."""
+    for _ in range(3):
+        box = row_input(page, "Frame")
+        box.fill(str(frame))
+        box.press("Enter")
+        if session is None or wait_for(lambda: session.player.frame == frame, timeout=10, fail=False):
+            return
+    raise AssertionError(
+        f"the tab did not go to frame {frame} (at {session.player.frame}, playing={session.player.playing})"
+    )
 
 
 def test_page_loads_offline_without_console_errors(app, tab, browser):
@@ -157,6 +165,7 @@ def test_played_frame_advances(tab):
     assert session.player.frame > first + 5
     shown = page.get_by_text("(frame ").inner_text()
     button(page, "Pause").click()
+    wait_for(lambda: not session.player.playing, what="playback to pause")
     assert "s / 10.95 s" in shown
 
 
@@ -164,8 +173,7 @@ def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
     page, session, log = tab
     canvas = page.locator("canvas").first
     for frame, x, z in WAYPOINTS:
-        seek(page, frame)
-        wait_for(lambda f=frame: session.player.frame == f, what=f"frame {frame}")
+        seek(page, frame, session)
         box = canvas.bounding_box()
         px, py = world_to_screen(session.client.camera, (x, 0.0, z), box)
         page.mouse.click(px, py)
@@ -190,8 +198,7 @@ def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
 
 def test_drag_target_gizmo(tab):
     page, session, _ = tab
-    seek(page, 60)
-    wait_for(lambda: session.player.frame == 60, what="frame 60")
+    seek(page, 60, session)
     button(page, "Add target").click()
     c0 = wait_for(lambda: session.doc.constraints[-1] if len(session.doc.constraints) == 3 else None, what="a target")
     assert c0["type"] == "end-effector" and c0["frame_indices"] == [60]
@@ -199,9 +206,8 @@ def test_drag_target_gizmo(tab):
     hand = session.shown_motion().positions[60, session.model.skeleton.index(c0["joint"])]
     assert float(torch.linalg.vector_norm(p0 - hand)) < 1e-4  # pinned where the joint is
     cam = session.client.camera
-    cam.look_at = p0.tolist()  # come close, as a user would orbit and zoom in, so the gizmo is large
-    cam.position = (p0 + torch.tensor([2.0, 0.8, -0.8], dtype=torch.float64)).tolist()
-    time.sleep(1.0)
+    # come close, as a user would orbit and zoom in, so that the gizmo is large on screen
+    set_camera(cam, (p0 + torch.tensor([2.0, 0.8, -0.8], dtype=torch.float64)).tolist(), p0.tolist())
     box = page.locator("canvas").first.bounding_box()
     axis = max((0, 2), key=lambda a: screen_step(cam, p0, a, box))  # the ground axis seen most across
     unit = torch.zeros(3, dtype=torch.float64)
@@ -283,8 +289,7 @@ def test_uploaded_clip_keyframes_and_inbetweening(tab, tmp_path, default_model):
     assert float((shown.positions - (clip.positions - start)).abs().max()) < 2e-3
     page.get_by_role("button", name="clear all").click()
     for frame in (0, 50):
-        seek(page, frame)
-        wait_for(lambda f=frame: session.player.frame == f, what=f"frame {frame}")
+        seek(page, frame, session)
         button(page, "Keyframe pose").click()
         wait_for(lambda f=frame: any(c["frame_indices"] == [f] for c in session.doc.constraints), what="a pose")
     generate(page, session)
@@ -301,8 +306,7 @@ def test_path_mode_clicks_make_a_dense_path(tab):
     page.get_by_role("option", name="path", exact=True).click()
     wait_for(lambda: session.constraints.mode.value == "path", what="path mode")
     cam = session.client.camera
-    cam.look_at, cam.position = (0.0, 0.0, 1.0), (3.5, 3.5, -1.0)
-    time.sleep(1.0)
+    set_camera(cam, (3.5, 3.5, -1.0), (0.0, 0.0, 1.0))
     box = page.locator("canvas").first.bounding_box()
     aimed = ((0.0, 0.5), (0.5, 1.5), (0.0, 2.5))
     for k, (x, z) in enumerate(aimed):

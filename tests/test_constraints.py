@@ -60,8 +60,7 @@ def encode(cs, skel, layout, num_frames=T):
 # ---------------------------------------------------------------------------- examples
 def test_examples_exist():
     names = {p.name for p in EXAMPLES}
-    assert {"waypoints.json", "dense_path.json", "hands.json", "feet_contacts.json",
-            "inbetween_from_bvh.json"} <= names
+    assert {"waypoints.json", "dense_path.json", "hands.json", "feet_contacts.json", "inbetween_from_bvh.json"} <= names
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
@@ -108,17 +107,23 @@ def test_fullbody_from_bvh_matches_features(clip, motion, skel, layout):
 def test_fullbody_arrays_equal_bvh_source(clip, motion, skel, layout):
     frames = [3, 40]
     from_file = FullBodyConstraint.from_bvh(clip, frames, skeleton=skel, fps=FPS, scale=0.01)
-    obj = [{"type": "fullbody", "frame_indices": frames,
+    obj = [
+        {
+            "type": "fullbody",
+            "frame_indices": frames,
             "local_joints_rot": quat_to_axis_angle(motion.local_rotations[frames]).tolist(),
-            "root_positions": motion.root_translation[frames].tolist()}]
+            "root_positions": motion.root_translation[frames].tolist(),
+        }
+    ]
     inline = load_constraints(obj, skel, FPS, T)[0]
     a, b = encode([from_file], skel, layout), encode([inline], skel, layout)
     assert torch.equal(a.mask, b.mask) and torch.allclose(a.x_tgt, b.x_tgt, atol=1e-9, rtol=0)
 
 
 def test_from_bvh_native_fps_and_recenter(clip, skel, layout):
-    c = FullBodyConstraint.from_bvh(clip, None, skeleton=skel, fps=30.0, scale=0.01, source_times=[0.0, 3.0],
-                                    recenter=True)
+    c = FullBodyConstraint.from_bvh(
+        clip, None, skeleton=skel, fps=30.0, scale=0.01, source_times=[0.0, 3.0], recenter=True
+    )
     assert c.times == (0.0, 3.0)
     assert torch.allclose(c.root_positions[0, [0, 2]], torch.zeros(2, dtype=torch.float64))
     assert c.root_positions[1, 2] > 1.0  # walked forward several metres
@@ -127,10 +132,16 @@ def test_from_bvh_native_fps_and_recenter(clip, skel, layout):
 # ---------------------------------------------------------------------------- frames and times
 def test_times_equal_frame_indices(skel, layout):
     def pair(**frames):
-        return [Root2DConstraint(positions=[[0.0, 1.0], [2.0, 3.0]], heading=[[0.0, 2.0], [1.0, 0.0]], **frames),
-                EndEffectorConstraint(joint="left_hand", positions=[[0.1, 1.0, 0.2], [0.0, 1.1, 0.3]],
-                                      rotations=[[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]], **frames),
-                FootContactConstraint(contacts=[[1, 0, 1, 0], [0, 0, 1, 1]], **frames)]
+        return [
+            Root2DConstraint(positions=[[0.0, 1.0], [2.0, 3.0]], heading=[[0.0, 2.0], [1.0, 0.0]], **frames),
+            EndEffectorConstraint(
+                joint="left_hand",
+                positions=[[0.1, 1.0, 0.2], [0.0, 1.1, 0.3]],
+                rotations=[[0.1, 0.2, 0.3], [0.0, 0.0, 1.0]],
+                **frames,
+            ),
+            FootContactConstraint(contacts=[[1, 0, 1, 0], [0, 0, 1, 1]], **frames),
+        ]
 
     a = encode(pair(frame_indices=[10, 35]), skel, layout)
     b = encode(pair(times=[0.5, 1.75]), skel, layout)
@@ -161,32 +172,50 @@ def test_end_effector_world_xz_and_root(skel, layout):
     assert not t.has_world and t.mask[12, [0, 2, jx, jz]].eq(1).all()
     assert t.x_tgt[12, jx] == pytest.approx(0.2) and t.x_tgt[12, jz] == pytest.approx(0.5)
     # a root2d waypoint at the same frame also fixes the root x/z
-    t = encode([EndEffectorConstraint(joint="left_hand", frame_indices=[12], positions=pos),
-                Root2DConstraint(frame_indices=[12], positions=[[0.1, 0.2]])], skel, layout)
+    t = encode(
+        [
+            EndEffectorConstraint(joint="left_hand", frame_indices=[12], positions=pos),
+            Root2DConstraint(frame_indices=[12], positions=[[0.1, 0.2]]),
+        ],
+        skel,
+        layout,
+    )
     assert not t.has_world and t.x_tgt[12, jx] == pytest.approx(0.2)
 
 
 def test_foot_is_ankle_rotation_only(skel, layout):
     a = skel.index("left_ankle")
-    t = encode([EndEffectorConstraint(joint="left_foot", frame_indices=[5], rotations=[[0.0, 0.5, 0.0]])],
-               skel, layout)
+    t = encode([EndEffectorConstraint(joint="left_foot", frame_indices=[5], rotations=[[0.0, 0.5, 0.0]])], skel, layout)
     r = layout.slices["joint_rot"].start + 6 * a
-    assert t.mask[5].sum() == 6 and (t.mask[5, r:r + 6] == 1).all() and t.kinds == {"end-effector:Foot_L": [5]}
+    assert t.mask[5].sum() == 6 and (t.mask[5, r : r + 6] == 1).all() and t.kinds == {"end-effector:Foot_L": [5]}
 
 
 def test_later_constraint_wins(skel, layout):
-    t = encode([Root2DConstraint(frame_indices=[7], positions=[[1.0, 2.0]]),
-                Root2DConstraint(frame_indices=[7, 8], positions=[[3.0, 4.0], [5.0, 6.0]])], skel, layout)
+    t = encode(
+        [
+            Root2DConstraint(frame_indices=[7], positions=[[1.0, 2.0]]),
+            Root2DConstraint(frame_indices=[7, 8], positions=[[3.0, 4.0], [5.0, 6.0]]),
+        ],
+        skel,
+        layout,
+    )
     assert t.x_tgt[7, [0, 2]].tolist() == [3.0, 4.0] and t.x_tgt[8, [0, 2]].tolist() == [5.0, 6.0]
     contacts = layout.slices["contacts"]
-    t = encode([FootContactConstraint(frame_indices=[3], contacts=[[1, 1, 1, 1]]),
-                FootContactConstraint(frame_indices=[3], contacts=[[0, 1, 0, 0]])], skel, layout)
+    t = encode(
+        [
+            FootContactConstraint(frame_indices=[3], contacts=[[1, 1, 1, 1]]),
+            FootContactConstraint(frame_indices=[3], contacts=[[0, 1, 0, 0]]),
+        ],
+        skel,
+        layout,
+    )
     assert t.x_tgt[3, contacts].tolist() == [0.0, 1.0, 0.0, 0.0] and (t.mask[3, contacts] == 1).all()
 
 
 def test_dense_path_interpolates_every_frame(skel, layout):
-    c = Root2DConstraint(frame_indices=[10, 20], positions=[[0.0, 0.0], [1.0, 2.0]],
-                         heading=[[1.0, 0.0], [0.0, 1.0]], dense=True)
+    c = Root2DConstraint(
+        frame_indices=[10, 20], positions=[[0.0, 0.0], [1.0, 2.0]], heading=[[1.0, 0.0], [0.0, 1.0]], dense=True
+    )
     t = encode([c], skel, layout)
     assert t.kinds == {"root2d:dense": list(range(10, 21))}
     assert (t.mask[10:21, [0, 2, 3, 4]] == 1).all() and t.mask[10:21].sum() == 44
@@ -199,32 +228,61 @@ def test_dense_path_interpolates_every_frame(skel, layout):
 GOOD = {"type": "root2d", "frame_indices": [0], "smooth_root_2d": [[0.0, 0.0]]}
 BAD_CASES = {
     "unknown_type": ({"type": "teleport", "frame_indices": [1]}, "type", "unknown constraint type"),
-    "unknown_joint": ({"type": "end-effector", "joint": "left_pinky", "frame_indices": [1],
-                       "positions": [[0, 1, 0]]}, "joint", "unknown joint or role 'left_pinky'"),
-    "beyond_duration": ({"type": "left-hand", "frame_indices": [150], "positions": [[0, 1, 0]]},
-                        "frame_indices", "6.000 s"),
+    "unknown_joint": (
+        {"type": "end-effector", "joint": "left_pinky", "frame_indices": [1], "positions": [[0, 1, 0]]},
+        "joint",
+        "unknown joint or role 'left_pinky'",
+    ),
+    "beyond_duration": (
+        {"type": "left-hand", "frame_indices": [150], "positions": [[0, 1, 0]]},
+        "frame_indices",
+        "6.000 s",
+    ),
     "beyond_duration_times": ({"type": "left-hand", "times": [7.0], "positions": [[0, 1, 0]]}, "times", "6.000 s"),
-    "negative_frame": ({"type": "root2d", "frame_indices": [-1], "smooth_root_2d": [[0, 0]]},
-                       "frame_indices", "negative frame -1"),
-    "wrong_shape": ({"type": "right-foot", "frame_indices": [1, 2], "positions": [[0, 1], [0, 1]]},
-                    "positions", "expected shape (2, 3)"),
-    "wrong_shape_fullbody": ({"type": "fullbody", "frame_indices": [1], "local_joints_rot": [[[0, 0, 0]]],
-                              "root_positions": [[0, 1, 0]]}, "local_joints_rot", "expected shape (1, 21, 3)"),
-    "nan": ({"type": "root2d", "frame_indices": [1], "smooth_root_2d": [[float("nan"), 0]]},
-            "smooth_root_2d", "NaN or inf"),
+    "negative_frame": (
+        {"type": "root2d", "frame_indices": [-1], "smooth_root_2d": [[0, 0]]},
+        "frame_indices",
+        "negative frame -1",
+    ),
+    "wrong_shape": (
+        {"type": "right-foot", "frame_indices": [1, 2], "positions": [[0, 1], [0, 1]]},
+        "positions",
+        "expected shape (2, 3)",
+    ),
+    "wrong_shape_fullbody": (
+        {"type": "fullbody", "frame_indices": [1], "local_joints_rot": [[[0, 0, 0]]], "root_positions": [[0, 1, 0]]},
+        "local_joints_rot",
+        "expected shape (1, 21, 3)",
+    ),
+    "nan": (
+        {"type": "root2d", "frame_indices": [1], "smooth_root_2d": [[float("nan"), 0]]},
+        "smooth_root_2d",
+        "NaN or inf",
+    ),
     "inf": ({"type": "right-hand", "times": [1.0], "rotations": [[0, float("inf"), 0]]}, "rotations", "NaN or inf"),
     "missing_field": ({"type": "foot-contact", "frame_indices": [1]}, "contacts", "missing required field"),
-    "missing_joint": ({"type": "end-effector", "frame_indices": [1], "positions": [[0, 1, 0]]},
-                      "joint", "missing required field"),
-    "both_frames_and_times": ({"type": "root2d", "frame_indices": [1], "times": [0.05],
-                               "smooth_root_2d": [[0, 0]]}, "frame_indices", "exactly one"),
+    "missing_joint": (
+        {"type": "end-effector", "frame_indices": [1], "positions": [[0, 1, 0]]},
+        "joint",
+        "missing required field",
+    ),
+    "both_frames_and_times": (
+        {"type": "root2d", "frame_indices": [1], "times": [0.05], "smooth_root_2d": [[0, 0]]},
+        "frame_indices",
+        "exactly one",
+    ),
     "neither_frames_nor_times": ({"type": "root2d", "smooth_root_2d": [[0, 0]]}, "frame_indices", "exactly one"),
-    "missing_bvh": ({"type": "fullbody", "bvh": "no/such/clip.bvh", "source_frames": [0], "scale": 0.01},
-                    "bvh", "not found"),
-    "typo_field": ({"type": "root2d", "frame_index": [1], "smooth_root_2d": [[0, 0]]}, "frame_index",
-                   "unknown field"),
-    "contact_values": ({"type": "foot-contact", "frame_indices": [1], "contacts": [[1, 0, 2, 0]]}, "contacts",
-                       "0 or 1"),
+    "missing_bvh": (
+        {"type": "fullbody", "bvh": "no/such/clip.bvh", "source_frames": [0], "scale": 0.01},
+        "bvh",
+        "not found",
+    ),
+    "typo_field": ({"type": "root2d", "frame_index": [1], "smooth_root_2d": [[0, 0]]}, "frame_index", "unknown field"),
+    "contact_values": (
+        {"type": "foot-contact", "frame_indices": [1], "contacts": [[1, 0, 2, 0]]},
+        "contacts",
+        "0 or 1",
+    ),
 }
 
 
@@ -250,8 +308,14 @@ def test_non_json_file_names_line(skel, tmp_path):
 
 def test_python_objects_are_validated_too(skel, layout):
     with pytest.raises(ConstraintError, match=r"^constraint 1 \(end-effector\): field 'joint': unknown joint"):
-        encode([Root2DConstraint(frame_indices=[0], positions=[[0.0, 0.0]]),
-                EndEffectorConstraint(joint="tail", frame_indices=[0], positions=[[0.0, 1.0, 0.0]])], skel, layout)
+        encode(
+            [
+                Root2DConstraint(frame_indices=[0], positions=[[0.0, 0.0]]),
+                EndEffectorConstraint(joint="tail", frame_indices=[0], positions=[[0.0, 1.0, 0.0]]),
+            ],
+            skel,
+            layout,
+        )
 
 
 def test_bvh_missing_joints_and_wrong_scale(clip, skel):

@@ -80,16 +80,47 @@ def test_cli_end_to_end_bvh_and_npz(tiny_checkpoint, tmp_path, capsys):
     out = tmp_path / "walk.bvh"
     cons = tmp_path / "c.json"
     cons.write_text(json.dumps([{"type": "root2d", "times": [1.0], "smooth_root_2d": [[0.2, 0.8]]}]))
-    rc = main(["generate", "A person walks forward.", "--seconds", "1.5", "--steps", "4", "--model",
-               str(tiny_checkpoint), "--out", str(out), "--samples", "2", "--constraints", str(cons),
-               "--no-progress"])
+    rc = main(
+        [
+            "generate",
+            "A person walks forward.",
+            "--seconds",
+            "1.5",
+            "--steps",
+            "4",
+            "--model",
+            str(tiny_checkpoint),
+            "--out",
+            str(out),
+            "--samples",
+            "2",
+            "--constraints",
+            str(cons),
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     text = capsys.readouterr().out
     assert "walk_00.bvh" in text and "walk_01.bvh" in text and "residuals" in text
     m = load_motion(tmp_path / "walk_00.bvh")
     assert m.num_frames == 30 and m.num_joints == 21
-    rc = main(["generate", "A person bows.", "--seconds", "1", "--steps", "3", "--model", str(tiny_checkpoint),
-               "--out", str(tmp_path / "bow.npz"), "--fps", "30", "--no-progress"])
+    rc = main(
+        [
+            "generate",
+            "A person bows.",
+            "--seconds",
+            "1",
+            "--steps",
+            "3",
+            "--model",
+            str(tiny_checkpoint),
+            "--out",
+            str(tmp_path / "bow.npz"),
+            "--fps",
+            "30",
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     with np.load(tmp_path / "bow.npz", allow_pickle=False) as d:
         assert d["positions"].shape == (30, 21, 3) and "foot_contacts" in d.files  # 1 s: 20 @ 20 -> 30 @ 30 fps
@@ -100,8 +131,23 @@ def test_cli_bad_input_one_line(tiny_checkpoint, tmp_path, capsys):
     assert main(["generate", "x", "--model", str(tmp_path / "missing")]) == 2
     bad = tmp_path / "bad.json"
     bad.write_text('[{"type": "left-hand", "times": [99], "positions": [[0, 1, 0]]}]')
-    assert main(["generate", "x", "--model", str(tiny_checkpoint), "--constraints", str(bad), "--seconds", "1",
-                 "--out", str(tmp_path / "y.bvh")]) == 2
+    assert (
+        main(
+            [
+                "generate",
+                "x",
+                "--model",
+                str(tiny_checkpoint),
+                "--constraints",
+                str(bad),
+                "--seconds",
+                "1",
+                "--out",
+                str(tmp_path / "y.bvh"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and "constraint 0" in err[2]
     assert not (tmp_path / "y.bvh").exists()
@@ -131,9 +177,16 @@ def test_end_effector_position_and_rotation_met(model):
     from kinema.evaluate.metrics import end_effector_position_error, end_effector_rotation_error
     from kinema.geometry.rotations import axis_angle_to_quat
 
-    cons = [{"type": "right-hand", "frame_indices": [30], "positions": [[-0.3, 1.1, 0.6]],
-             "rotations": [[0.0, 0.5, 0.8]], "smooth_root_2d": [[0.0, 0.5]]},
-            {"type": "left-foot", "frame_indices": [45], "positions": [[0.1, 0.1, 1.0]]}]
+    cons = [
+        {
+            "type": "right-hand",
+            "frame_indices": [30],
+            "positions": [[-0.3, 1.1, 0.6]],
+            "rotations": [[0.0, 0.5, 0.8]],
+            "smooth_root_2d": [[0.0, 0.5]],
+        },
+        {"type": "left-foot", "frame_indices": [45], "positions": [[0.1, 0.1, 1.0]]},
+    ]
     m = _gen(model, cons)
     hand = m.skeleton.index("right_hand")
     assert end_effector_position_error(m, hand, [30], torch.tensor([[-0.3, 1.1, 0.6]])) < 0.1
@@ -151,10 +204,16 @@ def test_fullbody_keyframes_met(model, bandai_root):
     clip = bandai_root / "Bandai-Namco-Research-Motiondataset-2/data/dataset-2_walk_normal_001.bvh.gz"
     ref = read_bvh(clip, scale=0.01).prune(["joint_Root"]).resample(20)
     root = ref.root_translation[[10, 40]] - ref.root_translation[10] * torch.tensor([1.0, 0.0, 1.0])
-    cons = [{"type": "fullbody", "frame_indices": [10, 40],
-             "local_joints_rot": __import__("kinema.geometry.rotations", fromlist=["x"]).quat_to_axis_angle(
-                 ref.local_rotations[[10, 40]]).tolist(),
-             "root_positions": root.tolist()}]
+    cons = [
+        {
+            "type": "fullbody",
+            "frame_indices": [10, 40],
+            "local_joints_rot": __import__("kinema.geometry.rotations", fromlist=["x"])
+            .quat_to_axis_angle(ref.local_rotations[[10, 40]])
+            .tolist(),
+            "root_positions": root.tolist(),
+        }
+    ]
     m = _gen(model, cons)
     from kinema.motion.core import Motion
 
@@ -178,8 +237,21 @@ def test_foot_contact_constraint_plants_the_foot(model):
 def test_bench_all_writes_a_report(tiny_checkpoint, tmp_path):
     import json as _json
 
-    rc = main(["bench", "all", "--model", str(tiny_checkpoint), "--out", str(tmp_path / "bench"),
-               "--steps", "2", "--repeats", "1", "--quick"])
+    rc = main(
+        [
+            "bench",
+            "all",
+            "--model",
+            str(tiny_checkpoint),
+            "--out",
+            str(tmp_path / "bench"),
+            "--steps",
+            "2",
+            "--repeats",
+            "1",
+            "--quick",
+        ]
+    )
     assert rc == 0
     rep = _json.loads((tmp_path / "bench" / "report.json").read_text())
     assert {r["config"] for r in rep["train"]} == {"tiny", "small", "small-1stage"}
@@ -244,8 +316,10 @@ def test_root_targets_compensate_the_smoothed_pelvis_offset() -> None:
     assert torch.allclose(aim[0, 10, [rx, rz]], torch.tensor([0.9, 2.2]), atol=1e-5)
     assert torch.allclose(aim[0, 20, [rx, rz, px, pz]], torch.tensor([3.0, 4.0, 0.05, 0.0]), atol=1e-5)
     unmasked = mask == 0
-    assert torch.equal(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0)[unmasked],
-                       (den.normalize(tgt) * mask)[unmasked])
+    assert torch.equal(
+        pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0)[unmasked],
+        (den.normalize(tgt) * mask)[unmasked],
+    )
 
 
 def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
@@ -253,12 +327,30 @@ def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
 
     L = model.loaded
     text = model.encode_text("a person walks")
-    f = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
-                        generator=torch.Generator().manual_seed(0))[0]
+    f = sample_features(
+        L.denoiser,
+        L.sampler,
+        40,
+        text,
+        torch.tensor([[1.0, 0.0]]),
+        L.guidance,
+        steps=5,
+        generator=torch.Generator().manual_seed(0),
+    )[0]
     assert f[0, [0, 2]].abs().max() < 1e-5
     accel = (f[2:, [0, 2]] - 2 * f[1:-1, [0, 2]] + f[:-2, [0, 2]]).norm(dim=-1)
-    raw = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
-                          generator=torch.Generator().manual_seed(0), root_smoothing=0.0, root_displacement=False)[0]
+    raw = sample_features(
+        L.denoiser,
+        L.sampler,
+        40,
+        text,
+        torch.tensor([[1.0, 0.0]]),
+        L.guidance,
+        steps=5,
+        generator=torch.Generator().manual_seed(0),
+        root_smoothing=0.0,
+        root_displacement=False,
+    )[0]
     accel_raw = (raw[2:, [0, 2]] - 2 * raw[1:-1, [0, 2]] + raw[:-2, [0, 2]]).norm(dim=-1)
     assert accel.mean() < 0.5 * accel_raw.mean()
 

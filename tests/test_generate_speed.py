@@ -42,9 +42,15 @@ def _same(a, b) -> bool:
 
 
 # ----------------------------------------------------------------------------- guidance branches
-@pytest.mark.parametrize("constraints, samples, per_step", [
-    (None, 1, 2), (WAYPOINT, 1, 3), (None, 3, 6), (HAND, 2, 6),
-])
+@pytest.mark.parametrize(
+    "constraints, samples, per_step",
+    [
+        (None, 1, 2),
+        (WAYPOINT, 1, 3),
+        (None, 3, 6),
+        (HAND, 2, 6),
+    ],
+)
 def test_branches_per_step(model, batch_sizes, constraints, samples, per_step):
     model.generate(PROMPT, seconds=1.0, constraints=constraints, samples=samples, steps=4, postprocess=False)
     assert batch_sizes == [per_step] * 4  # one batched pass per step for all samples
@@ -91,18 +97,35 @@ def _rowwise(monkeypatch):
             return None if v is None else v[i : i + 1]
 
         keys = ("world_xz", "world_mask")
-        rows = [real(denoiser, sampler, T, row(text, i), c_dir[i : i + 1], guide, row(x_tgt, i), row(mask, i),
-                     generator=generator, init_noise=noise[i : i + 1], **{k: row(v, i) if k in keys else v
-                                                                             for k, v in kw.items()})
-                for i in range(B)]
+        rows = [
+            real(
+                denoiser,
+                sampler,
+                T,
+                row(text, i),
+                c_dir[i : i + 1],
+                guide,
+                row(x_tgt, i),
+                row(mask, i),
+                generator=generator,
+                init_noise=noise[i : i + 1],
+                **{k: row(v, i) if k in keys else v for k, v in kw.items()},
+            )
+            for i in range(B)
+        ]
         return torch.cat(rows)
 
     monkeypatch.setattr(api, "sample_features", one_by_one)
 
 
-@pytest.mark.parametrize("what, constraints", [
-    (PROMPT, None), (PROMPT, HAND), ([(PROMPT, 1.0), ("A person waves.", 1.2)], None),
-])
+@pytest.mark.parametrize(
+    "what, constraints",
+    [
+        (PROMPT, None),
+        (PROMPT, HAND),
+        ([(PROMPT, 1.0), ("A person waves.", 1.2)], None),
+    ],
+)
 def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constraints):
     kw = dict(seconds=1.5, constraints=constraints, samples=3, steps=4, seed=11, postprocess=False)
     batched = model.generate(what, **kw)
@@ -140,8 +163,17 @@ def test_chunked_batches_give_the_same_rows(model, batch_sizes):
     c_dir = torch.tensor([[1.0, 0.0]]).expand(5, 2)
 
     def run(max_batch_frames):
-        return sample_features(L.denoiser, L.sampler, 20, text, c_dir, L.guidance, steps=3,
-                               generator=torch.Generator().manual_seed(2), max_batch_frames=max_batch_frames)
+        return sample_features(
+            L.denoiser,
+            L.sampler,
+            20,
+            text,
+            c_dir,
+            L.guidance,
+            steps=3,
+            generator=torch.Generator().manual_seed(2),
+            max_batch_frames=max_batch_frames,
+        )
 
     whole = run(10_000)
     assert batch_sizes == [10] * 3

@@ -40,8 +40,8 @@ def test_keyjoint_targets_resolve_relative_and_world_xz() -> None:
     # frame 2: root known at (1, 2), hand (joint 2) relative (0.5, 1.0, -0.5)
     x[0, 2, [rx, rz]] = torch.tensor([1.0, 2.0])
     m[0, 2, [rx, rz]] = 1
-    x[0, 2, jp + 6: jp + 9] = torch.tensor([0.5, 1.0, -0.5])
-    m[0, 2, jp + 6: jp + 9] = 1
+    x[0, 2, jp + 6 : jp + 9] = torch.tensor([0.5, 1.0, -0.5])
+    m[0, 2, jp + 6 : jp + 9] = 1
     # frame 5: only the hand height is a feature; its x/z wait in the world store
     x[0, 5, jp + 7] = 1.2
     m[0, 5, jp + 7] = 1
@@ -60,7 +60,7 @@ def test_relative_xz_without_a_known_root_is_not_a_target() -> None:
     layout = FeatureLayout(J)
     x, m = torch.zeros(1, T, layout.dim), torch.zeros(1, T, layout.dim)
     jp = layout.slices["joint_pos"].start
-    m[0, 1, jp + 6: jp + 9] = 1  # x/y/z features but no root x/z target at that frame
+    m[0, 1, jp + 6 : jp + 9] = 1  # x/y/z features but no root x/z target at that frame
     keys = KeyjointTargets(x, m, J)
     assert keys.mask[0, 1, 2].tolist() == [0, 1, 0]
 

@@ -19,8 +19,17 @@ from kinema.train.trainer import TrainConfig, Trainer
 
 
 def _cfg(**kw) -> TrainConfig:
-    base = dict(model="tiny", steps=40, batch_size=4, lr=1e-3, warmup=5, text_encoder="hash-test-32",
-                log_every=5, ckpt_every=1000, max_seconds=4.0)
+    base = dict(
+        model="tiny",
+        steps=40,
+        batch_size=4,
+        lr=1e-3,
+        warmup=5,
+        text_encoder="hash-test-32",
+        log_every=5,
+        ckpt_every=1000,
+        max_seconds=4.0,
+    )
     base.update(kw)
     return TrainConfig(**base)
 
@@ -55,10 +64,19 @@ def _fixed_batches_loss(trainer: Trainer, n: int = 8) -> float:
             x0 = batch.features
             t = trainer.schedule.sample_timesteps(x0.shape[0], g)
             x_t = trainer.schedule.q_sample(x0, t, torch.randn(x0.shape, generator=g))
-            pred = model(x_t, t, trainer.text_table[batch.caption_index], batch.text_keep, batch.c_dir, x0,
-                         torch.zeros_like(x0), batch.pad_mask)
-            loss, _ = motion_loss(pred, x0, batch.pad_mask, trainer.layout, trainer.skeleton, trainer.stats,
-                                  trainer.weights)
+            pred = model(
+                x_t,
+                t,
+                trainer.text_table[batch.caption_index],
+                batch.text_keep,
+                batch.c_dir,
+                x0,
+                torch.zeros_like(x0),
+                batch.pad_mask,
+            )
+            loss, _ = motion_loss(
+                pred, x0, batch.pad_mask, trainer.layout, trainer.skeleton, trainer.stats, trainer.weights
+            )
             losses.append(float(loss))
     model.train()
     return sum(losses) / n
@@ -77,17 +95,35 @@ def test_loss_drops_when_overfitting_a_few_clips(tiny_data, tmp_path):
 
 def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
     data = _single_clip_data(tiny_data, tmp_path)
-    cfg = _cfg(steps=400, batch_size=8, lr=2e-3, warmup=20, text_dropout=0.0, phase1_fraction=1.0,
-               max_seconds=2.0, ema_decay=0.9, ema_every=1, phase1_dropout=0.0,
-               random_heading=False)
+    cfg = _cfg(
+        steps=400,
+        batch_size=8,
+        lr=2e-3,
+        warmup=20,
+        text_dropout=0.0,
+        phase1_fraction=1.0,
+        max_seconds=2.0,
+        ema_decay=0.9,
+        ema_every=1,
+        phase1_dropout=0.0,
+        random_heading=False,
+    )
     trainer = Trainer(cfg, data, tmp_path / "run")
     trainer.batches.min_frames = 40  # always the whole clip: the target is unambiguous
     trainer.run(progress=False)
     loaded = load_denoiser(tmp_path / "run")
     gt = canonicalize_start(trainer.batches.clips[0][None], trainer.layout)[0]
     text = trainer.text_table[:1]
-    out = sample_features(loaded.denoiser, loaded.sampler, 40, text, gt[None, 0, 3:5], loaded.guidance.__class__(
-        mode="none"), steps=20, generator=torch.Generator().manual_seed(0))
+    out = sample_features(
+        loaded.denoiser,
+        loaded.sampler,
+        40,
+        text,
+        gt[None, 0, 3:5],
+        loaded.guidance.__class__(mode="none"),
+        steps=20,
+        generator=torch.Generator().manual_seed(0),
+    )
     pos = features_to_motion(out[0], loaded.skeleton, loaded.fps).positions
     ref = features_to_motion(gt, loaded.skeleton, loaded.fps).positions
     err = (pos - ref).norm(dim=-1).mean().item()
@@ -127,10 +163,33 @@ def test_interrupted_save_keeps_previous_checkpoint(tiny_data, tmp_path, monkeyp
 
 def test_two_process_gloo_run(tiny_data, tmp_path):
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--master_port", "29533",
-           "-m", "kinema", "train", "--config", "tiny", "--data", str(tiny_data), "--out", str(tmp_path / "ddp"),
-           "--steps", "4", "--batch-size", "2", "--ckpt-every", "2", "--text-encoder", "hash-test-32",
-           "--no-progress"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--nproc_per_node",
+        "2",
+        "--master_port",
+        "29533",
+        "-m",
+        "kinema",
+        "train",
+        "--config",
+        "tiny",
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(tmp_path / "ddp"),
+        "--steps",
+        "4",
+        "--batch-size",
+        "2",
+        "--ckpt-every",
+        "2",
+        "--text-encoder",
+        "hash-test-32",
+        "--no-progress",
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     info = json.loads((tmp_path / "ddp" / "ckpt-00000004" / "checkpoint.json").read_text())
@@ -142,8 +201,20 @@ def test_cli_resume_may_change_the_schedule_but_nothing_else(tiny_data, tmp_path
     from kinema.cli import main
 
     out = tmp_path / "run"
-    base = ["train", "--config", "tiny", "--data", str(tiny_data), "--out", str(out), "--batch-size", "2",
-            "--text-encoder", "hash-test-32", "--no-progress"]
+    base = [
+        "train",
+        "--config",
+        "tiny",
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(out),
+        "--batch-size",
+        "2",
+        "--text-encoder",
+        "hash-test-32",
+        "--no-progress",
+    ]
     assert main([*base, "--steps", "4", "--ckpt-every", "2", "--phase1-fraction", "0.5"]) == 0
     resumed = ["train", "--data", str(tiny_data), "--out", str(out), "--resume", "--no-progress"]
     assert main([*resumed, "--steps", "6", "--phase1-fraction", "0.25", "--content-balance", "0.5"]) == 0
@@ -196,11 +267,13 @@ def test_batch_sampler_draws_clips_in_proportion_to_their_weights():
 def test_fine_tune_starts_from_the_given_weights(tiny_data, tmp_path):
     Trainer(_cfg(steps=6), tiny_data, tmp_path / "base").run(progress=False)
     base = load_denoiser(tmp_path / "base")  # EMA weights, float32
-    ft = Trainer(_cfg(steps=4, seed=3, phase1_fraction=0.0, init_from=str(tmp_path / "base")), tiny_data,
-                 tmp_path / "ft")
+    ft = Trainer(
+        _cfg(steps=4, seed=3, phase1_fraction=0.0, init_from=str(tmp_path / "base")), tiny_data, tmp_path / "ft"
+    )
     assert ft.init_weights(ft.cfg.init_from).name == "ckpt-00000006"
-    for (name, p), q, e in zip(base.denoiser.state_dict().items(), ft.model.state_dict().values(),
-                               ft.ema.state_dict().values(), strict=True):
+    for (name, p), q, e in zip(
+        base.denoiser.state_dict().items(), ft.model.state_dict().values(), ft.ema.state_dict().values(), strict=True
+    ):
         assert torch.equal(p, q) and torch.equal(p, e), name
     assert ft.step == 0 and ft.keyframe_cap(0) == ft.cfg.max_keyframes  # its model already did the ramp
     ft.run(progress=False)
@@ -214,10 +287,19 @@ def test_fine_tune_refuses_a_different_architecture(tiny_data, tmp_path, capsys)
     from kinema.cli import main
 
     Trainer(_cfg(steps=2), tiny_data, tmp_path / "base").run(progress=False)
-    base = ["train", "--data", str(tiny_data), "--batch-size", "2", "--text-encoder", "hash-test-32",
-            "--no-progress", "--steps", "2"]
-    assert main([*base, "--config", "small", "--out", str(tmp_path / "ft"), "--init-from",
-                 str(tmp_path / "base")]) == 2
+    base = [
+        "train",
+        "--data",
+        str(tiny_data),
+        "--batch-size",
+        "2",
+        "--text-encoder",
+        "hash-test-32",
+        "--no-progress",
+        "--steps",
+        "2",
+    ]
+    assert main([*base, "--config", "small", "--out", str(tmp_path / "ft"), "--init-from", str(tmp_path / "base")]) == 2
     err = capsys.readouterr().err
     assert "cannot fine-tune from this model" in err and "model_config.width" in err
     assert main([*base, "--out", str(tmp_path / "ft2"), "--init-from", str(tmp_path / "nowhere")]) == 2
