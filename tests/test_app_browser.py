@@ -95,7 +95,8 @@ def generate(page, session) -> None:
     before = session.motions
     button(page, "Generate").click()
     wait_for(lambda: session.motions is not before and session.job is None, what="generation")
-    page.get_by_text("sample(s),").wait_for(timeout=10000)
+    assert "sample(s)," in session.status.content, session.status.content  # not "Failed: ..."
+    page.get_by_text("sample(s),").first.wait_for(timeout=60000)  # and the page shows it
 
 
 def screen_step(camera, point: torch.Tensor, axis: int, box) -> float:
