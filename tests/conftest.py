@@ -91,7 +91,17 @@ def tiny_checkpoint(tiny_data, tmp_path_factory) -> Path:
     from kinema.train.trainer import TrainConfig, Trainer
 
     run = tmp_path_factory.mktemp("runs") / "tiny"
-    cfg = TrainConfig(model="tiny", steps=60, batch_size=8, lr=1e-3, warmup=5, text_encoder="hash-test-32",
-                      log_every=10, ckpt_every=1000, max_seconds=6.0, sampling_steps=10)
+    cfg = TrainConfig(
+        model="tiny",
+        steps=60,
+        batch_size=8,
+        lr=1e-3,
+        warmup=5,
+        text_encoder="hash-test-32",
+        log_every=10,
+        ckpt_every=1000,
+        max_seconds=6.0,
+        sampling_steps=10,
+    )
     Trainer(cfg, tiny_data, run).run(progress=False)
     return run

@@ -26,20 +26,43 @@ pytest.importorskip("pydantic")
 
 #: Ray: every address on loopback, no usage report, and token auth with a token of this run's own (not
 #: ~/.ray/auth_token, which other Ray users of the machine may have or lack)
-ENV = os.environ | {"OMP_NUM_THREADS": "1", "RAY_USAGE_STATS_ENABLED": "0", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0",
-                    "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
+ENV = os.environ | {
+    "OMP_NUM_THREADS": "1",
+    "RAY_USAGE_STATS_ENABLED": "0",
+    "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0",
+    "RAY_AUTH_MODE": "token",
+    "RAY_AUTH_TOKEN": secrets.token_hex(32),
+}
 
 
 def _jobs(path: Path, n: int, seconds: float = 1.0, steps: int = 2, extra: list[str] = ()) -> Path:
-    lines = [json.dumps({"id": f"job{i:02d}", "prompt": "A person walks forward.", "seconds": seconds,
-                         "steps": steps, "seed": i, "format": "npz" if i % 3 == 2 else "bvh"}) for i in range(n)]
+    lines = [
+        json.dumps(
+            {
+                "id": f"job{i:02d}",
+                "prompt": "A person walks forward.",
+                "seconds": seconds,
+                "steps": steps,
+                "seed": i,
+                "format": "npz" if i % 3 == 2 else "bvh",
+            }
+        )
+        for i in range(n)
+    ]
     path.write_text("\n".join([*lines, *extra]) + "\n")
     return path
 
 
 def _kinema(*args: str, **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "kinema", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True, env=ENV, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "kinema", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+        env=ENV,
+        **kw,
+    )
 
 
 def _ok_records(out: Path) -> list[dict]:
@@ -109,8 +132,16 @@ def test_killed_batch_resumes_without_duplicates(tmp_path):
 def test_ctrl_c_stops_the_workers_and_exits_130(tmp_path):
     jobs = _jobs(tmp_path / "jobs.jsonl", 40, seconds=2.0, steps=5)
     out = tmp_path / "out"
-    proc = _kinema("batch", str(jobs), "--out", str(out), "--workers", "2", "--no-progress",
-                   preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in a terminal
+    proc = _kinema(
+        "batch",
+        str(jobs),
+        "--out",
+        str(out),
+        "--workers",
+        "2",
+        "--no-progress",
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # as in a terminal
     deadline = time.monotonic() + 120
     while not _ok_records(out):
         assert proc.poll() is None and time.monotonic() < deadline, proc.stdout.read()
@@ -126,10 +157,17 @@ def test_ctrl_c_stops_the_workers_and_exits_130(tmp_path):
 def test_resume_skips_finished_jobs_and_reruns_changed_ones(tmp_path):
     from kinema.batch.runner import run_batch
 
-    jobs = _jobs(tmp_path / "jobs.jsonl", 3, extra=['{"prompt": "x", "colour": 1}', '{"id": "job00", "prompt": "y"}',
-                                                   '{"prompt": "z", "seconds": 1, "steps": 2, "constraints": '
-                                                   '[{"type": "root2d", "frame_indices": [99], "smooth_root_2d": '
-                                                   '[[0, 1]]}]}'])
+    jobs = _jobs(
+        tmp_path / "jobs.jsonl",
+        3,
+        extra=[
+            '{"prompt": "x", "colour": 1}',
+            '{"id": "job00", "prompt": "y"}',
+            '{"prompt": "z", "seconds": 1, "steps": 2, "constraints": '
+            '[{"type": "root2d", "frame_indices": [99], "smooth_root_2d": '
+            "[[0, 1]]}]}",
+        ],
+    )
     out = tmp_path / "out"
     first = run_batch(jobs, out, workers=1, progress=False)
     assert (first.done, first.skipped, first.failed, first.total) == (3, 0, 3, 6)
@@ -202,10 +240,24 @@ def test_batch_on_a_local_ray_head(tmp_path):
         pytest.skip("the ray command is not installed next to this Python")
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="kr", dir="/tmp")  # short: Ray's socket paths must stay < 108 bytes
-    head = subprocess.Popen([str(ray_bin), "start", "--head", "--block", f"--port={port}",
-                             "--node-ip-address=127.0.0.1", "--num-cpus=2", "--include-dashboard=false",
-                             "--disable-usage-stats", f"--temp-dir={temp}"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, start_new_session=True, env=ENV)
+    head = subprocess.Popen(
+        [
+            str(ray_bin),
+            "start",
+            "--head",
+            "--block",
+            f"--port={port}",
+            "--node-ip-address=127.0.0.1",
+            "--num-cpus=2",
+            "--include-dashboard=false",
+            "--disable-usage-stats",
+            f"--temp-dir={temp}",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+        env=ENV,
+    )
     try:
         deadline = time.monotonic() + 120
         while not _listening(port):
@@ -213,8 +265,9 @@ def test_batch_on_a_local_ray_head(tmp_path):
             time.sleep(0.2)
         jobs = _jobs(tmp_path / "jobs.jsonl", 4)
         out = tmp_path / "out"
-        proc = _kinema("batch", str(jobs), "--out", str(out), "--ray", f"127.0.0.1:{port}", "--workers", "2",
-                       "--no-progress")
+        proc = _kinema(
+            "batch", str(jobs), "--out", str(out), "--ray", f"127.0.0.1:{port}", "--workers", "2", "--no-progress"
+        )
         text, _ = proc.communicate(timeout=300)
         assert proc.returncode == 0, text
         assert "4 done" in text and "on 2 worker(s)" in text, text

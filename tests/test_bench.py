@@ -44,8 +44,7 @@ def test_sweeps_report_seconds_per_motion(tiny_model):
     from kinema.bench.generate import bench_sweeps, format_sweeps
 
     rows = bench_sweeps(tiny_model, samples=(1, 2), durations=(1.0, 12.0), steps=2)
-    assert [(r.sweep, r.value) for r in rows] == [("samples", 1), ("samples", 2), ("seconds", 1.0),
-                                                  ("seconds", 12.0)]
+    assert [(r.sweep, r.value) for r in rows] == [("samples", 1), ("samples", 2), ("seconds", 1.0), ("seconds", 12.0)]
     assert rows[1].per_motion_s == pytest.approx(rows[1].total_s / 2)
     assert rows[3].segments >= 2  # longer than the model's window: a timeline of segments
     assert "s per motion" in format_sweeps(rows)
@@ -67,8 +66,15 @@ def test_suite_and_report(tiny_checkpoint, tmp_path):
     from kinema.bench.report import run_all, write_bench_report
     from kinema.bench.suite import GenerateSuiteOptions
 
-    opts = GenerateSuiteOptions.quick(sections=("steps", "sweeps", "threads"), steps=(2,), samples=(1,),
-                                      durations=(1.0,), seconds=1.0, loads=(0,), thread_repeats=1)
+    opts = GenerateSuiteOptions.quick(
+        sections=("steps", "sweeps", "threads"),
+        steps=(2,),
+        samples=(1,),
+        durations=(1.0,),
+        seconds=1.0,
+        loads=(0,),
+        thread_repeats=1,
+    )
     result = run_all(str(tiny_checkpoint), configs=("tiny",), suite=opts, progress=False)
     assert len(result["generate"]) == 4 and len(result["sweeps"]) == 2 and len(result["threads"]) == 2
     path = write_bench_report(result, tmp_path / "bench")
@@ -81,8 +87,26 @@ def test_suite_and_report(tiny_checkpoint, tmp_path):
 def test_cli_bench_generate_quick(tiny_checkpoint, capsys):
     from kinema.cli import main
 
-    assert main(["bench", "generate", "--model", str(tiny_checkpoint), "--quick", "--sections", "steps",
-                 "--steps", "2", "--seconds", "1", "--threads", "1"]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "generate",
+                "--model",
+                str(tiny_checkpoint),
+                "--quick",
+                "--sections",
+                "steps",
+                "--steps",
+                "2",
+                "--seconds",
+                "1",
+                "--threads",
+                "1",
+            ]
+        )
+        == 0
+    )
     assert "DDIM steps" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["bench", "generate", "--sections", "nope"])
@@ -91,8 +115,9 @@ def test_cli_bench_generate_quick(tiny_checkpoint, capsys):
 def test_train_modes_fp32_vs_bf16(tiny_data):
     from kinema.bench.train_modes import bench_train_modes, format_modes
 
-    rows, losses = bench_train_modes(tiny_data, "tiny", modes=("bf16",), steps=4, batch=2, warmup=1, tail=2,
-                                     progress=False)
+    rows, losses = bench_train_modes(
+        tiny_data, "tiny", modes=("bf16",), steps=4, batch=2, warmup=1, tail=2, progress=False
+    )
     assert [r.mode for r in rows] == ["fp32", "bf16"] and len(losses["bf16"]) == 4
     assert rows[0].speedup == 1.0 and rows[0].loss_rel_diff == 0.0
     assert 0 <= rows[1].loss_rel_diff < 0.5

@@ -30,8 +30,17 @@ KINEMA_TO_BLENDER = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
 
 
 def _blender_heads(bvh: Path, out: Path, frames: list[int]) -> dict:
-    cmd = [BLENDER, "-b", "--factory-startup", "--python", str(SCRIPT), "--", str(bvh), str(out),
-           ",".join(map(str, frames))]
+    cmd = [
+        BLENDER,
+        "-b",
+        "--factory-startup",
+        "--python",
+        str(SCRIPT),
+        "--",
+        str(bvh),
+        str(out),
+        ",".join(map(str, frames)),
+    ]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0 and out.exists(), proc.stdout[-2000:] + proc.stderr[-2000:]
     return json.loads(out.read_text())

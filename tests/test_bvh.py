@@ -48,9 +48,7 @@ def reference_positions(data: BVHData, scale: float) -> np.ndarray:
                 rot_cols.append(col + k)
         col += len(chans)
         local = (
-            Rotation.from_euler(rot_axes, data.values[:, rot_cols], degrees=True)
-            if rot_axes
-            else Rotation.identity(T)
+            Rotation.from_euler(rot_axes, data.values[:, rot_cols], degrees=True) if rot_axes else Rotation.identity(T)
         )
         p = data.parents[j]
         if p < 0:

@@ -24,6 +24,7 @@ def _dataset_dir(root: Path, number: int) -> Path:
     """A dataset folder of the Bandai data in use (real, or synthetic with the real label files: conftest.py)."""
     return root / f"Bandai-Namco-Research-Motiondataset-{number}"
 
+
 SUBJECT = re.compile(r"^(A|An|Someone)\b")
 WORD = re.compile(r"[A-Za-z'-]+")
 
@@ -59,9 +60,7 @@ def _check_clip(content: str, style: str) -> None:
         assert caps == captions_for(content, style, mirrored=mirrored)  # deterministic
     swap = {"left": "right", "right": "left"}
     side = {"left", "right"} & set(content.split("-"))
-    for text, mirrored_text in zip(
-        captions_for(content, style), captions_for(content, style, True), strict=True
-    ):
+    for text, mirrored_text in zip(captions_for(content, style), captions_for(content, style, True), strict=True):
         assert _side_words(mirrored_text) == {swap[w] for w in _side_words(text)}, mirrored_text
         if side:  # the label names a side: every caption says exactly that side
             assert _side_words(text) == side, text
@@ -103,9 +102,7 @@ def test_side_specific_examples() -> None:
         assert "left" in text and "right" not in text
     for text in captions_for("wave-left-hand", "normal", mirrored=True):
         assert "right" in text and "left" not in text
-    assert captions_for("walk-turn-left", "exhausted", mirrored=True) == captions_for(
-        "walk-turn-right", "exhausted"
-    )
+    assert captions_for("walk-turn-left", "exhausted", mirrored=True) == captions_for("walk-turn-right", "exhausted")
     # bye is done with the right hand, so its mirror is a left-handed wave
     assert all("right hand" in t for t in captions_for("bye", "happy"))
     assert all("left hand" in t for t in captions_for("bye", "happy", mirrored=True))
@@ -118,9 +115,7 @@ def test_mirrored_equals_mirrored_content_for_sided_labels() -> None:
     for content in CONTENT_PHRASES:
         if mirror_content(content) != content:
             for style in styles:
-                assert captions_for(content, style, mirrored=True) == captions_for(
-                    mirror_content(content), style
-                )
+                assert captions_for(content, style, mirrored=True) == captions_for(mirror_content(content), style)
 
 
 def test_all_known_pairs_are_well_formed_without_data() -> None:
@@ -150,9 +145,7 @@ def test_mirror_content() -> None:
 def test_mirror_caption() -> None:
     assert mirror_caption("A person waves with their left hand.") == "A person waves with their right hand."
     assert mirror_caption("Left then RIGHT, then right.") == "Right then LEFT, then left."
-    assert (
-        mirror_caption("He turns leftwards; a left-hand wave.") == "He turns rightwards; a right-hand wave."
-    )
+    assert mirror_caption("He turns leftwards; a left-hand wave.") == "He turns rightwards; a right-hand wave."
     assert mirror_caption("A bright, leftover rightful kick.") == "A bright, leftover rightful kick."
     text = "Someone turns Left, then waves the right hand."
     assert mirror_caption(mirror_caption(text)) == text

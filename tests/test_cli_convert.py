@@ -58,8 +58,10 @@ def test_errors_are_one_line_and_exit_2(clip, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.bvh" in err[0]
     bad = tmp_path / "bad.bvh"
-    bad.write_text("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
-                   "MOTION\nFrames: 2\nFrame Time: 0.05\n0 0 0\n0 0\n")
+    bad.write_text(
+        "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
+        "MOTION\nFrames: 2\nFrame Time: 0.05\n0 0 0\n0 0\n"
+    )
     assert main(["convert", str(bad), str(tmp_path / "y.npz")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.bvh:11" in err[0]

@@ -20,8 +20,19 @@ def _run(args, capsys):
 
 @pytest.fixture()
 def base(tiny_checkpoint, tmp_path):
-    return ["generate", "A person walks forward.", "--model", str(tiny_checkpoint), "--steps", "2",
-            "--seconds", "2", "--no-progress", "--threads", "1"]
+    return [
+        "generate",
+        "A person walks forward.",
+        "--model",
+        str(tiny_checkpoint),
+        "--steps",
+        "2",
+        "--seconds",
+        "2",
+        "--no-progress",
+        "--threads",
+        "1",
+    ]
 
 
 def test_no_constraints_no_table(base, tmp_path, capsys):
@@ -31,10 +42,14 @@ def test_no_constraints_no_table(base, tmp_path, capsys):
 
 def test_table_in_cm_and_unreachable_target_warned(base, tmp_path, capsys):
     cons = tmp_path / "c.json"
-    cons.write_text(json.dumps([
-        {"type": "root2d", "times": [1.0], "smooth_root_2d": [[0.2, 0.5]]},
-        {"type": "right-hand", "times": [1.5], "positions": [[30.0, 1.2, 0.5]]},
-    ]))
+    cons.write_text(
+        json.dumps(
+            [
+                {"type": "root2d", "times": [1.0], "smooth_root_2d": [[0.2, 0.5]]},
+                {"type": "right-hand", "times": [1.5], "positions": [[30.0, 1.2, 0.5]]},
+            ]
+        )
+    )
     code, out, err = _run([*base, "--constraints", str(cons), "--out", str(tmp_path / "b.bvh")], capsys)
     assert code == 0
     lines = out.splitlines()
@@ -63,8 +78,12 @@ def test_threads_option_and_environment(base, tmp_path, capsys, monkeypatch):
 
 
 def test_residual_table_rows():
-    rep = {"exact": {"before": {"rotation_deg": {"mean": 20.0, "max": 30.0, "count": 2}},
-                     "after": {"rotation_deg": {"mean": 0.5, "max": 1.0, "count": 2}}}}
+    rep = {
+        "exact": {
+            "before": {"rotation_deg": {"mean": 20.0, "max": 30.0, "count": 2}},
+            "after": {"rotation_deg": {"mean": 0.5, "max": 1.0, "count": 2}},
+        }
+    }
     table = residual_table([{}, rep])
     assert "joint rotation targets" in table and "30.00 deg" in table and "1.00 deg" in table
     assert table.splitlines()[2].split()[0] == "1"  # the second sample's row
@@ -72,8 +91,20 @@ def test_residual_table_rows():
 
 
 def test_preview_runs_ten_steps(tiny_checkpoint, tmp_path, capsys):
-    args = ["generate", "A person walks.", "--model", str(tiny_checkpoint), "--seconds", "1", "--no-progress",
-            "--threads", "1", "--preview", "--out", str(tmp_path / "p.bvh")]
+    args = [
+        "generate",
+        "A person walks.",
+        "--model",
+        str(tiny_checkpoint),
+        "--seconds",
+        "1",
+        "--no-progress",
+        "--threads",
+        "1",
+        "--preview",
+        "--out",
+        str(tmp_path / "p.bvh"),
+    ]
     code, out, _ = _run(args, capsys)
     assert code == 0 and "10 DDIM steps" in out
     code, _, err = _run([*args[:-2], "--steps", "3", "--out", str(tmp_path / "q.bvh")], capsys)

@@ -147,9 +147,7 @@ def test_stats_cover_the_train_split_only(build, records):
 def test_data_stats_prints_labels_splits_and_totals(build, records, capsys):
     assert main(["data", "stats", str(build)]) == 0
     out = capsys.readouterr().out
-    for word in (
-        {r["content"] for r in records} | {r["style"] for r in records} | {"train", "val", "test", "total"}
-    ):
+    for word in {r["content"] for r in records} | {r["style"] for r in records} | {"train", "val", "test", "total"}:
         assert word in out
     assert f"{len(records)} clips" in out
 

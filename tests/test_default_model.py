@@ -25,8 +25,16 @@ def test_shipped_files_size_and_licence() -> None:
     assert names == ["MODEL_CARD.md", "checkpoint.json", "ema.safetensors", "walk.png"]
     assert sum(p.stat().st_size for p in SHIPPED.iterdir()) <= 25e6
     card = (SHIPPED / "MODEL_CARD.md").read_text()
-    for needed in ("CC BY-NC 4.0", "non-commercial", "Kobayashi", "arXiv:2306.08861", "kinema train",
-                   "kinema evaluate", "Ground truth", "kinema bench"):
+    for needed in (
+        "CC BY-NC 4.0",
+        "non-commercial",
+        "Kobayashi",
+        "arXiv:2306.08861",
+        "kinema train",
+        "kinema evaluate",
+        "Ground truth",
+        "kinema bench",
+    ):
         assert needed in card, needed
 
 
@@ -43,8 +51,22 @@ def test_default_model_meets_waypoints_after_postprocessing(model) -> None:
 
 def test_readme_main_command(tmp_path, capsys) -> None:
     out = tmp_path / "walk.bvh"
-    assert main(["generate", "A person walks forward happily.", "--seconds", "4", "--out", str(out),
-                 "--steps", "10", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "A person walks forward happily.",
+                "--seconds",
+                "4",
+                "--out",
+                str(out),
+                "--steps",
+                "10",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert str(out) in capsys.readouterr().out
     motion = load_motion(out)
     assert motion.num_frames == 80 and motion.skeleton.num_joints == 21
@@ -62,8 +84,10 @@ def test_default_model_follows_text(model) -> None:
     Ground-truth Bandai Namco walks cover 0.9-1.9 m/s and runs 1.8-3.0 m/s; a lateral drift of about
     10 degrees is within what the data shows, so the direction check allows ~27 degrees.
     """
-    walk, run, wave = (_root_travel(model, p) for p in
-                       ("A person walks forward.", "A person runs forward.", "A person waves with the right hand."))
+    walk, run, wave = (
+        _root_travel(model, p)
+        for p in ("A person walks forward.", "A person runs forward.", "A person waves with the right hand.")
+    )
     assert 3.0 < walk[1] < 8.0 and walk[0].abs() < 0.5 * walk[1], walk
     assert run[1] > walk[1] and run[0].abs() < 0.5 * run[1], (run, walk)
     assert wave.norm() < 0.6, wave

@@ -138,9 +138,7 @@ def test_ddim_stochastic_eta_reproducible_and_oracle_exact() -> None:
     sampler = DDIMSampler(num_inference_steps=20, eta=1.0)
     a = sampler.sample(_toy_denoiser, SHAPE, torch.Generator().manual_seed(3))
     b = sampler.sample(_toy_denoiser, SHAPE, torch.Generator().manual_seed(3))
-    deterministic = DDIMSampler(num_inference_steps=20).sample(
-        _toy_denoiser, SHAPE, torch.Generator().manual_seed(3)
-    )
+    deterministic = DDIMSampler(num_inference_steps=20).sample(_toy_denoiser, SHAPE, torch.Generator().manual_seed(3))
     assert torch.equal(a, b) and not torch.allclose(a, deterministic)
     x0 = _x0()
     out = sampler.sample(lambda x, t: x0, SHAPE, torch.Generator().manual_seed(0))

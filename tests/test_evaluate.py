@@ -103,9 +103,30 @@ def _documented_keys() -> set[str]:
 
 def test_cli_end_to_end(tiny_checkpoint, tiny_data, tmp_path, capsys):
     out = tmp_path / "eval"
-    rc = _cli(["evaluate", "--model", str(tiny_checkpoint), "--data", str(tiny_data), "--split", "train",
-               "--cases", "4", "--seed", "0", "--steps", "4", "--out", str(out),
-               "--retrieval", str(tmp_path / "no-retrieval"), "--filmstrips", "2", "--no-progress"])
+    rc = _cli(
+        [
+            "evaluate",
+            "--model",
+            str(tiny_checkpoint),
+            "--data",
+            str(tiny_data),
+            "--split",
+            "train",
+            "--cases",
+            "4",
+            "--seed",
+            "0",
+            "--steps",
+            "4",
+            "--out",
+            str(out),
+            "--retrieval",
+            str(tmp_path / "no-retrieval"),
+            "--filmstrips",
+            "2",
+            "--no-progress",
+        ]
+    )
     assert rc == 0
     printed = capsys.readouterr().out
     assert "| Ground truth |" in printed and "wall time" in printed
@@ -142,8 +163,16 @@ def test_text_metrics_with_a_retrieval_model(tiny_checkpoint, tiny_data, tmp_pat
     RetrievalModel(cfg, ds.layout, ds.stats, ds.fps, "hash-test-32").save(tmp_path / "ret")
     cases = build_suite(tiny_data, "train", num_cases=3, seed=0, text_fraction=1.0)
     assert [c["kind"] for c in cases] == ["text"] * 3
-    res = run_suite(load_model(tiny_checkpoint), cases, postprocess_modes=(False,), steps=4, progress=False,
-                    retrieval=tmp_path / "ret", mm_prompts=1, mm_samples=2)
+    res = run_suite(
+        load_model(tiny_checkpoint),
+        cases,
+        postprocess_modes=(False,),
+        steps=4,
+        progress=False,
+        retrieval=tmp_path / "ret",
+        mm_prompts=1,
+        mm_samples=2,
+    )
     table = res.data["table"]
     assert set(table) == {"ground_truth", "raw"}
     for row in table.values():

@@ -119,10 +119,13 @@ def test_timeline_example(path, model, timelines):
     assert result.report.warnings == []
 
 
-@pytest.mark.xfail(reason="with the model's saved guidance (w_constr 2) every segment after the first keeps "
-                          "doing what the first one did: the joins are constraints and constraint guidance "
-                          "outweighs the new prompt (with --guidance 2 0 the segments follow their prompts)",
-                   raises=AssertionError, strict=False)
+@pytest.mark.xfail(
+    reason="with the model's saved guidance (w_constr 2) every segment after the first keeps "
+    "doing what the first one did: the joins are constraints and constraint guidance "
+    "outweighs the new prompt (with --guidance 2 0 the segments follow their prompts)",
+    raises=AssertionError,
+    strict=False,
+)
 def test_bow_wave_walk_follows_each_prompt(model, timelines):
     """examples/timelines/bow_wave_walk.json: a bow (trunk leans forward), then a raised right hand
     (above the head), then a walk (the pelvis travels)."""
@@ -136,9 +139,11 @@ def test_bow_wave_walk_follows_each_prompt(model, timelines):
     hand_over_head = p[:, names.index("Hand_R"), 1] - p[:, names.index("Head"), 1]
     speed = pelvis_speed(motion)
     bow, wave, walk = slice(0, int(3 * fps)), slice(int(3 * fps), int(6 * fps)), slice(int(6.5 * fps), None)
-    found = {"bow: max lean (deg)": float(lean[bow].max()),
-             "wave: max right hand over head (m)": float(hand_over_head[wave].max()),
-             "walk: mean pelvis speed (m/s)": float(speed[walk].mean())}
+    found = {
+        "bow: max lean (deg)": float(lean[bow].max()),
+        "wave: max right hand over head (m)": float(hand_over_head[wave].max()),
+        "walk: mean pelvis speed (m/s)": float(speed[walk].mean()),
+    }
     print(found)
     assert found["bow: max lean (deg)"] > 15
     assert found["wave: max right hand over head (m)"] > 0.1

@@ -17,8 +17,7 @@ from kinema.model.loading import find_checkpoint, load_denoiser
 
 
 def test_export_keeps_ema_weights_in_half_precision(tiny_checkpoint, tmp_path) -> None:
-    out = export_model(tiny_checkpoint, tmp_path / "model", guidance=Guidance("separated", 1.5, 3.0),
-                       sampling_steps=7)
+    out = export_model(tiny_checkpoint, tmp_path / "model", guidance=Guidance("separated", 1.5, 3.0), sampling_steps=7)
     assert sorted(p.name for p in out.iterdir()) == ["checkpoint.json", "ema.safetensors"]
     src = find_checkpoint(tiny_checkpoint)
     ema = load_file(str(src / "ema.safetensors"))

@@ -63,8 +63,9 @@ def test_contacts_standing_vs_in_the_air_vs_sliding():
     m = standing()
     layout = FeatureLayout(m.num_joints)
     assert layout.split(motion_to_features(m))["contacts"].min() == 1.0
-    lifted = Motion(m.skeleton, m.fps, m.root_translation + torch.tensor([0, 0.5, 0.0], dtype=torch.float64),
-                    m.local_rotations)
+    lifted = Motion(
+        m.skeleton, m.fps, m.root_translation + torch.tensor([0, 0.5, 0.0], dtype=torch.float64), m.local_rotations
+    )
     assert layout.split(motion_to_features(lifted))["contacts"].max() == 0.0
     assert layout.split(motion_to_features(standing(speed=2.0)))["contacts"].max() == 0.0
 
@@ -156,7 +157,8 @@ def test_isotropic_stats_are_rotation_invariant():
     layout = FeatureLayout(m.num_joints)
     f = motion_to_features(m)
     a = NormStats.compute([f], xz_pairs=layout.xz_pairs())
-    b = NormStats.compute([rotate_features(f, torch.tensor(2.0, dtype=torch.float64), layout)],
-                          xz_pairs=layout.xz_pairs())
+    b = NormStats.compute(
+        [rotate_features(f, torch.tensor(2.0, dtype=torch.float64), layout)], xz_pairs=layout.xz_pairs()
+    )
     assert torch.allclose(a.std, b.std, atol=1e-5) and torch.allclose(a.mean, b.mean, atol=1e-5)
     assert a.mean[layout.slices["heading"]].abs().max() == 0

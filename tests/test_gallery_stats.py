@@ -21,8 +21,19 @@ def _stats_fn():
 def test_known_motion_gives_known_statistics():
     motion_stats = _stats_fn()
     T, fps = 41, 20.0
-    pose = torch.tensor([[0, 1.0, 0], [0, 1.2, 0], [0, 1.4, 0], [0, 1.55, 0], [0, 1.7, 0],
-                         [-0.3, 1.0, 0], [0.3, 1.0, 0], [-0.1, 0.0, 0.1], [0.1, 0.0, 0.1]])
+    pose = torch.tensor(
+        [
+            [0, 1.0, 0],
+            [0, 1.2, 0],
+            [0, 1.4, 0],
+            [0, 1.55, 0],
+            [0, 1.7, 0],
+            [-0.3, 1.0, 0],
+            [0.3, 1.0, 0],
+            [-0.1, 0.0, 0.1],
+            [0.1, 0.0, 0.1],
+        ]
+    )
     pos = pose.expand(T, -1, -1).clone()
     pos[..., 2] += torch.arange(T).view(T, 1) / fps * 1.5  # 1.5 m/s along +Z, upright, no jerk
     st = motion_stats(pos, fps, NAMES)

@@ -40,12 +40,17 @@ def test_result_carries_its_own_report(model):
 
 
 def test_threads_give_the_sequential_results(model):
-    calls = [dict(seed=s, steps=st, seconds=sec) for s, st, sec in
-             [(0, 3, 1.0), (1, 6, 1.5), (2, 4, 1.0), (3, 5, 2.0), (4, 3, 1.0), (5, 7, 1.5)]]
+    calls = [
+        dict(seed=s, steps=st, seconds=sec)
+        for s, st, sec in [(0, 3, 1.0), (1, 6, 1.5), (2, 4, 1.0), (3, 5, 2.0), (4, 3, 1.0), (5, 7, 1.5)]
+    ]
 
     def run(kw):
-        return model.generate("A person walks forward.", constraints=[
-            {"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}], **kw)
+        return model.generate(
+            "A person walks forward.",
+            constraints=[{"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}],
+            **kw,
+        )
 
     sequential = [run(kw) for kw in calls]
     with ThreadPoolExecutor(max_workers=4) as pool:
@@ -63,15 +68,18 @@ def _close_reports(a, b) -> bool:
     return abs(ra - rb) < 1e-9
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(steps=0), "steps must be an integer in \\[1, "),
-    (dict(steps=5000), "steps must be an integer in \\[1, 1000\\]"),
-    (dict(seed=2**70), "seed must be an integer"),
-    (dict(seed=-1), "seed must be an integer"),
-    (dict(guidance=(float("nan"), 1.0)), "w_text must be a finite number >= 0"),
-    (dict(guidance=(-5.0, -5.0)), "w_text must be a finite number >= 0"),
-    (dict(samples=0), "samples must be a positive integer"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(steps=0), "steps must be an integer in \\[1, "),
+        (dict(steps=5000), "steps must be an integer in \\[1, 1000\\]"),
+        (dict(seed=2**70), "seed must be an integer"),
+        (dict(seed=-1), "seed must be an integer"),
+        (dict(guidance=(float("nan"), 1.0)), "w_text must be a finite number >= 0"),
+        (dict(guidance=(-5.0, -5.0)), "w_text must be a finite number >= 0"),
+        (dict(samples=0), "samples must be a positive integer"),
+    ],
+)
 def test_bad_arguments_are_clear_errors(model, kwargs, match):
     with pytest.raises(KinemaError, match=match):
         model.generate("A person walks.", seconds=1.0, **kwargs)

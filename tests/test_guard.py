@@ -88,12 +88,12 @@ def test_a_stage_beyond_the_bounds_is_undone_and_said():
     frames = torch.tensor([40])
     xz = torch.tensor([[1.0, 2.8]], dtype=torch.float64)  # 1 m sideways: needs a visible drag
     strict = GuardBounds(added_pelvis_speed=0.05)
-    out, report = postprocess(raw, PostTargets(root_xz=(frames, xz)), foot_lock=False, smooth=0,
-                              smooth_rotations=0, bounds=strict)
+    out, report = postprocess(
+        raw, PostTargets(root_xz=(frames, xz)), foot_lock=False, smooth=0, smooth_rotations=0, bounds=strict
+    )
     assert report["exact"]["undone"] and any("exact constraint pass undone" in w for w in report["warnings"])
     assert any(w.startswith("constraint not met: root path target at frame 40") for w in report["warnings"])
     assert torch.equal(out.root_translation, raw.root_translation)
     assert report["exact"]["after"] == report["exact"]["before"]
-    relaxed, rep = postprocess(raw, PostTargets(root_xz=(frames, xz)), foot_lock=False, smooth=0,
-                               smooth_rotations=0)
+    relaxed, rep = postprocess(raw, PostTargets(root_xz=(frames, xz)), foot_lock=False, smooth=0, smooth_rotations=0)
     assert rep["warnings"] == [] and rep["exact"]["after"]["root_xz_cm"]["max"] < 0.01

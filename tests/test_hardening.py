@@ -140,8 +140,12 @@ def test_damaged_weights_are_one_line_errors(tmp_path, capsys, case):
     from kinema.model.loading import load_denoiser
 
     data = WEIGHTS.read_bytes()
-    blob = {"empty": b"", "truncated": data[: len(data) // 2], "garbled": data[:8] + b"\xff" * 64 + data[72:],
-            "nan": _nan_weights() if case == "nan" else b""}[case]
+    blob = {
+        "empty": b"",
+        "truncated": data[: len(data) // 2],
+        "garbled": data[:8] + b"\xff" * 64 + data[72:],
+        "nan": _nan_weights() if case == "nan" else b"",
+    }[case]
     folder = _damaged_copy(tmp_path, case, weights=blob)
     with pytest.raises(KinemaError, match="ema.safetensors"):
         load_denoiser(folder)
@@ -157,8 +161,9 @@ def test_damaged_weights_are_one_line_errors(tmp_path, capsys, case):
         export_model(folder, exported)
 
 
-@pytest.mark.parametrize("text", ["", '{"fps": 20, "model_con', "[1, 2]", "null", DEEP,
-                                  '{"model_config": [1], "fps": 20}'])
+@pytest.mark.parametrize(
+    "text", ["", '{"fps": 20, "model_con', "[1, 2]", "null", DEEP, '{"model_config": [1], "fps": 20}']
+)
 def test_garbled_checkpoint_json_is_one_line_error(tmp_path, capsys, text):
     from kinema.model.loading import load_denoiser
 
@@ -264,15 +269,26 @@ def test_convert_and_render_check_output_path_first(tmp_path, bvh_file, capsys, 
 
 
 # ---------------------------------------------------------------------------- argument checks
-@pytest.mark.parametrize("args,what", [
-    (["--fps", "-30"], "--fps"), (["--fps", "0"], "--fps"), (["--fps", "nan"], "--fps"),
-    (["--guidance", "nan", "1"], "--guidance"), (["--guidance", "-5", "-5"], "--guidance"),
-    (["--guidance", "1", "inf"], "--guidance"),
-    (["--seed", "99999999999999999999999"], "--seed"), (["--seed", "-1"], "--seed"),
-    (["--samples", "0"], "--samples"), (["--steps", "0"], "--steps"), (["--seconds", "-1"], "--seconds"),
-    (["--seconds", "inf"], "--seconds"), (["--heading", "nan"], "--heading"),
-    (["--constraints-fps", "0"], "--constraints-fps"), (["--constraints-fps", "-30"], "--constraints-fps"),
-])
+@pytest.mark.parametrize(
+    "args,what",
+    [
+        (["--fps", "-30"], "--fps"),
+        (["--fps", "0"], "--fps"),
+        (["--fps", "nan"], "--fps"),
+        (["--guidance", "nan", "1"], "--guidance"),
+        (["--guidance", "-5", "-5"], "--guidance"),
+        (["--guidance", "1", "inf"], "--guidance"),
+        (["--seed", "99999999999999999999999"], "--seed"),
+        (["--seed", "-1"], "--seed"),
+        (["--samples", "0"], "--samples"),
+        (["--steps", "0"], "--steps"),
+        (["--seconds", "-1"], "--seconds"),
+        (["--seconds", "inf"], "--seconds"),
+        (["--heading", "nan"], "--heading"),
+        (["--constraints-fps", "0"], "--constraints-fps"),
+        (["--constraints-fps", "-30"], "--constraints-fps"),
+    ],
+)
 def test_generate_rejects_bad_numbers(tmp_path, capsys, no_model, args, what):
     with pytest.raises(SystemExit) as exc:
         main(["generate", "walk", "--out", str(tmp_path / "o.bvh"), *args])
@@ -282,11 +298,16 @@ def test_generate_rejects_bad_numbers(tmp_path, capsys, no_model, args, what):
     assert not (tmp_path / "o.bvh").exists()
 
 
-@pytest.mark.parametrize("cmd", [["convert", "IN", "OUT.npz", "--fps", "0"],
-                                 ["convert", "IN", "OUT.npz", "--fps", "-30"],
-                                 ["convert", "IN", "OUT.npz", "--in-scale", "0"],
-                                 ["export", "M", "--out", "O", "--guidance", "nan", "1"],
-                                 ["evaluate", "--model", "M", "--seed", "-1"]])
+@pytest.mark.parametrize(
+    "cmd",
+    [
+        ["convert", "IN", "OUT.npz", "--fps", "0"],
+        ["convert", "IN", "OUT.npz", "--fps", "-30"],
+        ["convert", "IN", "OUT.npz", "--in-scale", "0"],
+        ["export", "M", "--out", "O", "--guidance", "nan", "1"],
+        ["evaluate", "--model", "M", "--seed", "-1"],
+    ],
+)
 def test_other_commands_reject_bad_numbers(capsys, cmd):
     with pytest.raises(SystemExit) as exc:
         main(cmd)
@@ -309,12 +330,15 @@ def test_steps_above_the_trained_length_is_an_error(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------------- non-finite motion data
-@pytest.mark.parametrize("row,where", [
-    ("1e300 90 0 0 0 0 10 0 0", "Hips Xposition in frame 2"),
-    ("0 1e300 0 0 0 0 10 0 0", "Hips Yposition in frame 2"),
-    ("0 90 0 1e300 0 0 10 0 0", ":20: rotation out of range: 1e+300 in frame 2 (Hips Zrotation)"),
-    ("0 90 0 0 0 0 10 0 1e308", ":20: rotation out of range: 1e+308 in frame 2 (Chest Yrotation)"),
-])
+@pytest.mark.parametrize(
+    "row,where",
+    [
+        ("1e300 90 0 0 0 0 10 0 0", "Hips Xposition in frame 2"),
+        ("0 1e300 0 0 0 0 10 0 0", "Hips Yposition in frame 2"),
+        ("0 90 0 1e300 0 0 10 0 0", ":20: rotation out of range: 1e+300 in frame 2 (Hips Zrotation)"),
+        ("0 90 0 0 0 0 10 0 1e308", ":20: rotation out of range: 1e+308 in frame 2 (Chest Yrotation)"),
+    ],
+)
 def test_bvh_with_huge_values_is_rejected(tmp_path, capsys, row, where):
     src = tmp_path / "huge.bvh"
     src.write_text(GOOD.replace("1 90 0 0 5 0 20 0 0", row))
@@ -343,8 +367,13 @@ def test_bvh_huge_offset_and_scale_are_rejected(tmp_path):
 def test_npz_with_non_finite_values_names_file_and_key(tmp_path, bvh_file, capsys):
     good = tmp_path / "good.npz"
     load_motion(bvh_file).save(good)
-    for key, value in [("root_translation", np.inf), ("local_quats", np.nan), ("offsets", np.inf),
-                       ("fps", np.nan), ("fps", -3.0)]:
+    for key, value in [
+        ("root_translation", np.inf),
+        ("local_quats", np.nan),
+        ("offsets", np.inf),
+        ("fps", np.nan),
+        ("fps", -3.0),
+    ]:
         d = dict(np.load(good))
         if d[key].ndim:
             d[key] = d[key].copy()
@@ -402,14 +431,24 @@ def test_constraints_fps_is_passed_to_the_api(tmp_path, fake_model):
     assert "constraints_fps" not in call or call["constraints_fps"] is None
     # the effective defaults without a Kimodo meta.json
     assert (call["what"], call["seconds"], call["seed"], call["samples"], call["steps"], call["guidance"]) == (
-        "walk", 5.0, 0, 1, None, None)
+        "walk",
+        5.0,
+        0,
+        1,
+        None,
+        None,
+    )
 
 
 def _kimodo_folder(tmp_path: Path, **texts) -> Path:
     folder = tmp_path / "kimodo"
     folder.mkdir()
-    meta = {"num_samples": 2, "seed": 7, "diffusion_steps": 3,
-            "cfg": {"enabled": True, "text_weight": 2.5, "constraint_weight": 1.5}}
+    meta = {
+        "num_samples": 2,
+        "seed": 7,
+        "diffusion_steps": 3,
+        "cfg": {"enabled": True, "text_weight": 2.5, "constraint_weight": 1.5},
+    }
     (folder / "meta.json").write_text(json.dumps({**meta, **(texts or {"text": "A person walks", "duration": 1.5})}))
     (folder / "constraints.json").write_text("[]")
     return folder / "constraints.json"
@@ -422,18 +461,48 @@ def test_kimodo_meta_fills_what_the_user_left_out(tmp_path, capsys, fake_model):
         main(["generate", "--constraints", str(c), "--out", out])
     call = fake_model[-1]
     assert (call["what"], call["seconds"], call["seed"], call["steps"], call["samples"]) == (
-        "A person walks", 1.5, 7, 3, 2)
+        "A person walks",
+        1.5,
+        7,
+        3,
+        2,
+    )
     g = call["guidance"]
     assert (g.w_text, g.w_constr) == (2.5, 1.5)
     line = capsys.readouterr().out.strip()
     assert line.count("\n") == 0 and "prompt, seconds, seed, steps, samples, guidance" in line
     assert "meta.json" in line
     with pytest.raises(_Stop):
-        main(["generate", "run", "--constraints", str(c), "--out", out, "--seed", "1", "--steps", "2",
-              "--samples", "1", "--guidance", "1", "1", "--seconds", "2"])
+        main(
+            [
+                "generate",
+                "run",
+                "--constraints",
+                str(c),
+                "--out",
+                out,
+                "--seed",
+                "1",
+                "--steps",
+                "2",
+                "--samples",
+                "1",
+                "--guidance",
+                "1",
+                "1",
+                "--seconds",
+                "2",
+            ]
+        )
     call = fake_model[-1]
     assert (call["what"], call["seconds"], call["seed"], call["steps"], call["samples"], call["guidance"]) == (
-        "run", 2.0, 1, 2, 1, (1.0, 1.0))
+        "run",
+        2.0,
+        1,
+        2,
+        1,
+        (1.0, 1.0),
+    )
     assert "Kimodo" not in capsys.readouterr().out
 
 
@@ -453,8 +522,26 @@ def test_kimodo_meta_timeline(tmp_path, capsys, fake_model):
 def test_generate_no_progress_sample_suffixes_and_fps_keep_duration(tmp_path, capfd, monkeypatch):
     monkeypatch.chdir(tmp_path)  # a fresh text cache: the text encoder really loads
     out = tmp_path / "m.bvh"
-    assert main(["generate", "A person jumps.", "--steps", "2", "--seconds", "1", "--no-progress",
-                 "--samples", "2", "--fps", "30", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "A person jumps.",
+                "--steps",
+                "2",
+                "--seconds",
+                "1",
+                "--no-progress",
+                "--samples",
+                "2",
+                "--fps",
+                "30",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     err = capfd.readouterr().err
     assert "Loading" not in err and "%|" not in err and "it/s" not in err, err
     assert not out.exists()

@@ -81,8 +81,14 @@ def test_soma_end_effectors_keep_their_root(skel):
     with pytest.warns(ConstraintWarning) as record:
         cs = load_constraints(path, skel, FPS, T)
     text = " ".join(str(w.message) for w in record)
-    for part in ("constraints 0 (right-foot), 1 (left-foot), 2 (left-hand), 3 (right-hand)", "30 joints",
-                 "has 21", "SOMA", "root2d", "dropped"):
+    for part in (
+        "constraints 0 (right-foot), 1 (left-foot), 2 (left-hand), 3 (right-hand)",
+        "30 joints",
+        "has 21",
+        "SOMA",
+        "root2d",
+        "dropped",
+    ):
         assert part in text
     (c,) = cs  # Kimodo repeats the same pose in each of the four: kept once
     assert isinstance(c, Root2DConstraint) and c.frames(FPS, T) == [19, 63]  # Kimodo frames 28, 94
@@ -139,8 +145,9 @@ def test_fps_in_file_and_argument(skel, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # an explicit fps is not announced
         assert load_constraints(plain, skel, FPS, 121, source_fps=30)[0].frames(FPS) == [0, 60, 120]
-        assert load_constraints(DATA / "06_root_waypoints/constraints.json", skel, FPS, 121,
-                                source_fps=60)[0].frames(FPS) == [0, 30, 60]  # overrides the meta.json guess
+        assert load_constraints(DATA / "06_root_waypoints/constraints.json", skel, FPS, 121, source_fps=60)[0].frames(
+            FPS
+        ) == [0, 30, 60]  # overrides the meta.json guess
     with_fps = tmp_path / "with_fps.json"
     with_fps.write_text(json.dumps({"fps": 30, "constraints": raw("06_root_waypoints")}))
     assert load_constraints(with_fps, skel, FPS, 121)[0].frames(FPS) == [0, 60, 120]
@@ -161,8 +168,14 @@ def test_frames_that_collide_after_conversion(skel):
     contacts = [{"type": "foot-contact", "frame_indices": [1, 2], "contacts": [[1, 1, 0, 0]] * 2}]
     with pytest.raises(ConstraintError, match=r"constraint 0 \(foot-contact\): field 'frame_indices': frames 1 and 2"):
         load_constraints(contacts, skel, FPS, 100, source_fps=30)
-    dense = [{"type": "root2d", "frame_indices": [0, 3, 4, 5], "dense": True,
-              "smooth_root_2d": [[0, 0], [0, 3], [0, 4], [0, 5]]}]  # 4 and 5 fall on model frame 3
+    dense = [
+        {
+            "type": "root2d",
+            "frame_indices": [0, 3, 4, 5],
+            "dense": True,
+            "smooth_root_2d": [[0, 0], [0, 3], [0, 4], [0, 5]],
+        }
+    ]  # 4 and 5 fall on model frame 3
     (c,) = load_constraints(dense, skel, FPS, 100, source_fps=30)
     assert c.frames(FPS) == [0, 1, 2, 3]  # the polyline resampled at 0, 0.05, 0.1, 0.15 s
     assert torch.allclose(c.positions[:, 1], torch.tensor([0.0, 1.5, 3.0, 4.5], dtype=torch.float64))
@@ -175,10 +188,22 @@ def test_whole_pose_end_effector_on_the_model_skeleton(skel):
     gen = torch.Generator().manual_seed(0)
     rots = torch.randn(2, skel.num_joints, 3, generator=gen, dtype=torch.float64) * 0.3
     root = torch.tensor([[0.1, 0.9, 0.2], [0.3, 0.95, 0.5]], dtype=torch.float64)
-    obj = [{"type": "left-hand", "frame_indices": [3, 60], "local_joints_rot": rots.tolist(),
-            "root_positions": root.tolist(), "smooth_root_2d": [[0.1, 0.2], [0.3, 0.5]]},
-           {"type": "end-effector", "joint_names": ["right_foot"], "frame_indices": [30],
-            "local_joints_rot": rots[:1].tolist(), "root_positions": root[:1].tolist()}]
+    obj = [
+        {
+            "type": "left-hand",
+            "frame_indices": [3, 60],
+            "local_joints_rot": rots.tolist(),
+            "root_positions": root.tolist(),
+            "smooth_root_2d": [[0.1, 0.2], [0.3, 0.5]],
+        },
+        {
+            "type": "end-effector",
+            "joint_names": ["right_foot"],
+            "frame_indices": [30],
+            "local_joints_rot": rots[:1].tolist(),
+            "root_positions": root[:1].tolist(),
+        },
+    ]
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         hand, foot = load_constraints({"fps": 30, "constraints": obj}, skel, FPS, 100)
@@ -207,11 +232,14 @@ def test_read_kimodo_meta(tmp_path):
     m = read_kimodo_meta(tmp_path)
     assert m.prompt_or_timeline() == [{"prompt": "walk", "seconds": 3.5}, {"prompt": "turn", "seconds": 4.0}]
     assert m.guidance.mode == "none" and m.steps is None
-    for bad, part in [({"text": "a", "duration": -1}, "field 'duration': expected a positive number, got -1"),
-                      ({"texts": ["a", "b"], "durations": [1.0]}, "field 'durations': expected one duration"),
-                      ({"text": "a", "duration": 2, "diffusion_steps": 2.5}, "field 'diffusion_steps'"),
-                      ({"text": "a", "duration": 2, "cfg": {"text_weight": "x"}}, "field 'cfg.text_weight'"),
-                      ({"duration": 2}, "field 'text': missing required field"), ([], "expected a JSON object")]:
+    for bad, part in [
+        ({"text": "a", "duration": -1}, "field 'duration': expected a positive number, got -1"),
+        ({"texts": ["a", "b"], "durations": [1.0]}, "field 'durations': expected one duration"),
+        ({"text": "a", "duration": 2, "diffusion_steps": 2.5}, "field 'diffusion_steps'"),
+        ({"text": "a", "duration": 2, "cfg": {"text_weight": "x"}}, "field 'cfg.text_weight'"),
+        ({"duration": 2}, "field 'text': missing required field"),
+        ([], "expected a JSON object"),
+    ]:
         (tmp_path / "meta.json").write_text(json.dumps(bad))
         with pytest.raises(KinemaError, match=f"^{tmp_path / 'meta.json'}: .*{part}"):
             read_kimodo_meta(tmp_path / "meta.json")

@@ -205,8 +205,14 @@ def test_normalization_saved_in_state_dict() -> None:
 # ---------------------------------------------------------------------------- guidance
 def _branch(model: Denoiser, inp: dict, text: bool, constr: bool) -> torch.Tensor:
     return model(
-        inp["x_t"], inp["t"], inp["text_emb"] if text else None, None, inp["c_dir"],
-        inp["x_tgt"] if constr else None, inp["mask"] if constr else None, inp["pad_mask"],
+        inp["x_t"],
+        inp["t"],
+        inp["text_emb"] if text else None,
+        None,
+        inp["c_dir"],
+        inp["x_tgt"] if constr else None,
+        inp["mask"] if constr else None,
+        inp["pad_mask"],
     )
 
 
@@ -216,8 +222,16 @@ def _branch(model: Denoiser, inp: dict, text: bool, constr: bool) -> torch.Tenso
 def test_forward_guided_separated_selects_branch(w, text, constr) -> None:
     model = _model()
     inp = _inputs(model)
-    guided = model.forward_guided(inp["x_t"], inp["t"], inp["text_emb"], inp["c_dir"], inp["x_tgt"],
-                                  inp["mask"], inp["pad_mask"], Guidance(GuidanceMode.SEPARATED, *w))
+    guided = model.forward_guided(
+        inp["x_t"],
+        inp["t"],
+        inp["text_emb"],
+        inp["c_dir"],
+        inp["x_tgt"],
+        inp["mask"],
+        inp["pad_mask"],
+        Guidance(GuidanceMode.SEPARATED, *w),
+    )
     torch.testing.assert_close(guided, _branch(model, inp, text, constr), atol=1e-5, rtol=1e-5)
 
 
@@ -226,14 +240,13 @@ def test_forward_guided_regular_and_none() -> None:
     inp = _inputs(model)
     args = (inp["x_t"], inp["t"], inp["text_emb"], inp["c_dir"], inp["x_tgt"], inp["mask"], inp["pad_mask"])
     cond = _branch(model, inp, True, True)
-    torch.testing.assert_close(model.forward_guided(*args, Guidance(GuidanceMode.NONE)), cond,
-                               atol=1e-5, rtol=1e-5)
-    torch.testing.assert_close(model.forward_guided(*args, Guidance(GuidanceMode.REGULAR, 1.0)), cond,
-                               atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(model.forward_guided(*args, Guidance(GuidanceMode.NONE)), cond, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(
+        model.forward_guided(*args, Guidance(GuidanceMode.REGULAR, 1.0)), cond, atol=1e-5, rtol=1e-5
+    )
     # no constraints: separated collapses to regular text CFG
     g = Guidance(GuidanceMode.SEPARATED, 2.0, 2.0)
-    out = model.forward_guided(inp["x_t"], inp["t"], inp["text_emb"], inp["c_dir"], None, None,
-                               inp["pad_mask"], g)
+    out = model.forward_guided(inp["x_t"], inp["t"], inp["text_emb"], inp["c_dir"], None, None, inp["pad_mask"], g)
     expected = 2.0 * _branch(model, inp, True, False) - _branch(model, inp, False, False)
     torch.testing.assert_close(out, expected, atol=1e-5, rtol=1e-5)
 

@@ -82,8 +82,12 @@ def test_two_bone_ik_clamps_unreachable_targets_along_the_chain_direction():
 def test_straight_leg_bends_the_knee_forward_and_weights_blend():
     skel = humanoid(SCHEMES["bandai"])  # rest pose: legs straight down, facing +Z
     T = 5
-    m = Motion(skel, 20, torch.tensor([[0.0, 0.9, 0.0]] * T, dtype=torch.float64),
-               axis_angle_to_quat(torch.zeros(T, skel.num_joints, 3, dtype=torch.float64)))
+    m = Motion(
+        skel,
+        20,
+        torch.tensor([[0.0, 0.9, 0.0]] * T, dtype=torch.float64),
+        axis_angle_to_quat(torch.zeros(T, skel.num_joints, 3, dtype=torch.float64)),
+    )
     a, b, c = limb_chain(skel, "left_leg")
     P = m.positions
     target = P[:, c] + torch.tensor([0.0, 0.2, 0.0], dtype=torch.float64)
@@ -238,10 +242,12 @@ def test_exact_pass_hits_constraints_on_a_perturbed_clip(walk):
     src, targets = _perturbed(walk), _walk_targets(walk)
     out, report = hit_constraints(src, targets)
     before, after = report["before"], report["after"]
-    print("\nresiduals before -> after (max):",
-          {k: f"{before[k]['max']:.3g} -> {after[k]['max']:.2g}" for k in before})
-    assert set(before) == set(after) == {
-        "full_body_position_cm", "full_body_rotation_deg", "position_cm", "rotation_deg", "root_xz_cm"}
+    print("\nresiduals before -> after (max):", {k: f"{before[k]['max']:.3g} -> {after[k]['max']:.2g}" for k in before})
+    assert (
+        set(before)
+        == set(after)
+        == {"full_body_position_cm", "full_body_rotation_deg", "position_cm", "rotation_deg", "root_xz_cm"}
+    )
     assert before["full_body_position_cm"]["max"] > 5 and before["root_xz_cm"]["max"] > 1
     for kind, stats in after.items():
         assert stats["max"] < 0.1, kind  # 1 mm, 0.1 deg
@@ -333,8 +339,9 @@ def test_postprocess_smooths_shaking_limbs_and_keeps_a_clean_capture(walk):
     clean = walk.to(torch.float64)
     g = torch.Generator().manual_seed(1)
     aa = math.radians(3.0) * torch.randn(clean.local_rotations.shape[:2] + (3,), generator=g, dtype=torch.float64)
-    shaking = Motion(clean.skeleton, clean.fps, clean.root_translation, quat_mul(clean.local_rotations,
-                                                                                  axis_angle_to_quat(aa)))
+    shaking = Motion(
+        clean.skeleton, clean.fps, clean.root_translation, quat_mul(clean.local_rotations, axis_angle_to_quat(aa))
+    )
     kw = dict(foot_lock=False)
     out, rep = postprocess(shaking, **kw)
     assert rep["smooth"]["sigma_rot_s"] == 0.04

@@ -22,7 +22,8 @@ class _TorchCosineAdam:
         self.params = list(params)
         self.opt = torch.optim.Adam(self.params, lr=lr)
         self.sched = torch.optim.lr_scheduler.LambdaLR(
-            self.opt, lambda i: 0.5 * (1 + math.cos(math.pi * i / max(iterations, 1))))
+            self.opt, lambda i: 0.5 * (1 + math.cos(math.pi * i / max(iterations, 1)))
+        )
 
     def step(self, grads):
         for p, g in zip(self.params, grads, strict=True):

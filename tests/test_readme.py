@@ -51,7 +51,7 @@ def kinema_commands(text: str) -> list[str]:
 def section(title: str) -> str:
     start = TEXT.index(f"\n## {title}\n")
     end = TEXT.find("\n## ", start + 1)
-    return TEXT[start:end if end >= 0 else None]
+    return TEXT[start : end if end >= 0 else None]
 
 
 COMMANDS = kinema_commands(TEXT)
@@ -93,7 +93,7 @@ def test_generate_options_exist():
     parser = build_parser()
     generate = next(a for a in parser._actions if a.dest == "command").choices["generate"]
     known = set(generate._option_string_actions)
-    paragraph = TEXT[TEXT.index("Options: `--constraints"):TEXT.index("```python")]
+    paragraph = TEXT[TEXT.index("Options: `--constraints") : TEXT.index("```python")]
     named = set(re.findall(r"`(--[a-z][a-z-]*)", paragraph))
     assert len(named) >= 8
     assert named <= known, f"README names options that `kinema generate` lacks: {sorted(named - known)}"

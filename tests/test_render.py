@@ -77,8 +77,9 @@ def test_targets_and_contacts_are_drawn(walk, tmp_path):
     assert gif.stat().st_size > 0
 
 
-@pytest.mark.parametrize("bad", [[(5, (1.0, 2.0, 3.0, 4.0))], [(500, (0, 1, 0))], [(1, (np.nan, 0, 0))], [(1,)],
-                                 [(1.5, (0, 1, 0))]])
+@pytest.mark.parametrize(
+    "bad", [[(5, (1.0, 2.0, 3.0, 4.0))], [(500, (0, 1, 0))], [(1, (np.nan, 0, 0))], [(1,)], [(1.5, (0, 1, 0))]]
+)
 def test_bad_targets_raise(walk, tmp_path, bad):
     with pytest.raises(KinemaError):
         render_filmstrip(walk, tmp_path / "x.png", frames=2, targets=bad)
@@ -134,8 +135,18 @@ def test_cli_marks_constraints(walk_clip, tmp_path):
     cfile = tmp_path / "c.json"
     cfile.write_text(json.dumps(spec))
     png = tmp_path / "c.png"
-    args = ["render", str(walk_clip), "--scale", "0.01", "--out", str(png), "--frames", "4",
-            "--constraints", str(cfile)]
+    args = [
+        "render",
+        str(walk_clip),
+        "--scale",
+        "0.01",
+        "--out",
+        str(png),
+        "--frames",
+        "4",
+        "--constraints",
+        str(cfile),
+    ]
     assert main(args) == 0
     assert _has_colour(_rgb(png), TARGET_COLOUR)
     spec[0]["times"] = [60.0]  # beyond the clip: a one-line error

@@ -43,8 +43,19 @@ def trained(tiny_data, tmp_path_factory):
     """A tiny model trained briefly on the tiny build's train clips (hash text encoder)."""
     out = tmp_path_factory.mktemp("retrieval") / "m"
     torch.manual_seed(0)
-    model = train_retrieval(tiny_data, out, steps=80, batch_size=8, lr=3e-3, seed=0, text_encoder="hash-test-32",
-                            config=TINY, warmup=5, progress=False, log_every=20)
+    model = train_retrieval(
+        tiny_data,
+        out,
+        steps=80,
+        batch_size=8,
+        lr=3e-3,
+        seed=0,
+        text_encoder="hash-test-32",
+        config=TINY,
+        warmup=5,
+        progress=False,
+        log_every=20,
+    )
     return model, out
 
 
@@ -64,8 +75,19 @@ def test_beats_chance_on_train_clips(trained, tiny_data):
 
 def test_training_is_deterministic(trained, tiny_data, tmp_path):
     model, _ = trained
-    again = train_retrieval(tiny_data, tmp_path / "m", steps=80, batch_size=8, lr=3e-3, seed=0,
-                            text_encoder="hash-test-32", config=TINY, warmup=5, progress=False, log_every=20)
+    again = train_retrieval(
+        tiny_data,
+        tmp_path / "m",
+        steps=80,
+        batch_size=8,
+        lr=3e-3,
+        seed=0,
+        text_encoder="hash-test-32",
+        config=TINY,
+        warmup=5,
+        progress=False,
+        log_every=20,
+    )
     for (k, a), b in zip(model.state_dict().items(), again.state_dict().values(), strict=True):
         assert torch.equal(a, b), k
 
@@ -152,12 +174,44 @@ def test_cli_train_and_eval(tiny_data, tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="kinema")
     cli.register(parser.add_subparsers(dest="command", required=True))
     out = tmp_path / "cli"
-    args = parser.parse_args(["retrieval", "train", "--data", str(tiny_data), "--out", str(out), "--steps", "3",
-                              "--batch-size", "4", "--text-encoder", "hash-test-32", "--cache-dir", str(tmp_path / "c"),
-                              "--eval-split", "none", "--no-progress"])
+    args = parser.parse_args(
+        [
+            "retrieval",
+            "train",
+            "--data",
+            str(tiny_data),
+            "--out",
+            str(out),
+            "--steps",
+            "3",
+            "--batch-size",
+            "4",
+            "--text-encoder",
+            "hash-test-32",
+            "--cache-dir",
+            str(tmp_path / "c"),
+            "--eval-split",
+            "none",
+            "--no-progress",
+        ]
+    )
     assert args.func(args) == 0
-    args = parser.parse_args(["retrieval", "eval", "--data", str(tiny_data), "--model", str(out), "--split", "train",
-                              "--cache-dir", str(tmp_path / "c"), "--json", str(tmp_path / "m.json")])
+    args = parser.parse_args(
+        [
+            "retrieval",
+            "eval",
+            "--data",
+            str(tiny_data),
+            "--model",
+            str(out),
+            "--split",
+            "train",
+            "--cache-dir",
+            str(tmp_path / "c"),
+            "--json",
+            str(tmp_path / "m.json"),
+        ]
+    )
     assert args.func(args) == 0
     assert "text->motion" in capsys.readouterr().out
     assert json.loads((tmp_path / "m.json").read_text())["split"] == "train"

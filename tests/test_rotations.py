@@ -71,9 +71,7 @@ def test_axis_angle_vs_scipy(rots, dtype, tol):
     # angles above pi wrap to the equivalent rotation with angle in [0, pi]
     big = rv / np.linalg.norm(rv, axis=-1, keepdims=True) * 4.0
     _close(R.axis_angle_to_matrix(_t(big, dtype)), Rotation.from_rotvec(big).as_matrix(), tol)
-    _close(
-        R.quat_to_axis_angle(R.axis_angle_to_quat(_t(big, dtype))), Rotation.from_rotvec(big).as_rotvec(), tol
-    )
+    _close(R.quat_to_axis_angle(R.axis_angle_to_quat(_t(big, dtype))), Rotation.from_rotvec(big).as_rotvec(), tol)
 
 
 @pytest.mark.parametrize("dtype,tol", DTYPES)
@@ -214,9 +212,7 @@ def test_gimbal_lock(order, dtype, tol):
     assert torch.isfinite(out).all()
     _close(R.euler_to_matrix(out, order), m.detach(), tol)
     _close(out[:, 1].abs(), np.full(8, math.pi / 2), 1e-3 if dtype == torch.float32 else 1e-7)
-    (grad,) = torch.autograd.grad(
-        out.sum() + R.quat_to_euler(R.euler_to_quat(ang_t, order), order).sum(), ang_t
-    )
+    (grad,) = torch.autograd.grad(out.sum() + R.quat_to_euler(R.euler_to_quat(ang_t, order), order).sum(), ang_t)
     assert torch.isfinite(grad).all()
 
 
@@ -263,9 +259,7 @@ def test_slerp_nearly_equal_and_interior():
 
 
 def test_standardize_continuous_mirror():
-    q = R.quat_normalize(
-        torch.randn(50, 3, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(4))
-    )
+    q = R.quat_normalize(torch.randn(50, 3, 4, dtype=torch.float64, generator=torch.Generator().manual_seed(4)))
     assert (R.quat_standardize(q)[..., 0] >= 0).all()
     path = R.quat_slerp(q[:1], q[1:2], torch.linspace(0, 1, 40, dtype=torch.float64)[:, None])  # (40, 3, 4)
     flips = torch.where(torch.rand(40, 3, 1, generator=torch.Generator().manual_seed(5)) < 0.5, -1.0, 1.0)

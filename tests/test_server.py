@@ -30,8 +30,28 @@ pytest.importorskip("uvicorn")
 
 KEY = "test-key-0123456789abcdef"
 AUTH = {"Authorization": f"Bearer {KEY}"}
-LIMITS = ["--workers", "1", "--queue", "8", "--max-seconds", "2", "--max-samples", "2", "--max-steps", "5",
-          "--max-body-bytes", "65536", "--max-jobs", "16", "--job-ttl", "60", "--timeout", "60", "--threads", "1"]
+LIMITS = [
+    "--workers",
+    "1",
+    "--queue",
+    "8",
+    "--max-seconds",
+    "2",
+    "--max-samples",
+    "2",
+    "--max-steps",
+    "5",
+    "--max-body-bytes",
+    "65536",
+    "--max-jobs",
+    "16",
+    "--job-ttl",
+    "60",
+    "--timeout",
+    "60",
+    "--threads",
+    "1",
+]
 TINY = {"prompt": "A person walks forward.", "seconds": 1, "steps": 2}
 BLENDER = shutil.which("blender")
 ADDON = Path(__file__).resolve().parents[1] / "integrations/blender"
@@ -56,11 +76,23 @@ def server(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("server")
     (tmp / "keys").write_text(f"# test key\n{KEY}\n")
     port = _free_port()
-    cmd = [sys.executable, "-m", "kinema", "serve", "--port", str(port), "--api-key-file", str(tmp / "keys"),
-           "--log-level", "warning", *LIMITS]
+    cmd = [
+        sys.executable,
+        "-m",
+        "kinema",
+        "serve",
+        "--port",
+        str(port),
+        "--api-key-file",
+        str(tmp / "keys"),
+        "--log-level",
+        "warning",
+        *LIMITS,
+    ]
     log = (tmp / "server.log").open("w")
-    proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                            env=os.environ | {"OMP_NUM_THREADS": "1"})
+    proc = subprocess.Popen(
+        cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True, env=os.environ | {"OMP_NUM_THREADS": "1"}
+    )
     url = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + 120
@@ -140,10 +172,12 @@ def test_generate_npz_and_json_formats(server):
 def test_constraints_inline_bvh_and_residuals(server):
     url, _ = server
     bvh = post(url, "/v1/generate", TINY).json()["motions"][0]["data"]
-    body = TINY | {"constraints": [
-        {"type": "root2d", "frame_indices": [19], "smooth_root_2d": [[0.3, 0.8]]},
-        {"type": "fullbody", "bvh": bvh, "source_frames": [0], "frame_indices": [0]},
-    ]}
+    body = TINY | {
+        "constraints": [
+            {"type": "root2d", "frame_indices": [19], "smooth_root_2d": [[0.3, 0.8]]},
+            {"type": "fullbody", "bvh": bvh, "source_frames": [0], "frame_indices": [0]},
+        ]
+    }
     resp = post(url, "/v1/generate", body)
     assert resp.status_code == 200, resp.text
     (res,) = resp.json()["report"]["residuals"]
@@ -169,8 +203,9 @@ def test_jobs_lifecycle_and_downloads(server):
     assert "motion_01.bvh" in file.headers["content-disposition"]
     assert httpx.get(f"{url}/v1/jobs/{job['id']}/motions/2", headers=AUTH).status_code == 404
     assert httpx.get(f"{url}/v1/jobs/{'0' * 32}", headers=AUTH).status_code == 404
-    bad = post(url, "/v1/jobs", TINY | {"constraints": [{"type": "root2d", "frame_indices": [99],
-                                                        "smooth_root_2d": [[0, 1]]}]})
+    bad = post(
+        url, "/v1/jobs", TINY | {"constraints": [{"type": "root2d", "frame_indices": [99], "smooth_root_2d": [[0, 1]]}]}
+    )
     failed = bad.json()
     while failed["status"] not in ("done", "failed"):
         time.sleep(0.1)
@@ -179,20 +214,29 @@ def test_jobs_lifecycle_and_downloads(server):
     assert httpx.get(f"{url}/v1/jobs/{failed['id']}/result", headers=AUTH).status_code == 422
 
 
-@pytest.mark.parametrize(("change", "path", "words"), [
-    ({"typo": 1}, "$.typo", "Extra inputs"),
-    ({"seconds": 3}, "$.seconds", "less than or equal to 2"),
-    ({"steps": 6}, "$.steps", "less than or equal to 5"),
-    ({"format": "glb"}, "$.format", "not implemented"),
-    ({"objectives": [{"type": "reach"}]}, "$.objectives", "not supported"),
-    ({"model": "../../etc"}, "$.model", "unknown model"),
-    ({"rig": "smpl"}, "$.rig", "no model here drives this rig"),
-    ({"constraints": [{"type": "root2d", "frame_indices": [5], "smooth_root_2d": [[1, 2, 3]]}]},
-     "$.constraints[0].smooth_root_2d", "expected shape"),
-    ({"constraints": [{"type": "root2d", "frame_indices": [5], "smooth_root_2d": [[1, float("nan")]]}]},
-     "$.constraints[0].smooth_root_2d[0][1]", "finite"),
-    ({"constraints": [{"type": "left-hand", "colour": 1}]}, "$.constraints[0].colour", "Extra inputs"),
-])
+@pytest.mark.parametrize(
+    ("change", "path", "words"),
+    [
+        ({"typo": 1}, "$.typo", "Extra inputs"),
+        ({"seconds": 3}, "$.seconds", "less than or equal to 2"),
+        ({"steps": 6}, "$.steps", "less than or equal to 5"),
+        ({"format": "glb"}, "$.format", "not implemented"),
+        ({"objectives": [{"type": "reach"}]}, "$.objectives", "not supported"),
+        ({"model": "../../etc"}, "$.model", "unknown model"),
+        ({"rig": "smpl"}, "$.rig", "no model here drives this rig"),
+        (
+            {"constraints": [{"type": "root2d", "frame_indices": [5], "smooth_root_2d": [[1, 2, 3]]}]},
+            "$.constraints[0].smooth_root_2d",
+            "expected shape",
+        ),
+        (
+            {"constraints": [{"type": "root2d", "frame_indices": [5], "smooth_root_2d": [[1, float("nan")]]}]},
+            "$.constraints[0].smooth_root_2d[0][1]",
+            "finite",
+        ),
+        ({"constraints": [{"type": "left-hand", "colour": 1}]}, "$.constraints[0].colour", "Extra inputs"),
+    ],
+)
 def test_validation_errors_name_the_field(server, change, path, words):
     url, _ = server
     content = json.dumps(TINY | change).encode()  # NaN as the bare token Python's json writes
@@ -238,8 +282,9 @@ def test_cors_is_off_and_public_binds_need_a_key(server, tmp_path, capsys):
     from kinema.cli import main
 
     url, _ = server
-    pre = httpx.options(f"{url}/v1/generate", headers={"Origin": "https://example.org",
-                                                       "Access-Control-Request-Method": "POST"})
+    pre = httpx.options(
+        f"{url}/v1/generate", headers={"Origin": "https://example.org", "Access-Control-Request-Method": "POST"}
+    )
     assert "access-control-allow-origin" not in pre.headers
     assert main(["serve", "--host", "0.0.0.0", "--port", str(_free_port())]) == 2
     assert "--api-key-file" in capsys.readouterr().err
@@ -295,11 +340,31 @@ def test_schemathesis_finds_no_server_error(server, tmp_path):
     pytest.importorskip("schemathesis")
     url, proc = server
     runner = "import sys; from schemathesis.cli import schemathesis; sys.argv[0] = 'st'; sys.exit(schemathesis())"
-    cmd = [sys.executable, "-c", runner, "run", f"{url}/openapi.json", "-H", f"Authorization: Bearer {KEY}",
-           "--checks", "not_a_server_error,status_code_conformance,content_type_conformance,"
-           "response_schema_conformance", "--phases", "examples,coverage,fuzzing", "-n", "30", "--seed", "20",
-           "--generation-database", "none", "--no-shrink", "-w", "1",
-           "--request-timeout", "60", "--no-color"]
+    cmd = [
+        sys.executable,
+        "-c",
+        runner,
+        "run",
+        f"{url}/openapi.json",
+        "-H",
+        f"Authorization: Bearer {KEY}",
+        "--checks",
+        "not_a_server_error,status_code_conformance,content_type_conformance,response_schema_conformance",
+        "--phases",
+        "examples,coverage,fuzzing",
+        "-n",
+        "30",
+        "--seed",
+        "20",
+        "--generation-database",
+        "none",
+        "--no-shrink",
+        "-w",
+        "1",
+        "--request-timeout",
+        "60",
+        "--no-color",
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=240, cwd=tmp_path)
     assert done.returncode == 0, done.stdout[-4000:] + done.stderr[-2000:]
     assert proc.poll() is None
@@ -322,8 +387,20 @@ def test_blender_addon_client_without_blender(server):
 def test_blender_addon_imports_a_generated_motion(server, tmp_path):
     url, _ = server
     out = tmp_path / "blender.json"
-    cmd = [BLENDER, "-b", "--factory-startup", "--python", str(ADDON / "headless_check.py"), "--", url, KEY,
-           "A person walks forward.", "1", "2", str(out)]
+    cmd = [
+        BLENDER,
+        "-b",
+        "--factory-startup",
+        "--python",
+        str(ADDON / "headless_check.py"),
+        "--",
+        url,
+        KEY,
+        "A person walks forward.",
+        "1",
+        "2",
+        str(out),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0 and out.exists(), done.stdout[-3000:] + done.stderr[-2000:]
     report = json.loads(out.read_text())

@@ -77,11 +77,13 @@ def test_slow_generation_answers_504_and_cors_when_configured(registry):
     with TestClient(create_app(config, registry)) as client:
         resp = client.post("/v1/generate", json={"prompt": "A person walks.", "seconds": 2, "steps": 5})
         assert resp.status_code == 504 and "/v1/jobs" in resp.json()["detail"]
-        pre = client.options("/v1/generate", headers={"Origin": "https://tool.example",
-                                                      "Access-Control-Request-Method": "POST"})
+        pre = client.options(
+            "/v1/generate", headers={"Origin": "https://tool.example", "Access-Control-Request-Method": "POST"}
+        )
         assert pre.headers["access-control-allow-origin"] == "https://tool.example"
-        other = client.options("/v1/generate", headers={"Origin": "https://evil.example",
-                                                        "Access-Control-Request-Method": "POST"})
+        other = client.options(
+            "/v1/generate", headers={"Origin": "https://evil.example", "Access-Control-Request-Method": "POST"}
+        )
         assert "access-control-allow-origin" not in other.headers
 
 

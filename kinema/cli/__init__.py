@@ -16,6 +16,7 @@ from kinema.errors import KinemaError
 def build_parser() -> argparse.ArgumentParser:
     """Assemble the parser from the sub-command modules (imported lazily to keep start-up fast)."""
     from kinema.cli import (
+        app,
         batch,
         bench,
         convert,
@@ -32,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
     sub = parser.add_subparsers(dest="command", required=True)
+    faces = (serve, batch, app)
     for module in (
         generate,
         convert,
@@ -43,8 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
         render,
         evaluate,
         evaluate_retrieval,
-        serve,
-        batch,
+        *faces,
     ):
         module.register(sub)
     return parser

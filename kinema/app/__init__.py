@@ -1,0 +1,11 @@
+"""`kinema app`: a web authoring UI on the stock viser package (docs/app.md).
+
+- kinema.app.server: `AppServer` (one viser server, one model, a generation pool, a Session per tab);
+- kinema.app.session: a tab's document, motions, scene and generation;
+- panels: timeline_panel, playback, constraint_panel, files_panel;
+- kinema.app.edits: constraints (JSON form) made from scene actions; kinema.app.document: the session file;
+- kinema.app.views / markers / residuals: drawing motions and constraints, residuals in words.
+
+The human default model is trained on CC BY-NC data (Bandai Namco): motions made with it are for
+non-commercial use.
+"""

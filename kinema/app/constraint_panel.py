@@ -1,0 +1,237 @@
+"""The constraints panel: tools that add constraints from the scene and a list to select, move,
+retime and delete them.
+
+- Click the ground (mode "waypoint") to lay a waypoint at the shown frame; mode "path" collects points
+  until "Finish path" makes one dense path over the chosen frame range.
+- "Keyframe pose" keeps the shown pose at the shown frame; "Add target" pins a joint where it is
+  now (position and/or rotation) and gives it a gizmo to drag.
+- "Add contacts" plants or lifts the feet over a frame range.
+The selected constraint carries the transform gizmo (drag it to move the constraint). ``host`` is the
+tab's Session: it supplies the shown motion and frame, the document, notifications and redraws.
+"""
+
+from __future__ import annotations
+
+import math
+
+from kinema.app import edits
+from kinema.app.residuals import residual
+from kinema.errors import KinemaError
+
+CLICK_MODES = ("off", "waypoint", "path")
+TARGET_MODES = {"position": (True, False), "rotation": (False, True), "position + rotation": (True, True)}
+
+
+class ConstraintPanel:
+    def __init__(self, gui, scene, host):
+        self.gui, self.scene, self.host = gui, scene, host
+        self.path_points: list[tuple[float, float]] = []
+        self.gizmo = None
+        names = tuple(host.model.skeleton.names)
+        with gui.add_folder("Constraints"):
+            self.mode = gui.add_dropdown(
+                "Click ground", CLICK_MODES, initial_value="waypoint", hint="what a click on the ground adds"
+            )
+            self.heading = gui.add_checkbox(
+                "Headings", False, hint="waypoints face the way the gizmo turns; paths face along the path"
+            )
+            self.finish_path = gui.add_button(
+                "Finish path",
+                disabled=True,
+                hint="turn the clicked points into a dense path over the frame range below",
+            )
+            self.keyframe_btn = gui.add_button(
+                "Keyframe pose", icon="camera", hint="keep the whole pose shown at this frame"
+            )
+            self.joint = gui.add_dropdown("Joint", names, initial_value=_default_joint(host.model.skeleton))
+            self.target_mode = gui.add_dropdown("Target", tuple(TARGET_MODES), initial_value="position")
+            self.target_btn = gui.add_button(
+                "Add target", icon="target", hint="pin the joint where it is at this frame; drag the gizmo to move it"
+            )
+            self.contact = gui.add_dropdown("Feet", tuple(edits.CONTACT_PRESETS), initial_value="left foot planted")
+            self.range = gui.add_multi_slider(
+                "Frames", min=0, max=1, step=1, initial_value=(0, 1), hint="frame range for contacts and paths"
+            )
+            self.contact_btn = gui.add_button(
+                "Add contacts", icon="shoe", hint="plant / lift the feet over the frame range"
+            )
+            self.items = gui.add_dropdown("Selected", ("(none)",), initial_value="(none)")
+            self.heading_deg = gui.add_slider(
+                "Heading (deg)",
+                min=-180,
+                max=180,
+                step=5,
+                initial_value=0,
+                visible=False,
+                hint="facing of the selected waypoint (0 = +Z)",
+            )
+            row = gui.add_button_group("Edit", ("to this frame", "to range", "delete", "clear all"))
+            self.residual_md = gui.add_markdown("")
+        self.mode.on_update(lambda _: self._mode_changed())
+        self.finish_path.on_click(lambda _: self._safely(self._finish_path))
+        self.keyframe_btn.on_click(lambda _: self._safely(self._keyframe))
+        self.target_btn.on_click(lambda _: self._safely(self._target))
+        self.contact_btn.on_click(lambda _: self._safely(self._contacts))
+        self.items.on_update(lambda _: self._select_changed())
+        self.heading_deg.on_update(lambda _: self._heading_changed())
+        row.on_click(lambda e: self._safely(lambda: self._edit(e.target.value)))
+        scene.on_click()(self._clicked)
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def constraints(self) -> list[dict]:
+        return self.host.doc.constraints
+
+    def _safely(self, fn) -> None:
+        try:
+            fn()
+        except KinemaError as err:
+            self.host.notify("Cannot do that", str(err), error=True)
+
+    def _add(self, c: dict) -> None:
+        self.constraints.append(c)
+        self.refresh(select=len(self.constraints) - 1)
+
+    def selected_index(self) -> int | None:
+        labels = self._labels()
+        return labels.index(self.items.value) if self.items.value in labels else None
+
+    def _labels(self) -> list[str]:
+        return [f"{i + 1}. {edits.label(c, self.host.model.fps)}" for i, c in enumerate(self.constraints)]
+
+    def set_length(self, num_frames: int) -> None:
+        """Frame ranges follow the timeline's length; a range that reached the old end keeps reaching it."""
+        hi = max(1, num_frames - 1)
+        lo_v, hi_v = self.range.value
+        old_end = self.range.max
+        self.range.max = hi
+        lo_v = min(lo_v, hi - 1)
+        self.range.value = (lo_v, hi if hi_v >= old_end or hi_v > hi or hi_v <= lo_v else hi_v)
+
+    # ------------------------------------------------------------------ list
+    def refresh(self, select: int | None = None) -> None:
+        """Rebuild the list, markers, gizmo and residuals after any change."""
+        labels = self._labels()
+        keep = self.selected_index() if select is None else select
+        self.items.options = tuple(labels) or ("(none)",)
+        self.items.value = labels[keep] if keep is not None and keep < len(labels) else self.items.options[0]
+        self._select_changed()
+
+    def _select_changed(self) -> None:
+        i = self.selected_index()
+        self.host.markers.draw(self.constraints, i)
+        self._place_gizmo(i)
+        c = None if i is None else self.constraints[i]
+        is_wp = c is not None and c["type"] == "root2d" and not c.get("dense")
+        self.heading_deg.visible = is_wp and "global_root_heading" in c
+        if self.heading_deg.visible:
+            cs, sn = c["global_root_heading"][0]
+            self.heading_deg.value = int(round(math.degrees(math.atan2(sn, cs)) / 5) * 5)
+        self.show_residuals()
+
+    def show_residuals(self) -> None:
+        motion = self.host.result_motion()
+        if motion is None or not self.constraints:
+            self.residual_md.content = "" if self.constraints else "No constraints yet."
+            return
+        lines = [f"- {lab}: {residual(c, motion)}" for lab, c in zip(self._labels(), self.constraints, strict=True)]
+        self.residual_md.content = "**Residuals** (shown motion)\n" + "\n".join(lines)
+
+    def _place_gizmo(self, i: int | None) -> None:
+        if self.gizmo is not None:
+            self.gizmo.remove()
+            self.gizmo = None
+        if i is None or self.constraints[i]["type"] == "foot-contact":
+            return
+        c = self.constraints[i]
+        ground = c["type"] in ("root2d", "fullbody")
+        rotates = c["type"] == "end-effector" and "rotations" in c
+        self.gizmo = self.scene.add_transform_controls(
+            "/gizmo",
+            scale=0.45,
+            position=edits.anchor(c),
+            wxyz=edits.rotation_wxyz(c),
+            active_axes=(True, not ground, True),
+            disable_rotations=not rotates,
+            depth_test=False,
+        )
+
+        @self.gizmo.on_update
+        def _(event) -> None:
+            j = self.selected_index()
+            if j is None or event.phase != "end":
+                return
+            self.constraints[j] = edits.moved(self.constraints[j], self.gizmo.position, self.gizmo.wxyz)
+            self.refresh(select=j)
+
+    def _heading_changed(self) -> None:
+        i = self.selected_index()
+        if i is None or "global_root_heading" not in self.constraints[i]:
+            return
+        self.constraints[i]["global_root_heading"] = [edits.heading_vector(math.radians(self.heading_deg.value))]
+        self.host.markers.draw(self.constraints, i)
+
+    def _edit(self, action: str) -> None:
+        i = self.selected_index()
+        if action == "clear all":
+            self.constraints.clear()
+            self.path_points = []
+        elif i is None:
+            raise KinemaError("select a constraint first")
+        elif action == "delete":
+            del self.constraints[i]
+            i = min(i, len(self.constraints) - 1) if self.constraints else None
+        elif action == "to range":
+            self.constraints[i] = edits.spanned(self.constraints[i], *self.range.value)
+        else:
+            self.constraints[i] = edits.retimed(self.constraints[i], self.host.player.frame)
+        self.refresh(select=i)
+
+    # ------------------------------------------------------------------ tools
+    def _mode_changed(self) -> None:
+        self.path_points = []
+        self.finish_path.disabled = True
+
+    def _clicked(self, event) -> None:
+        hit = edits.ground_point(event.ray_origin, event.ray_direction)
+        if hit is None or self.mode.value == "off":
+            return
+        if self.mode.value == "waypoint":
+            frame = self.host.player.frame
+            if any(c["type"] == "root2d" and frame in c["frame_indices"] for c in self.constraints):
+                self.host.notify(
+                    "Waypoint not added",
+                    f"frame {frame} already has a waypoint: scrub to another frame first",
+                    error=True,
+                )
+                return
+            self._add(edits.waypoint(frame, *hit, heading=0.0 if self.heading.value else None))
+        else:
+            self.path_points.append(hit)
+            self.finish_path.disabled = len(self.path_points) < 2
+            self.host.markers.draw_pending(self.path_points)
+
+    def _finish_path(self) -> None:
+        lo, hi = self.range.value
+        self._add(edits.path(self.path_points, lo, hi, headings=self.heading.value))
+        self.path_points = []
+        self.finish_path.disabled = True
+        self.host.markers.draw_pending([])
+
+    def _keyframe(self) -> None:
+        self._add(edits.keyframe(self.host.shown_motion(), self.host.player.frame))
+
+    def _target(self) -> None:
+        pos, rot = TARGET_MODES[self.target_mode.value]
+        self._add(
+            edits.target(self.host.shown_motion(), self.host.player.frame, self.joint.value, position=pos, rotation=rot)
+        )
+
+    def _contacts(self) -> None:
+        lo, hi = self.range.value
+        self._add(edits.contacts(lo, hi, self.contact.value))
+
+
+def _default_joint(skeleton) -> str:
+    j = skeleton.roles.get("right_hand")
+    return skeleton.names[j] if j is not None else skeleton.names[-1]

@@ -1,0 +1,64 @@
+"""The app server: one viser server, one loaded model shared by every tab, a small worker pool for
+generation, and a Session per connected tab."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import viser
+
+from kinema.app.session import Session
+
+#: generations that may run at once (across tabs); more wait in the pool's queue
+WORKERS = 2
+#: where a new tab's camera stands and looks (world metres, Y up): to the character's left (+X), above
+#: the first metres of a walk along +Z, so that paths across the ground read left to right
+CAMERA_POSITION = (4.4, 4.6, 1.0)
+CAMERA_LOOK_AT = (0.0, 0.2, 3.4)
+
+
+class AppServer:
+    """``kinema app``: serve the authoring UI for ``model`` on ``host:port`` (``steps``: DDIM steps
+    a new tab starts with, None = the model's setting)."""
+
+    def __init__(
+        self, model, *, host: str = "127.0.0.1", port: int = 8080, steps: int | None = None, verbose: bool = False
+    ):
+        self.model, self.steps = model, steps
+        self.pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="kinema-app-generate")
+        self.sessions: dict[int, Session] = {}
+        self.seconds_per_work = 2e-4  # refined by learn_rate after each generation
+        self._lock = threading.Lock()
+        self.server = viser.ViserServer(host=host, port=port, label="kinema", verbose=verbose)
+        self.server.scene.set_up_direction("+y")
+        self.server.initial_camera.position = CAMERA_POSITION
+        self.server.initial_camera.look_at = CAMERA_LOOK_AT
+        self.server.on_client_connect(self._connect)
+        self.server.on_client_disconnect(self._disconnect)
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.server.get_host()}:{self.server.get_port()}"
+
+    def learn_rate(self, work: float, seconds: float) -> None:
+        """Running estimate of seconds per unit of work (frames x steps x samples), for progress bars."""
+        with self._lock:
+            self.seconds_per_work = 0.5 * self.seconds_per_work + 0.5 * seconds / max(work, 1.0)
+
+    def _connect(self, client) -> None:
+        session = Session(self, client)
+        with self._lock:
+            self.sessions[client.client_id] = session
+
+    def _disconnect(self, client) -> None:
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            session.close()
+
+    def stop(self) -> None:
+        for session in list(self.sessions.values()):
+            session.close()
+        self.server.stop()
+        self.pool.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,224 @@
+"""One browser tab: its document, motions, scene and panels. Generation runs on the app's worker pool
+(never on viser's callback threads), with an estimated progress bar; results and errors come back as
+scene updates and notifications. Tabs share the loaded model (``generate`` is thread-safe) and
+nothing else."""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+
+from kinema.app.constraint_panel import ConstraintPanel
+from kinema.app.document import Document, Settings, check_timeline, load_document
+from kinema.app.files_panel import FilesPanel
+from kinema.app.markers import Markers, contact_flags_at
+from kinema.app.playback import Player
+from kinema.app.timeline_panel import TimelinePanel
+from kinema.app.views import OTHER_COLOR, SELECTED_COLOR, SkeletonView, rest_motion
+from kinema.errors import KinemaError
+
+#: spacing (metres, towards -X, away from the camera) of the samples not selected, drawn beside the selected one
+SAMPLE_SPACING = 1.6
+SAMPLE_NAMES = ("1", "2", "3", "4")
+
+
+class Session:
+    def __init__(self, app, client):
+        self.app, self.client, self.model = app, client, app.model
+        self.doc = Document(settings=Settings(steps=app.steps))
+        self.motions = [rest_motion(self.model.skeleton, self.model.fps)]
+        self.generated = False
+        self.selected = 0
+        self.job = None
+        self.lock = threading.Lock()
+        scene, gui = client.scene, client.gui
+        scene.set_up_direction("+y")
+        scene.add_grid(
+            "/ground",
+            width=24,
+            height=24,
+            plane="xz",
+            cell_size=0.5,
+            section_size=1.0,
+            plane_color=(235, 235, 240),
+            plane_opacity=0.6,
+        )
+        gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
+        gui.main_panel.dock_right()
+        self.views: list[SkeletonView] = []
+        self.markers = Markers(scene, self.model.skeleton, self.model.fps)
+        self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True))
+        self._build_generate(gui)
+        self.player = Player(gui, self.model.fps, self.show_frame)
+        self.constraints = ConstraintPanel(gui, scene, self)
+        self.files = FilesPanel(gui, self)
+        self.show_motions(self.motions, report=None, source=None)
+        self._length_changed()
+
+    # ------------------------------------------------------------------ panels
+    def _build_generate(self, gui) -> None:
+        s = self.doc.settings
+        with gui.add_folder("Generate"):
+            self.gen_btn = gui.add_button(
+                "Generate",
+                icon="wand",
+                color="green",
+                hint="generate from the timeline, keeping the constraints",
+            )
+            self.progress = gui.add_progress_bar(0.0, visible=False, animated=True)
+            self.status = gui.add_markdown("Write prompts in the timeline, then press **Generate**.")
+            self.samples = gui.add_slider("Samples", min=1, max=4, step=1, initial_value=s.samples)
+            self.seed = gui.add_number("Seed", s.seed, min=0, step=1)
+            self.steps = gui.add_number(
+                "Steps",
+                s.steps or self.model.loaded.sampler.num_inference_steps,
+                min=1,
+                max=self.model.max_steps,
+                step=1,
+                hint="DDIM steps: fewer is faster",
+            )
+            self.pick = gui.add_button_group("Show sample", SAMPLE_NAMES[:1])
+        self.gen_btn.on_click(lambda _: self.generate())
+        self.pick.on_click(lambda e: self.select_sample(SAMPLE_NAMES.index(e.target.value)))
+
+    def notify(self, title: str, body: str, *, error: bool = False) -> None:
+        self.client.add_notification(title, body, color="red" if error else "blue", auto_close_seconds=8.0)
+
+    # ------------------------------------------------------------------ motions
+    def shown_motion(self):
+        return self.motions[self.selected]
+
+    def result_motion(self):
+        """The shown motion once there is one (generated or uploaded), else None."""
+        return self.shown_motion() if self.generated else None
+
+    def show_motions(self, motions, *, report, source: str | None) -> None:
+        """Replace the motions (samples) drawn; the first is selected."""
+        with self.lock:
+            self.motions, self.generated, self.selected = list(motions), source is not None, 0
+            for v in self.views:
+                v.remove()
+            self.views = [
+                SkeletonView(
+                    self.client.scene,
+                    f"/sample{i}",
+                    self.model.skeleton,
+                    color=SELECTED_COLOR if i == 0 else OTHER_COLOR,
+                )
+                for i in range(len(motions))
+            ]
+        self.pick.options = SAMPLE_NAMES[: len(motions)]
+        self.pick.visible = len(motions) > 1
+        self.select_sample(0)
+        if source is not None and report is None:
+            self.status.content = f"Showing {source}."
+        self._length_changed()
+
+    def select_sample(self, i: int) -> None:
+        with self.lock:
+            self.selected = min(max(i, 0), len(self.motions) - 1)
+            others = [k for k in range(len(self.motions)) if k != self.selected]
+            for k, view in enumerate(self.views):
+                lane = 0 if k == self.selected else others.index(k) + 1
+                view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
+                view.trail = k == self.selected
+                view.remove()
+                view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
+        self.show_frame(self.player.frame)
+        self.constraints.show_residuals()
+        if len(self.motions) > 1:
+            self.pick.label = f"Show sample ({self.selected + 1} in orange)"
+
+    def show_frame(self, frame: int) -> None:
+        with self.lock:
+            for view in self.views:
+                view.show(frame)
+        flags = contact_flags_at(self.doc.constraints, frame)
+        self.markers.draw_contacts(self.shown_motion(), frame, flags)
+
+    def _length_changed(self) -> None:
+        """The slider spans the shown motion, or the timeline before anything is generated (so that
+        constraints can be laid out in time first; the rest pose stands in for every frame)."""
+        frames = self.doc.num_frames(self.model.fps)
+        self.player.set_length(self.shown_motion().num_frames if self.generated else frames)
+        self.constraints.set_length(frames)
+
+    # ------------------------------------------------------------------ generation
+    def generate(self) -> None:
+        if self.job is not None:
+            self.notify("Busy", "this tab is already generating", error=True)
+            return
+        try:
+            timeline = check_timeline(self.doc.timeline)
+            self.doc.settings = Settings(
+                samples=int(self.samples.value), seed=int(self.seed.value), steps=int(self.steps.value)
+            )
+        except (KinemaError, ValueError) as err:
+            self.notify("Cannot generate", str(err), error=True)
+            return
+        args = dict(
+            constraints=[dict(c) for c in self.doc.constraints] or None,
+            samples=self.doc.settings.samples,
+            steps=self.doc.settings.steps,
+            seed=self.doc.settings.seed,
+        )
+        work = sum(round(s["seconds"] * self.model.fps) for s in timeline) * args["steps"] * (1 + args["samples"]) / 2
+        self.gen_btn.disabled = True
+        self.progress.value, self.progress.visible = 0.0, True
+        self.status.content = "Generating..."
+        self.job = self.app.pool.submit(self._run, timeline, args, work)
+        threading.Thread(target=self._tick, args=(self.job, work), daemon=True).start()
+
+    def _run(self, timeline, args, work) -> None:
+        t0 = time.perf_counter()
+        try:
+            result = self.model.generate(timeline, **args)
+            self.app.learn_rate(work, time.perf_counter() - t0)
+            self.show_motions(result.motions, report=result.report, source="generated")
+            self._report(result.report)
+        except KinemaError as err:
+            self.notify("Generation failed", str(err), error=True)
+            self.status.content = f"Failed: {err}"
+        except Exception as err:  # a bug: keep the page alive, log the traceback on the server
+            traceback.print_exc()
+            self.notify("Internal error", f"{type(err).__name__}: {err}", error=True)
+            self.status.content = "Failed (internal error, see the server log)."
+        finally:
+            self.job = None
+            self.gen_btn.disabled = False
+            self.progress.visible = False
+
+    def _tick(self, job, work: float) -> None:
+        """Progress estimated from the measured speed of earlier generations (generate has no callback)."""
+        t0, expected = time.perf_counter(), max(0.3, work * self.app.seconds_per_work)
+        while not job.done():
+            frac = min(0.95, (time.perf_counter() - t0) / expected)
+            self.progress.value = 100.0 * frac
+            time.sleep(0.1)
+
+    def _report(self, report) -> None:
+        text = (
+            f"{len(self.motions)} sample(s), {report.frames} frames, {report.segments} segment(s), "
+            f"{report.steps} steps, seed {report.seed}: **{report.seconds:.1f} s**"
+        )
+        if report.warnings:
+            text += "\n\n" + "\n".join(f"- {w}" for w in dict.fromkeys(report.warnings))
+            self.notify("Constraints not all met", "; ".join(dict.fromkeys(report.warnings)), error=True)
+        self.status.content = text
+
+    # ------------------------------------------------------------------ files
+    def load_session(self, name: str, content: bytes) -> None:
+        doc = load_document(content, skeleton=self.model.skeleton, fps=self.model.fps, source=name)
+        self.doc = doc
+        self.timeline.set_document(doc)
+        s = doc.settings
+        self.samples.value, self.seed.value = s.samples, s.seed
+        if s.steps is not None:
+            self.steps.value = s.steps
+        self._length_changed()
+        self.constraints.refresh(select=None)
+        self.notify("Session loaded", f"{name}: {len(doc.timeline)} prompt(s), {len(doc.constraints)} constraint(s)")
+
+    def close(self) -> None:
+        self.player.close()

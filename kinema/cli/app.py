@@ -1,0 +1,59 @@
+"""`kinema app`: the web authoring UI (viser), docs/app.md.
+
+Loads the model, starts the server and prints the URL; runs until interrupted. Needs the app extra:
+pip install 'kinema[app]'.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from kinema.cli._args import positive_int
+from kinema.cli.serve import _port
+from kinema.errors import KinemaError
+
+MISSING_EXTRA = "kinema app needs the app extra: pip install 'kinema[app]' (viser)"
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "app",
+        help="web authoring UI: timeline, constraints in the scene, playback, export (docs/app.md)",
+        description=__doc__,
+    )
+    p.add_argument("--model", default="default", help="'default' (shipped) or a run/checkpoint folder")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; the next free one if taken)")
+    p.add_argument(
+        "--steps",
+        type=positive_int,
+        help="DDIM steps new tabs start with (default: the model's setting; fewer = faster drafts)",
+    )
+    p.add_argument(
+        "--threads", type=positive_int, help="torch CPU threads (default: KINEMA_THREADS, else kinema.runtime's choice)"
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        from kinema.app.server import AppServer
+    except ImportError as err:
+        if "viser" not in str(err):
+            raise
+        raise KinemaError(MISSING_EXTRA) from None
+    from kinema.generate.api import load_model
+    from kinema.runtime import configure_threads
+
+    configure_threads(args.threads)
+    model = load_model(args.model)
+    if args.steps is not None and args.steps > model.max_steps:
+        raise KinemaError(f"--steps: at most {model.max_steps} for this model, got {args.steps}")
+    app = AppServer(model, host=args.host, port=args.port, steps=args.steps)
+    print(f"kinema app: open {app.url} (Ctrl+C to stop)", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    finally:
+        app.stop()
