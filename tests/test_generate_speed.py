@@ -50,9 +50,10 @@ def test_branches_per_step(model, batch_sizes, constraints, samples, per_step):
     assert batch_sizes == [per_step] * 4  # one batched pass per step for all samples
 
 
-def test_timeline_later_segments_keep_the_constraint_branch(model, batch_sizes):
+def test_timeline_join_is_context_not_a_constraint_branch(model, batch_sizes):
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], steps=3, postprocess=False)
-    assert batch_sizes == [2] * 3 + [3] * 3  # the second segment is constrained by the overlap frames
+    # the second segment's join frames are context every branch sees: text CFG alone, two branches
+    assert batch_sizes == [2] * 3 + [2] * 3
 
 
 def test_empty_prompt_without_constraints_runs_one_branch(model, batch_sizes):
@@ -90,7 +91,7 @@ def _rowwise(monkeypatch):
         def row(v, i):
             return None if v is None else v[i : i + 1]
 
-        keys = ("world_xz", "world_mask")
+        keys = ("world_xz", "world_mask", "context_mask")
         rows = [real(denoiser, sampler, T, row(text, i), c_dir[i : i + 1], guide, row(x_tgt, i), row(mask, i),
                      generator=generator, init_noise=noise[i : i + 1], **{k: row(v, i) if k in keys else v
                                                                              for k, v in kw.items()})
@@ -116,11 +117,12 @@ def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constr
 
 
 def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
-    seen = []
+    seen, joins = [], []
     real = api.sample_features
 
     def spy(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw):
         seen.append((x_tgt.clone(), mask.clone(), c_dir.clone()))
+        joins.append(kw["context_mask"])
         return real(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw)
 
     monkeypatch.setattr(api, "sample_features", spy)
@@ -128,7 +130,8 @@ def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
     (x0, m0, c0), (x1, m1, c1) = seen
     assert torch.equal(x0[0], x0[1]) and torch.equal(c0[0], c0[1])  # shared first-segment targets
     ov = int(m1[0].amax(-1).gt(0).sum())
-    assert ov == 10 and torch.equal(m1[0], m1[1])
+    assert ov == 3 and torch.equal(m1[0], m1[1])  # the first 0.15 s of the 0.5-s overlap are imposed
+    assert joins[0] is None and torch.equal(joins[1], m1)  # ... as context (Denoiser.forward_guided)
     assert not torch.allclose(x1[0, :ov], x1[1, :ov], atol=1e-4)  # each sample's own join
 
 

@@ -22,15 +22,12 @@ from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.generate.keyjoints import FeaturePoser
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, sample_features
-from kinema.generate.segments import SegmentPlan, plan_segments
+from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.motion.core import Motion
 from kinema.motion.features import features_to_motion
 from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
-
-#: seconds of overlap between consecutive timeline segments (constrained, then cross-faded)
-OVERLAP_SECONDS = 0.5
 
 #: prompt embeddings kept in memory by a loaded model (thread-safe LRU, kinema.text.MemoryCachedEncoder)
 TEXT_MEMORY_ENTRIES = 1024
@@ -229,14 +226,14 @@ class KinemaModel:
         motions: list[Motion] | None = None
         poser = FeaturePoser(self.skeleton) if self.joint_sigma > 0 else None
         for k, seg in enumerate(plan.segments):
-            x_tgt, mask, world_xz, world_mask, c_dir, shift = _stacked_targets(plan, k, motions, heading, samples)
+            x_tgt, mask, world_xz, world_mask, c_dir, shift, join = _stacked_targets(plan, k, motions, heading, samples)
             text = self.encode_text(seg.prompt)
             feats = sample_features(
                 self.loaded.denoiser, self.loaded.sampler, seg.num_frames,
                 None if text is None else text.expand(samples, -1), c_dir, guide,
                 x_tgt, mask, steps=steps, generator=g, progress=progress, world_xz=world_xz, world_mask=world_mask,
                 root_displacement=self.root_displacement, anchor_start=self.root_displacement,
-                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma, joint_poser=poser,
+                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma, joint_poser=poser, context_mask=join,
             )
             feats[:, :, 0] += shift[:, None, 0]
             feats[:, :, 2] += shift[:, None, 1]

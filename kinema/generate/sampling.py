@@ -168,6 +168,7 @@ def sample_features(
     world_mask: torch.Tensor | None = None,
     init_noise: torch.Tensor | None = None,
     max_batch_frames: int = MAX_BATCH_FRAMES,
+    context_mask: torch.Tensor | None = None,
     **options,
 ) -> torch.Tensor:
     """Run the reverse process for a batch of ``c_dir.shape[0]`` motions of ``num_frames`` frames.
@@ -185,25 +186,29 @@ def sample_features(
     separated-guidance constraint branch sees exactly the unconditional branch's input, so
     ``(1 - w_t - w_c) D0 + w_t D_text + w_c D_constr`` equals the two-branch ``(1 - w_t) D0 + w_t D_text``
     up to float rounding, and every step runs 2 branches instead of 3 (docs/speed.md).
+
+    ``context_mask (B, T, D)``: entries of ``mask`` every guidance branch sees (a timeline's join
+    frames; :meth:`kinema.model.denoiser.Denoiser.forward_guided`).
     """
     B, D = c_dir.shape[0], denoiser.config.feature_dim
     has_world = world_xz is not None and world_mask is not None and bool(world_mask.any())
     if not has_world:
         world_xz = world_mask = None
         if mask is not None and not bool(mask.any()):
-            mask = x_tgt = None  # nothing constrained: no constraint branch
+            mask = x_tgt = context_mask = None  # nothing constrained: no constraint branch
     if init_noise is None:
         gen_device = generator.device if generator is not None else "cpu"
         init_noise = torch.randn((B, num_frames, D), generator=generator, device=gen_device)
     branches = _branch_count(guidance, text_emb is not None, mask is not None or has_world)
     chunk = max(1, max_batch_frames // (branches * num_frames))
-    rows = [text_emb, c_dir, x_tgt, mask, world_xz, world_mask, init_noise]
+    rows = [text_emb, c_dir, x_tgt, mask, world_xz, world_mask, init_noise, context_mask]
     out = []
     for lo in range(0, B, chunk):
-        text_c, c_dir_c, x_tgt_c, mask_c, wxz_c, wm_c, noise_c = (None if v is None else v[lo : lo + chunk]
-                                                                 for v in rows)
+        text_c, c_dir_c, x_tgt_c, mask_c, wxz_c, wm_c, noise_c, ctx_c = (None if v is None else v[lo : lo + chunk]
+                                                                        for v in rows)
         out.append(_sample_rows(denoiser, sampler, num_frames, text_c, c_dir_c, guidance, x_tgt_c, mask_c, steps,
-                                generator, progress, wxz_c, wm_c, init_noise=noise_c, **options))
+                                generator, progress, wxz_c, wm_c, init_noise=noise_c, context_mask=ctx_c,
+                                **options))
     return torch.cat(out)
 
 
@@ -223,7 +228,7 @@ def _sample_rows(
     world_xz: torch.Tensor | None = None, world_mask: torch.Tensor | None = None,
     root_displacement: bool = True, root_smoothing: float = ROOT_SMOOTHING_SECONDS, anchor_start: bool = True,
     joint_poser: FeaturePoser | None = None, joint_sigma: float = JOINT_SIGMA_SECONDS,
-    init_noise: torch.Tensor | None = None,
+    init_noise: torch.Tensor | None = None, context_mask: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """:func:`sample_features` for one chunk of rows, all in one denoiser batch per step."""
     B = c_dir.shape[0]
@@ -249,7 +254,8 @@ def _sample_rows(
 
     def denoise(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         tgt_n = None if mask is None else denoiser.normalize(tgt) * mask
-        x0 = denoiser.forward_guided(x_t, t, text_emb, c_dir, tgt_n, mask, None, guidance, text_mask=text_mask)
+        x0 = denoiser.forward_guided(x_t, t, text_emb, c_dir, tgt_n, mask, None, guidance, text_mask=text_mask,
+                                     context_mask=None if mask is None else context_mask)
         if smooth_frames > 0:
             x0 = x0.clone()
             x0[..., rxz] = smooth_time(x0[..., rxz], smooth_frames)

@@ -2,9 +2,22 @@
 
 Frames of user constraints refer to the whole output. Segment k covers output frames
 ``[start_k, end_k)`` and is generated with ``overlap`` extra leading frames that re-play the end of the
-motion so far (dense full-body keyframes: positions, velocities, rotations, root and heading).
+motion so far; the first ``imposed`` of them are full-body keyframes of that motion (positions,
+velocities, rotations, root and heading), given to the model as *context* that every guidance branch
+sees (``join`` mask; kinema.model.denoiser.Denoiser.forward_guided), and the whole overlap is
+cross-faded afterwards (kinema.generate.timeline.crossfade).
+
+Why so few frames, and why as context (issue 18; Kimodo Sec. 4.4 imposes 5 transition frames): with
+all 10 overlap frames imposed as constraints under separated guidance (w_constr = 2), every segment
+after the first kept doing what the first did (walk -> bow -> wave walked throughout: wave hand 0.3 m
+*below* the head). Measured on walk -> bow -> wave and bow -> wave -> walk, seeds 0-1, 50 steps, raw:
+3 of 10 frames imposed as context gives the wave hand 0.23-0.32 m above the head and the closing walk
+1.07 m/s (before: 0.16-0.29 m/s), join accelerations 34-98 m/s^2 (inside the segments, p99: 76-186);
+5 imposed frames followed the prompts less (wave 0.0-0.32 m) with rougher joins (up to 185 m/s^2);
+constraints only at high noise (t >= 800) gave slower walks (0.56-0.66 m/s).
+
 Every segment is sampled in a local frame whose first root sits over the origin, as in training; the
-shift is added back afterwards. Shapes: ``x_tgt``/``mask`` ``(T, D)``, ``world_xz (T, J, 2)``.
+shift is added back afterwards. Shapes: ``x_tgt``/``mask``/``join`` ``(T, D)``, ``world_xz (T, J, 2)``.
 """
 
 from __future__ import annotations
@@ -18,13 +31,21 @@ from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.features import FeatureLayout, motion_to_features
 
+#: seconds of the previous motion each later segment re-plays and cross-fades over
+OVERLAP_SECONDS = 0.5
+#: seconds at the start of that overlap imposed as full-body context (at least one frame)
+IMPOSED_SECONDS = 0.15
+#: feature groups of the imposed frames
+JOIN_GROUPS = ("root_pos", "heading", "joint_pos", "joint_vel", "joint_rot")
+
 
 @dataclass
 class PlannedSegment:
     prompt: str
     start: int  # first new output frame
     end: int  # one past the last output frame
-    overlap: int  # leading frames shared with the previous segment
+    overlap: int  # leading frames shared with the previous segment (cross-faded)
+    imposed: int = 0  # the first frames of the overlap given as full-body context
 
     @property
     def num_frames(self) -> int:
@@ -49,7 +70,10 @@ class SegmentPlan:
         return self.model.loaded.layout
 
     def segment_targets(self, k: int, motion: Motion | None, heading: float):
-        """(x_tgt, mask, world_xz, world_mask, c_dir, shift_xz) for segment k in its local frame."""
+        """(x_tgt, mask, world_xz, world_mask, c_dir, shift_xz, join) for segment k in its local frame.
+
+        ``join`` (None for the first segment) marks the imposed overlap entries, which ``mask`` holds too.
+        """
         seg = self.segments[k]
         lo = seg.start - seg.overlap
         x_tgt = self.x_tgt[lo : seg.end].clone()
@@ -57,6 +81,7 @@ class SegmentPlan:
         wxz = None if self.world_xz is None else self.world_xz[lo : seg.end].clone()
         wm = None if self.world_mask is None else self.world_mask[lo : seg.end].clone()
         sl = self.layout.slices
+        join = None
         if motion is None:
             shift = torch.zeros(2)
             c_dir = torch.tensor([math.cos(heading), math.sin(heading)])
@@ -65,20 +90,23 @@ class SegmentPlan:
                 c_dir = x_tgt[0, sl["heading"]].float()
         else:
             prev = motion_to_features(motion).float()
-            join = prev[motion.num_frames - seg.overlap :]
-            shift = join[0, [0, 2]].clone()
-            c_dir = join[0, sl["heading"]].clone()
+            prev_end = prev[motion.num_frames - seg.overlap :]
+            shift = prev_end[0, [0, 2]].clone()
+            c_dir = prev_end[0, sl["heading"]].clone()
             channels = torch.zeros(self.layout.dim, dtype=torch.bool)
-            for name in ("root_pos", "heading", "joint_pos", "joint_vel", "joint_rot"):
+            for name in JOIN_GROUPS:
                 channels[sl[name]] = True
-            x_tgt[: seg.overlap, channels] = join[:, channels]
-            mask[: seg.overlap, channels] = 1.0
+            n = seg.imposed
+            x_tgt[:n, channels] = prev_end[:n, channels]
+            mask[:n, channels] = 1.0
+            join = torch.zeros_like(mask)
+            join[:n, channels] = 1.0
         root = sl["root_pos"]
         x_tgt[:, root.start] -= shift[0]
         x_tgt[:, root.start + 2] -= shift[1]
         if wxz is not None:
             wxz = wxz - shift
-        return x_tgt, mask, wxz, wm, c_dir, shift
+        return x_tgt, mask, wxz, wm, c_dir, shift, join
 
     def postprocess(self, motion: Motion) -> tuple[Motion, dict]:
         """Guarded post-processing of one finished motion; returns it with its own report."""
@@ -107,12 +135,13 @@ def plan_segments(model, segments, constraints, constraints_fps: float | None = 
     from kinema.generate.targets import encode_user_constraints
 
     fps = model.fps
-    overlap = max(1, round(0.5 * fps))
+    overlap = max(1, round(OVERLAP_SECONDS * fps))
+    imposed = max(1, round(IMPOSED_SECONDS * fps))
     bounds = segment_bounds(segments, fps)
     planned = []
     for i, (s, start, end) in enumerate(zip(segments, bounds[:-1], bounds[1:], strict=True)):
         ov = 0 if i == 0 else min(overlap, start)
-        planned.append(PlannedSegment(s.prompt, start, end, ov))
+        planned.append(PlannedSegment(s.prompt, start, end, ov, min(imposed, ov)))
     total_frames = bounds[-1]
     cons, x_tgt, mask, wxz, wm = encode_user_constraints(model, constraints, total_frames, constraints_fps)
     return SegmentPlan(model, planned, total_frames, x_tgt, mask, wxz, wm, cons)
