@@ -60,8 +60,12 @@ def test_unknown_prompts_warn_with_their_nearest_captions(model, prompt):
 
 
 def test_known_prompts_and_paraphrases_do_not_warn(model):
-    segments = [("A person walks forward.", 1.0), ("Someone strolls slowly ahead.", 1.0),
-                ("A woman lifts her left arm up high.", 1.0), ("A person walks forward.", 1.0)]
+    segments = [
+        ("A person walks forward.", 1.0),
+        ("Someone strolls slowly ahead.", 1.0),
+        ("A woman lifts her left arm up high.", 1.0),
+        ("A person walks forward.", 1.0),
+    ]
     rep = model.generate(segments, steps=1, postprocess=False).report
     assert rep.warnings == []
     assert [p["prompt"] for p in rep.prompts] == [s for s, _ in segments[:3]]  # each distinct prompt once
@@ -71,8 +75,23 @@ def test_known_prompts_and_paraphrases_do_not_warn(model):
 
 def test_cli_prints_the_warning_on_stderr(tmp_path, capsys):
     out = tmp_path / "m.bvh"
-    assert main(["generate", "A person sits down on a chair.", "--seconds", "1", "--steps", "1",
-                 "--no-postprocess", "--no-progress", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "A person sits down on a chair.",
+                "--seconds",
+                "1",
+                "--steps",
+                "1",
+                "--no-postprocess",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "kinema: warning: prompt 'A person sits down on a chair.' is far from every caption" in err
     assert out.is_file()
@@ -85,6 +104,17 @@ def test_export_writes_known_prompts(tiny_checkpoint, tiny_data, tmp_path, capsy
     assert (out / FILE_NAME).is_file() and "known captions" in capsys.readouterr().out
     loaded = kinema.load_model(out)
     assert loaded.known_prompts is not None and loaded.known_prompts.encoder_id == "hash-test-32"
-    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "m2"), "--known-prompts",
-                 str(tmp_path / "nothing")]) == 2
+    assert (
+        main(
+            [
+                "export",
+                str(tiny_checkpoint),
+                "--out",
+                str(tmp_path / "m2"),
+                "--known-prompts",
+                str(tmp_path / "nothing"),
+            ]
+        )
+        == 2
+    )
     assert "not a dataset build" in capsys.readouterr().err and not (tmp_path / "m2").exists()

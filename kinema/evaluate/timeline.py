@@ -46,25 +46,50 @@ def build_timeline_cases(dataset, data_dir, split: str, num_cases: int, seed: in
     rng = random.Random(f"kinema-suite-timeline:{seed}")
     pool = [i for i, r in enumerate(dataset.clips) if r["length"] >= lo and r["captions"]]
     if num_cases > 0 and len(pool) < SEGMENTS[1]:
-        raise ValueError(f"{data_dir}: split {split!r} has {len(pool)} captioned clips of "
-                         f"{SEGMENT_SECONDS[0]:g} s or more; timeline cases need {SEGMENTS[1]}")
+        raise ValueError(
+            f"{data_dir}: split {split!r} has {len(pool)} captioned clips of "
+            f"{SEGMENT_SECONDS[0]:g} s or more; timeline cases need {SEGMENTS[1]}"
+        )
     cases = []
     for k in range(num_cases):
         segs = []
         for i in rng.sample(pool, rng.randint(*SEGMENTS)):
             rec = dataset.clips[i]
             n = min(rec["length"], round(SEGMENT_SECONDS[1] * fps))
-            segs.append({"prompt": rec["captions"][0], "seconds": n / fps, "clip_id": rec["clip_id"],
-                         "start": rng.randint(0, rec["length"] - n), "frames": n})
+            segs.append(
+                {
+                    "prompt": rec["captions"][0],
+                    "seconds": n / fps,
+                    "clip_id": rec["clip_id"],
+                    "start": rng.randint(0, rec["length"] - n),
+                    "frames": n,
+                }
+            )
         seconds = sum(s["seconds"] for s in segs)
-        cases.append({
-            "id": f"{first_id + k:04d}-timeline", "kind": "timeline", "parts": [], "clip_id": segs[0]["clip_id"],
-            "caption": segs[0]["prompt"], "prompt": " | ".join(s["prompt"] for s in segs), "with_text": True,
-            "seconds": seconds, "num_frames": sum(s["frames"] for s in segs), "fps": fps, "heading": 0.0,
-            "perturbed": False, "num_keyframes": None, "constraints": [], "segments": segs,
-            "source": {"data": str(data_dir), "split": split, "segments": [
-                {k2: s[k2] for k2 in ("clip_id", "start", "frames")} for s in segs]},
-        })
+        cases.append(
+            {
+                "id": f"{first_id + k:04d}-timeline",
+                "kind": "timeline",
+                "parts": [],
+                "clip_id": segs[0]["clip_id"],
+                "caption": segs[0]["prompt"],
+                "prompt": " | ".join(s["prompt"] for s in segs),
+                "with_text": True,
+                "seconds": seconds,
+                "num_frames": sum(s["frames"] for s in segs),
+                "fps": fps,
+                "heading": 0.0,
+                "perturbed": False,
+                "num_keyframes": None,
+                "constraints": [],
+                "segments": segs,
+                "source": {
+                    "data": str(data_dir),
+                    "split": split,
+                    "segments": [{k2: s[k2] for k2 in ("clip_id", "start", "frames")} for s in segs],
+                },
+            }
+        )
     return cases
 
 
@@ -89,8 +114,8 @@ def join_smoothness(motion: Motion, bounds: list[int]) -> dict[str, float | None
     """Joint speed / acceleration near the joins (inner ``bounds``) vs away from them (see module doc)."""
     P = motion.positions.double()
     fps = motion.fps
-    speed = ((P[1:] - P[:-1]).norm(dim=-1) * fps)  # (T-1, J), between frames t and t+1
-    acc = ((P[2:] - 2 * P[1:-1] + P[:-2]).norm(dim=-1) * fps * fps)  # (T-2, J), at frame t+1
+    speed = (P[1:] - P[:-1]).norm(dim=-1) * fps  # (T-1, J), between frames t and t+1
+    acc = (P[2:] - 2 * P[1:-1] + P[:-2]).norm(dim=-1) * fps * fps  # (T-2, J), at frame t+1
     T = P.shape[0]
     near = torch.zeros(T, dtype=torch.bool)
     for b in bounds[1:-1]:
@@ -102,8 +127,10 @@ def join_smoothness(motion: Motion, bounds: list[int]) -> dict[str, float | None
         return float(x[m].mean()) if bool(m.any()) else None
 
     return {
-        "join_speed": mean(speed, sj), "inside_speed": mean(speed, si),
-        "join_acc": mean(acc, aj), "inside_acc": mean(acc, ai),
+        "join_speed": mean(speed, sj),
+        "inside_speed": mean(speed, si),
+        "join_acc": mean(acc, aj),
+        "inside_acc": mean(acc, ai),
         "join_acc_peak": float(acc[aj].max()) if bool(aj.any()) else None,
         "inside_acc_p99": float(torch.quantile(acc[ai].amax(-1), 0.99)) if bool(ai.any()) else None,
     }
@@ -113,9 +140,11 @@ def motion_quality(motions: list[Motion]) -> dict[str, float | None]:
     """Foot skate (pooled over the motions' contact samples), contact accuracy and jerk (means)."""
     pairs = [M.foot_skate_with_count(m) for m in motions]
     n = sum(c for _, c in pairs)
-    return {"foot_skate_cm_s": None if n == 0 else sum(v * c for v, c in pairs) / n,
-            "contact_acc": sum(M.contact_accuracy(m) for m in motions) / len(motions),
-            "jerk": sum(M.jerk(m) for m in motions) / len(motions)}
+    return {
+        "foot_skate_cm_s": None if n == 0 else sum(v * c for v, c in pairs) / n,
+        "contact_acc": sum(M.contact_accuracy(m) for m in motions) / len(motions),
+        "jerk": sum(M.jerk(m) for m in motions) / len(motions),
+    }
 
 
 def crop_segments(motion: Motion, bounds: list[int]) -> list[Motion]:
@@ -138,16 +167,29 @@ def run_timeline_case(model, case: dict, modes: list[str], seed: int, steps, gui
     for row, m in gen.items():
         metrics[row] = motion_quality([m]) | join_smoothness(m, bounds)
     for row in metrics:  # the constraint columns of the main table: a timeline case has none
-        metrics[row].update(fullbody_pos_cm=None, ee_pos_cm=None, ee_rot_deg=None, root2d_pos_cm=None,
-                            pelvis_p95_cm=None, jitter=None, foot_skate_samples=0)
+        metrics[row].update(
+            fullbody_pos_cm=None,
+            ee_pos_cm=None,
+            ee_rot_deg=None,
+            root2d_pos_cm=None,
+            pelvis_p95_cm=None,
+            jitter=None,
+            foot_skate_samples=0,
+        )
     keys = ("id", "kind", "parts", "clip_id", "prompt", "with_text", "perturbed", "seconds", "num_keyframes")
     record = {k: case[k] for k in keys} | {"segments": len(segments), "metrics": metrics}
     segs = {"ground_truth": gt} | {row: crop_segments(m, bounds) for row, m in gen.items()}
     return record, {"ground_truth": gt[0]} | gen, segs
 
 
-def timeline_summary(records: list[dict], captions: list[str], segments: dict[str, list[Motion]], retrieval,
-                     text_cache: Path | None, embed) -> dict:
+def timeline_summary(
+    records: list[dict],
+    captions: list[str],
+    segments: dict[str, list[Motion]],
+    retrieval,
+    text_cache: Path | None,
+    embed,
+) -> dict:
     """Per row: cases, segments, R@1/R@3 of each segment against its own caption (``None`` without a
     retrieval model), skate / contact / jerk and the join smoothness means over the cases.
 

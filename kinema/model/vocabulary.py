@@ -44,14 +44,19 @@ class PromptMatch:
     known: bool
 
     def to_dict(self) -> dict:
-        return {"prompt": self.prompt, "known": self.known,
-                "nearest": [{"caption": c, "similarity": round(s, 4)} for c, s in self.nearest]}
+        return {
+            "prompt": self.prompt,
+            "known": self.known,
+            "nearest": [{"caption": c, "similarity": round(s, 4)} for c, s in self.nearest],
+        }
 
     def warning(self) -> str:
         near = "; ".join(f"{c!r} ({s:.2f})" for c, s in self.nearest)
-        return (f"prompt {self.prompt!r} is far from every caption the model was trained on (best similarity "
-                f"{self.nearest[0][1]:.2f} < {UNKNOWN_BELOW:.2f}); the motion may show something else. "
-                f"Nearest known captions: {near}")
+        return (
+            f"prompt {self.prompt!r} is far from every caption the model was trained on (best similarity "
+            f"{self.nearest[0][1]:.2f} < {UNKNOWN_BELOW:.2f}); the motion may show something else. "
+            f"Nearest known captions: {near}"
+        )
 
 
 class KnownPrompts:
@@ -59,8 +64,9 @@ class KnownPrompts:
 
     def __init__(self, captions: list[str], embeddings: torch.Tensor, encoder_id: str):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
-            raise KinemaError(f"known prompts: {len(captions)} captions but embeddings of shape "
-                              f"{tuple(embeddings.shape)}")
+            raise KinemaError(
+                f"known prompts: {len(captions)} captions but embeddings of shape {tuple(embeddings.shape)}"
+            )
         self.captions = list(captions)
         self.embeddings = torch.nn.functional.normalize(embeddings.float(), dim=-1)
         self.encoder_id = encoder_id
@@ -75,8 +81,11 @@ class KnownPrompts:
 
     def save(self, folder: str | Path) -> Path:
         """Write ``folder/known_prompts.safetensors`` atomically (float16 embeddings)."""
-        meta = {"format": "kinema-known-prompts-1", "text_encoder": self.encoder_id,
-                "captions": json.dumps(self.captions)}
+        meta = {
+            "format": "kinema-known-prompts-1",
+            "text_encoder": self.encoder_id,
+            "captions": json.dumps(self.captions),
+        }
         path = Path(folder) / FILE_NAME
         atomic_write_bytes(path, save({"embeddings": self.embeddings.half().contiguous()}, metadata=meta))
         return path
@@ -100,8 +109,10 @@ class KnownPrompts:
         """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``."""
         e = torch.nn.functional.normalize(embedding.float().reshape(1, -1), dim=-1)
         if e.shape[1] != self.embeddings.shape[1]:
-            raise KinemaError(f"known prompts: embedding has {e.shape[1]} dimensions, expected "
-                              f"{self.embeddings.shape[1]} ({self.encoder_id})")
+            raise KinemaError(
+                f"known prompts: embedding has {e.shape[1]} dimensions, expected "
+                f"{self.embeddings.shape[1]} ({self.encoder_id})"
+            )
         sims = (self.embeddings @ e[0]).clamp(-1.0, 1.0)
         top = sims.topk(min(NEAREST, len(self.captions)))
         nearest = [(self.captions[int(i)], float(v)) for v, i in zip(top.values, top.indices, strict=True)]
