@@ -2,7 +2,9 @@
 
 Run once, from the code *before* a refactor that must not change behaviour:
 ``OMP_NUM_THREADS=1 python scripts/record_reference_outputs.py tests/data/reference_outputs.npz``.
-tests/test_reference_outputs.py then checks every later commit against the file.
+tests/test_reference_outputs.py then checks every later commit against the file. A deliberate change
+of behaviour re-records only the cases it changes: ``... reference_outputs.npz --only timeline`` keeps
+every other case (and the keyframe inputs) of the existing file.
 """
 
 from __future__ import annotations
@@ -21,14 +23,20 @@ import kinema  # noqa: E402
 from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
 
 
-def main(out: str) -> None:
+def main(out: str, only: str | None = None) -> None:
     torch.set_num_threads(1)
     model = kinema.load_model()
     seed_motion = model.generate("A person walks forward.", seconds=2.0, steps=5, seed=11, postprocess=False)[0]
     kf_rot = quat_to_axis_angle(seed_motion.local_rotations[[0, 30]].double()).numpy()
     kf_root = seed_motion.root_translation[[0, 30]].double().numpy()
     arrays = {"input_kf_rot": kf_rot, "input_kf_root": kf_root}
+    if only is not None:
+        with np.load(out) as old:
+            arrays = {k: old[k] for k in old.files if not k.startswith(only)}
+        kf_rot, kf_root = arrays["input_kf_rot"], arrays["input_kf_root"]
     for name, prompt, kwargs in cases(kf_rot, kf_root):
+        if only is not None and not name.startswith(only):
+            continue
         result = model.generate(prompt, **kwargs)
         for i, m in enumerate(result):
             arrays[f"{name}_{i}_root"] = m.root_translation.float().numpy()
@@ -40,4 +48,5 @@ def main(out: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    args = sys.argv[1:]
+    main(args[0], args[2] if len(args) == 3 and args[1] == "--only" else None)

@@ -59,7 +59,7 @@ def test_suite_kinds_lengths_and_constraints(tiny_data):
 
     ds = MotionDataset(tiny_data, "train")
     cases = build_suite(tiny_data, "train", num_cases=20, seed=0, perturb_fraction=0.5)
-    assert {c["kind"] for c in cases} == set(CASE_KINDS)
+    assert {c["kind"] for c in cases} == set(CASE_KINDS) - {"timeline"}  # timeline cases: build_timeline_cases
     assert len({c["id"] for c in cases}) == len(cases)
     constrained = [c for c in cases if c["kind"] != "text"]
     assert {c["with_text"] for c in constrained} == {True, False}
@@ -103,30 +103,9 @@ def _documented_keys() -> set[str]:
 
 def test_cli_end_to_end(tiny_checkpoint, tiny_data, tmp_path, capsys):
     out = tmp_path / "eval"
-    rc = _cli(
-        [
-            "evaluate",
-            "--model",
-            str(tiny_checkpoint),
-            "--data",
-            str(tiny_data),
-            "--split",
-            "train",
-            "--cases",
-            "4",
-            "--seed",
-            "0",
-            "--steps",
-            "4",
-            "--out",
-            str(out),
-            "--retrieval",
-            str(tmp_path / "no-retrieval"),
-            "--filmstrips",
-            "2",
-            "--no-progress",
-        ]
-    )
+    rc = _cli(["evaluate", "--model", str(tiny_checkpoint), "--data", str(tiny_data), "--split", "train",
+               "--cases", "4", "--timeline-cases", "1", "--seed", "0", "--steps", "4", "--out", str(out),
+               "--retrieval", str(tmp_path / "no-retrieval"), "--filmstrips", "2", "--no-progress"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert "| Ground truth |" in printed and "wall time" in printed
@@ -144,12 +123,17 @@ def test_cli_end_to_end(tiny_checkpoint, tiny_data, tmp_path, capsys):
         assert tuple(row) == COLUMNS and all(k in documented for k in row)
     for key in data["cases"][0]:
         assert key in documented, key
-    assert len(data["cases"]) == 4 and data["meta"]["num_cases"] == 4
+    assert len(data["cases"]) == 5 and data["meta"]["num_cases"] == 5
+    assert data["cases"][-1]["kind"] == "timeline" and set(data["timeline"]) == {"ground_truth", "raw", "post"}
+    for row in data["timeline"].values():
+        assert all(k in documented for k in row)
+    assert data["timeline"]["raw"]["join_acc"] > 0 and data["timeline"]["ground_truth"]["join_acc"] is None
+    assert "## Timelines" in (out / "report.md").read_text() and "| Model (raw) | 1 |" in printed.split("Segments")[-1]
     assert any("retrieval" in w for w in data["warnings"]) and data["table"]["raw"]["r3_whole"] is None
     assert len(data["plots"]["filmstrips"]) == 2
     assert all((out / p).is_file() for p in data["plots"]["filmstrips"])
     assert data["table"]["ground_truth"]["contact_acc"] == 1.0
-    assert len(load_suite(out / "suite.json")) == 4
+    assert len(load_suite(out / "suite.json")) == 5
     assert "Ground truth" in (out / "report.md").read_text()
 
 
@@ -195,3 +179,55 @@ def test_cli_errors(tiny_checkpoint, tiny_data, tmp_path, capsys):
         err = capsys.readouterr()
         lines = [ln for ln in (err.out + err.err).strip().splitlines() if ln.strip()]
         assert len(lines) == 1 and name in lines[0], lines
+
+
+# ----------------------------------------------------------------------------- timeline cases
+def test_timeline_cases_are_deterministic_and_scored_per_segment(tiny_checkpoint, tiny_data, tmp_path):
+    from kinema.data.dataset import MotionDataset
+    from kinema.evaluate.retrieval import RetrievalConfig, RetrievalModel
+    from kinema.evaluate.timeline import SEGMENT_SECONDS, build_timeline_cases, segment_bounds
+    from kinema.generate.api import load_model
+
+    ds = MotionDataset(tiny_data, "train")
+    cases = build_timeline_cases(ds, tiny_data, "train", 2, seed=3, first_id=7)
+    assert cases == build_timeline_cases(ds, tiny_data, "train", 2, seed=3, first_id=7)
+    assert [c["id"] for c in cases] == ["0007-timeline", "0008-timeline"]
+    for c in cases:
+        assert 2 <= len(c["segments"]) <= 4 and len({s["clip_id"] for s in c["segments"]}) == len(c["segments"])
+        assert all(SEGMENT_SECONDS[0] - 1e-9 <= s["seconds"] <= SEGMENT_SECONDS[1] + 1e-9 for s in c["segments"])
+        assert segment_bounds(c)[-1] == c["num_frames"]
+    save_suite(cases, tmp_path / "suite.json")
+    assert load_suite(tmp_path / "suite.json") == cases
+    cfg = RetrievalConfig(width=16, layers=1, heads=2, ff_mult=2, embed_dim=8, text_dim=32, text_hidden=16)
+    RetrievalModel(cfg, ds.layout, ds.stats, ds.fps, "hash-test-32").save(tmp_path / "ret")
+    res = run_suite(load_model(tiny_checkpoint), cases, postprocess_modes=(False,), steps=3, progress=False,
+                    retrieval=tmp_path / "ret", mm_prompts=0)
+    tl = res.data["timeline"]
+    n = sum(len(c["segments"]) for c in cases)
+    assert tl["raw"]["segments"] == tl["ground_truth"]["segments"] == n and tl["raw"]["cases"] == 2
+    for row in tl.values():
+        assert 0.0 <= row["r1"] <= row["r3"] <= 1.0 and row["foot_skate_cm_s"] >= 0.0
+    assert res.motions["0007-timeline"]["raw"].num_frames == cases[0]["num_frames"]
+    assert res.data["by_kind"]["raw"]["timeline"]["cases"] == 2
+
+
+def test_join_smoothness_sees_a_pop_at_the_join():
+    import torch
+
+    from kinema.evaluate.timeline import join_smoothness
+    from kinema.motion.core import Motion
+    from kinema.skeleton import Skeleton
+
+    skel = Skeleton(["a", "b"], [-1, 0], [[0.0, 0.0, 0.0], [0.0, 0.5, 0.0]], name="two")
+    T, fps = 60, 20.0
+    root = torch.zeros(T, 3)
+    root[:, 2] = torch.arange(T) * 1.0 / fps  # 1 m/s, no acceleration
+    quats = torch.zeros(T, 2, 4)
+    quats[..., 0] = 1.0
+    smooth = join_smoothness(Motion(skel, fps, root, quats), [0, 30, T])
+    assert smooth["join_speed"] == pytest.approx(1.0) and smooth["inside_speed"] == pytest.approx(1.0)
+    assert smooth["join_acc_peak"] == pytest.approx(0.0, abs=1e-3)  # float32 positions
+    root[30:, 0] += 0.2  # a 20-cm jump at the join
+    popped = join_smoothness(Motion(skel, fps, root, quats), [0, 30, T])
+    assert popped["join_acc_peak"] == pytest.approx(0.2 * fps * fps, rel=1e-4)
+    assert popped["inside_acc_p99"] == pytest.approx(0.0, abs=1e-3) and popped["join_speed"] > 1.0

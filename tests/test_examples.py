@@ -119,35 +119,60 @@ def test_timeline_example(path, model, timelines):
     assert result.report.warnings == []
 
 
-@pytest.mark.xfail(
-    reason="with the model's saved guidance (w_constr 2) every segment after the first keeps "
-    "doing what the first one did: the joins are constraints and constraint guidance "
-    "outweighs the new prompt (with --guidance 2 0 the segments follow their prompts)",
-    raises=AssertionError,
-    strict=False,
-)
-def test_bow_wave_walk_follows_each_prompt(model, timelines):
-    """examples/timelines/bow_wave_walk.json: a bow (trunk leans forward), then a raised right hand
-    (above the head), then a walk (the pelvis travels)."""
-    path = EXAMPLES / "timelines/bow_wave_walk.json"
-    motion = timelines[path][1][0]
+def _segment_measures(motion, bow: slice, wave: slice, walk: slice) -> dict[str, float]:
+    """Trunk lean (pelvis -> head from vertical) in the bow, right hand over the head in the wave, mean
+    pelvis speed in the walk and in the bow's last 3 s (a bow stands still)."""
     names = list(motion.skeleton.names)
     p = motion.positions
-    fps = motion.fps
     up = p[:, names.index("Head")] - p[:, 0]
     lean = torch.rad2deg(torch.acos(up[:, 1] / up.norm(dim=-1)))
     hand_over_head = p[:, names.index("Hand_R"), 1] - p[:, names.index("Head"), 1]
     speed = pelvis_speed(motion)
-    bow, wave, walk = slice(0, int(3 * fps)), slice(int(3 * fps), int(6 * fps)), slice(int(6.5 * fps), None)
-    found = {
-        "bow: max lean (deg)": float(lean[bow].max()),
-        "wave: max right hand over head (m)": float(hand_over_head[wave].max()),
-        "walk: mean pelvis speed (m/s)": float(speed[walk].mean()),
-    }
+    found = {"bow: max lean (deg)": float(lean[bow].max()),
+             "bow: mean pelvis speed, last 3 s (m/s)": float(speed[bow][-int(3 * motion.fps) :].mean()),
+             "wave: max right hand over head (m)": float(hand_over_head[wave].max()),
+             "walk: mean pelvis speed (m/s)": float(speed[walk].mean())}
     print(found)
+    return found
+
+
+def test_bow_wave_walk_follows_each_prompt(model, timelines):
+    """examples/timelines/bow_wave_walk.json: a bow (trunk leans forward), then a raised right hand
+    (above the head), then a walk (the pelvis travels). Before issue 18's joins (10 frames imposed as
+    constraints, w_constr 2) the wave stayed below the head and the walk crept at 0.2-0.3 m/s."""
+    path = EXAMPLES / "timelines/bow_wave_walk.json"
+    fps = model.fps
+    motion = timelines[path][1][0]
+    found = _segment_measures(motion, slice(0, int(3 * fps)), slice(int(3 * fps), int(6 * fps)),
+                              slice(int(6.5 * fps), None))
     assert found["bow: max lean (deg)"] > 15
     assert found["wave: max right hand over head (m)"] > 0.1
     assert found["walk: mean pelvis speed (m/s)"] > 0.5
+
+
+def _walk_bow_wave(model, timelines) -> dict[str, float]:
+    fps = model.fps
+    motion = timelines[EXAMPLES / "timelines/walk_bow_wave.json"][1][0]
+    return _segment_measures(motion, slice(int(4 * fps), int(8 * fps)), slice(int(8 * fps), None),
+                             slice(0, int(4 * fps)))
+
+
+def test_walk_bow_wave_follows_each_prompt(model, timelines):
+    """Issue 18's timeline: the walk travels, then the person stops (the bow segment stands still) and
+    the wave raises the right hand above the head. Before the fix the walk went on through all 12 s
+    (bow segment 1.0-1.4 m/s) and the hand stayed 0.3-0.4 m below the head."""
+    found = _walk_bow_wave(model, timelines)
+    assert found["walk: mean pelvis speed (m/s)"] > 0.8
+    assert found["bow: mean pelvis speed, last 3 s (m/s)"] < 0.5
+    assert found["wave: max right hand over head (m)"] > 0.1
+
+
+@pytest.mark.xfail(reason="the default model bows 25 degrees or more in about one draw in four even alone "
+                          "('A person bows.', seeds 0-3: 34, 18, 7, 13 deg) and after a walk in none of seeds 0-3 "
+                          "(9, 9, 19, 9 deg at 10 steps); the timeline's joins are not what limits it "
+                          "(every join setting tried gave 5-22 deg, seeds 0-5)", raises=AssertionError, strict=True)
+def test_walk_bow_wave_bow_leans_25_degrees(model, timelines):
+    assert _walk_bow_wave(model, timelines)["bow: max lean (deg)"] >= 25
 
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)

@@ -50,9 +50,10 @@ def test_branches_per_step(model, batch_sizes, constraints, samples, per_step):
     assert batch_sizes == [per_step] * 4  # one batched pass per step for all samples
 
 
-def test_timeline_later_segments_keep_the_constraint_branch(model, batch_sizes):
+def test_timeline_join_is_context_not_a_constraint_branch(model, batch_sizes):
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], steps=3, postprocess=False)
-    assert batch_sizes == [2] * 3 + [3] * 3  # the second segment is constrained by the overlap frames
+    # the second segment's join frames are context every branch sees: text CFG alone, two branches
+    assert batch_sizes == [2] * 3 + [2] * 3
 
 
 def test_empty_prompt_without_constraints_runs_one_branch(model, batch_sizes):
@@ -110,11 +111,12 @@ def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constr
 
 
 def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
-    seen = []
+    seen, joins = [], []
     real = api.sample_features
 
     def spy(denoiser, sampler, rep, text, targets, settings, **kw):
         seen.append((targets.x_tgt.clone(), targets.mask.clone(), targets.c_dir.clone()))
+        joins.append(targets.context_mask)
         return real(denoiser, sampler, rep, text, targets, settings, **kw)
 
     monkeypatch.setattr(api, "sample_features", spy)
@@ -122,7 +124,8 @@ def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
     (x0, m0, c0), (x1, m1, c1) = seen
     assert torch.equal(x0[0], x0[1]) and torch.equal(c0[0], c0[1])  # shared first-segment targets
     ov = int(m1[0].amax(-1).gt(0).sum())
-    assert ov == 10 and torch.equal(m1[0], m1[1])
+    assert ov == 3 and torch.equal(m1[0], m1[1])  # the first 0.15 s of the 0.5-s overlap are imposed
+    assert joins[0] is None and torch.equal(joins[1], m1)  # ... as context (Denoiser.forward_guided)
     assert not torch.allclose(x1[0, :ov], x1[1, :ov], atol=1e-4)  # each sample's own join
 
 

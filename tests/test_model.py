@@ -259,3 +259,24 @@ def test_set_dropout_zero_makes_training_mode_deterministic() -> None:
     assert not torch.equal(model(**inp), model(**inp))
     model.set_dropout(0.0)
     torch.testing.assert_close(model(**inp), model(**inp))
+
+
+def test_forward_guided_context_is_seen_by_every_branch() -> None:
+    """A timeline's join frames (context_mask) enter every branch; they are not extrapolated as constraints."""
+    model = _model()
+    inp = _inputs(model)
+    g = Guidance(GuidanceMode.SEPARATED, 2.0, 2.0)
+    both = (inp["x_t"], inp["t"], inp["text_emb"], inp["c_dir"], inp["x_tgt"], inp["mask"], inp["pad_mask"])
+    # only context: regular text CFG with the context in both branches
+    ctx = model.forward_guided(*both, g, context_mask=inp["mask"])
+    expected = 2.0 * _branch(model, inp, True, True) - _branch(model, inp, False, True)
+    torch.testing.assert_close(ctx, expected, atol=1e-5, rtol=1e-5)
+    # context plus constraints on other entries: the constraint branch sees both, the others the context
+    ctx_mask = torch.zeros_like(inp["mask"])
+    ctx_mask[:, :2] = inp["mask"][:, :2]
+    mixed = model.forward_guided(*both, g, context_mask=ctx_mask)
+    ctx_inp = {**inp, "mask": ctx_mask}
+    d0 = _branch(model, ctx_inp, False, True)
+    expected = -3.0 * d0 + 2.0 * _branch(model, ctx_inp, True, True) + 2.0 * _branch(model, inp, False, True)
+    torch.testing.assert_close(mixed, expected, atol=1e-5, rtol=1e-5)
+    assert not torch.allclose(mixed, model.forward_guided(*both, g), atol=1e-4)

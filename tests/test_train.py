@@ -223,3 +223,20 @@ def test_fine_tune_refuses_a_different_architecture(tiny_data, tmp_path, capsys)
     assert "cannot fine-tune from this model" in err and "model_config.width" in err
     assert main([*base, "--out", str(tmp_path / "ft2"), "--init-from", str(tmp_path / "nowhere")]) == 2
     assert "no such model folder" in capsys.readouterr().err
+
+
+def test_foot_contact_weight_reaches_the_loss_and_is_checked(tiny_data, tmp_path):
+    from kinema.errors import KinemaError
+
+    trainer = Trainer(_cfg(foot_contact=0.5, steps=2), tiny_data, tmp_path / "run")
+    assert trainer.weights.foot_contact == 0.5
+    rec = trainer.train_step(trainer.model)
+    assert rec["foot_contact"] >= 0 and "foot_contact" not in _plain_step_terms(tiny_data, tmp_path)
+    with pytest.raises(KinemaError, match="foot_contact"):
+        Trainer(_cfg(foot_contact=-1.0), tiny_data, tmp_path / "bad")
+
+
+def _plain_step_terms(tiny_data, tmp_path) -> dict:
+    """The logged terms of one step of the default configuration (no foot-contact term)."""
+    trainer = Trainer(_cfg(steps=2), tiny_data, tmp_path / "plain")
+    return trainer.train_step(trainer.model)

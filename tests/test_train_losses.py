@@ -9,8 +9,9 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, matrix_to_sixd, sixd_to_matrix
+from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo import features_to_motion, motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.skeleton import Skeleton
@@ -368,3 +369,63 @@ def test_max_keyframes_ramp() -> None:
     assert max_keyframes_at(10**6, 500, 1000) == 20
     vals = [max_keyframes_at(s, 0, 1000) for s in range(0, 1001, 10)]
     assert vals == sorted(vals) and set(vals) == set(range(1, 21))
+
+
+# ---------------------------------------------------------------------------- foot-contact term
+def _with_contacts(x: torch.Tensor, value: float) -> torch.Tensor:
+    """Normalised batch ``x`` with every raw contact flag set to ``value``."""
+    raw = STATS.denormalize(x)
+    raw[..., LAYOUT.slices["contacts"]] = value
+    return STATS.normalize(raw)
+
+
+def _planted_speed_loss(pred: torch.Tensor, mask: torch.Tensor, fps: float, unit: float) -> float:
+    """The term by hand: contact-joint velocities of features_to_motion(pred), smooth L1 in ``unit``."""
+    total, count = 0.0, 0
+    for b in range(pred.shape[0]):
+        n = int(mask[b].sum())
+        motion = features_to_motion(STATS.denormalize(pred[b, :n]), SKEL, fps)
+        _, pos = motion.global_transforms()
+        v = (pos[1:, contact_joints(SKEL)] - pos[:-1, contact_joints(SKEL)]) * fps / unit
+        total += torch.nn.functional.smooth_l1_loss(v, torch.zeros_like(v), reduction="sum").item()
+        count += v.shape[0] * v.shape[1]
+    return total / count
+
+
+def test_foot_contact_term_is_planted_foot_speed_of_the_output_motion() -> None:
+    target, mask = _batch()
+    target = _with_contacts(target, 1.0)
+    pred = target + 0.05 * torch.randn(target.shape, generator=torch.Generator().manual_seed(3))
+    pred = _with_contacts(pred, 0.0)  # the term reads the *ground-truth* flags, not the predicted ones
+    base, _ = _loss(pred, target, mask, fps=30.0)
+    w = LossWeights(foot_contact=2.0)
+    total, terms = _loss(pred, target, mask, weights=w, fps=30.0)
+    expected = _planted_speed_loss(pred, mask, 30.0, w.foot_unit)
+    assert expected > 1.0  # the fixture's root travels ~2 m in 1.3 s: its feet slide
+    assert terms["foot_contact"].item() == pytest.approx(expected, rel=1e-4)
+    assert total.item() == pytest.approx(base.item() + 2.0 * expected, rel=1e-5)
+
+
+def test_foot_contact_term_only_on_planted_frames_and_needs_fps() -> None:
+    target, mask = _batch()
+    _, terms = _loss(target, _with_contacts(target, 0.0), mask, weights=LossWeights(foot_contact=1.0), fps=30.0)
+    assert terms["foot_contact"].item() == 0.0
+    _, off = _loss(target, target, mask)
+    assert "foot_contact" not in off
+    with pytest.raises(ValueError, match="fps"):
+        _loss(target, target, mask, weights=LossWeights(foot_contact=1.0))
+
+
+def test_foot_contact_gradient_slows_the_planted_feet() -> None:
+    target, mask = _batch()
+    target = _with_contacts(target, 1.0)
+    pred = target.clone().requires_grad_(True)
+    w = LossWeights(foot_contact=1.0)
+    _, terms = _loss(pred, target, mask, weights=w, fps=30.0)
+    before = terms["foot_contact"].item()
+    total, _ = _loss(pred, target, mask, weights=w, fps=30.0)
+    total.backward()
+    assert torch.isfinite(pred.grad).all()
+    stepped = (pred - 0.01 * pred.grad).detach()
+    _, after = _loss(stepped, target, mask, weights=w, fps=30.0)
+    assert after["foot_contact"].item() < before

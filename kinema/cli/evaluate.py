@@ -14,6 +14,8 @@ def register(sub) -> None:
     p.add_argument("--data", type=Path, default=Path("cache/bandai20"), help="dataset build (default cache/bandai20)")
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="clips to draw cases from")
     p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
+    p.add_argument("--timeline-cases", type=int, default=8,
+                   help="multi-prompt timeline cases added when building a suite (default 8; 0 = none)")
     p.add_argument("--seed", type=seed, default=0, help="suite and generation seed")
     p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting)")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
@@ -36,15 +38,17 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
+    from kinema.data.dataset import MotionDataset
     from kinema.errors import KinemaError
-    from kinema.evaluate.report import format_table, write_report
+    from kinema.evaluate.report import format_table, format_timeline_table, write_report
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
+    from kinema.evaluate.timeline import build_timeline_cases
     from kinema.generate.api import load_model, resolve_model_path
 
     t0 = time.perf_counter()
-    if args.cases < 1:
-        raise KinemaError("--cases must be at least 1")
+    if args.cases < 1 or args.timeline_cases < 0:
+        raise KinemaError("--cases must be at least 1 and --timeline-cases at least 0")
     if args.steps is not None and args.steps < 1:
         raise KinemaError("--steps must be at least 1")
     if args.filmstrips < 0 or args.mm[0] < 0:
@@ -60,6 +64,12 @@ def run(args: argparse.Namespace) -> int:
         if not args.data.is_dir():
             raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
         cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed)
+        if args.timeline_cases:
+            try:
+                cases += build_timeline_cases(MotionDataset(args.data, args.split), args.data.resolve(), args.split,
+                                              args.timeline_cases, args.seed, first_id=len(cases))
+            except ValueError as err:
+                raise KinemaError(str(err)) from None
         if args.suite is not None:
             save_suite(cases, args.suite)
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
@@ -75,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
     data = write_report(results, out, filmstrips=args.filmstrips)
     print()
     print(format_table(data))
+    if data.get("timeline"):
+        print()
+        print(format_timeline_table(data))
     for w in data["warnings"]:
         print(f"warning: {w}")
     print(f"wrote {out / 'report.md'}, {out / 'report.json'}, {out / 'suite.json'} and {out / 'plots'}/")

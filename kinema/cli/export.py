@@ -22,19 +22,38 @@ def register(sub) -> None:
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="default separated guidance weights saved with the model (finite, >= 0)")
     p.add_argument("--steps", type=positive_int, help="default DDIM steps saved with the model")
+    p.add_argument("--known-prompts", type=Path, metavar="DATA",
+                   help="dataset build whose train captions the model learned: their embeddings are saved as "
+                        "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from kinema.diffusion.guidance import Guidance
+    from kinema.errors import KinemaError
     from kinema.model.export import export_model
     from kinema.model.loading import load_denoiser
 
+    if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
+        raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps)
     loaded = load_denoiser(out)  # prove the folder loads before reporting success
+    if args.known_prompts is not None:
+        _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
           f"{loaded.sampler.num_inference_steps} DDIM steps)")
     return 0
+
+
+def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
+    """Embed the train captions of ``data`` with the model's text encoder into ``out``."""
+    from kinema.data.dataset import MotionDataset
+    from kinema.model.vocabulary import KnownPrompts
+    from kinema.text import get_text_encoder
+
+    captions = [c for rec in MotionDataset(data, "train").clips for c in rec["captions"]]
+    known = KnownPrompts.build(captions, get_text_encoder(encoder_id, cache_dir=Path("cache/text")))
+    print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")

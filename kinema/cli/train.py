@@ -24,6 +24,9 @@ def register(sub) -> None:
     p.add_argument("--content-balance", type=float,
                    help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
                         "square-root balancing of rare contents")
+    p.add_argument("--foot-contact", type=float,
+                   help="weight of the foot-contact consistency loss (velocity of joints the data says are "
+                        "planted -> 0; default 0 = off); docs/training.md")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -75,6 +78,7 @@ def _config_from_args(args: argparse.Namespace):
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
+        "foot_contact": args.foot_contact,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

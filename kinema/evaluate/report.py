@@ -54,6 +54,23 @@ def format_table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def format_timeline_table(data: dict) -> str:
+    """The timeline table (markdown; kinema.evaluate.timeline), or "" when the suite has no timeline case."""
+    tl = data.get("timeline")
+    if not tl:
+        return ""
+    lines = ["| Method | Cases | Segments | R@1 (%) | R@3 (%) | Skate (cm/s) | Speed join / inside (m/s) | "
+             "Acc join / inside (m/s^2) | Acc peak join / inside p99 (m/s^2) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for row, v in tl.items():
+        lines.append(
+            f"| {ROW_LABELS.get(row, row)} | {v['cases']} | {v['segments']} | {_fmt(v['r1'], 100, 1)} | "
+            f"{_fmt(v['r3'], 100, 1)} | {_fmt(v['foot_skate_cm_s'])} | {_fmt(v['join_speed'])} / "
+            f"{_fmt(v['inside_speed'])} | {_fmt(v['join_acc'], 1, 1)} / {_fmt(v['inside_acc'], 1, 1)} | "
+            f"{_fmt(v['join_acc_peak'], 1, 0)} / {_fmt(v['inside_acc_p99'], 1, 0)} |")
+    return "\n".join(lines)
+
+
 def _markdown(data: dict) -> str:
     meta, timing, text = data["meta"], data["timing"], data["text"]
     rows = list(data["table"])
@@ -93,6 +110,12 @@ def _markdown(data: dict) -> str:
                          for k in ("foot_skate_cm_s", "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
                                    "root2d_pos_cm", "pelvis_p95_cm")]
                 out.append(f"| {kind} | {ROW_LABELS.get(row, row)} | {v['cases']} | " + " | ".join(cells) + " |")
+    if data.get("timeline"):
+        n = next(iter(data["timeline"].values()))["segments"]
+        out += ["", "## Timelines", "", format_timeline_table(data), "",
+                "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
+                f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
+                "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md)."]
     out += ["", "## Timing", "",
             f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
             f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "

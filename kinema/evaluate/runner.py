@@ -23,6 +23,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.evaluate import metrics as M
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
+from kinema.evaluate.timeline import run_timeline_case, timeline_summary
 from kinema.motion.core import Motion
 from kinema.representation.kimodo import motion_to_features
 
@@ -218,6 +219,8 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     records, motions, devs = [], {}, {r: [] for r in rows}
     gen_seconds = post_seconds = 0.0
     text_ids: list[int] = []
+    timelines: list[dict] = []
+    tl_segments: dict[str, list[Motion]] = {r: [] for r in rows}
     ret = _load_retrieval(retrieval, warn)
     n_mm = min(mm_prompts, sum(c["kind"] == "text" for c in cases)) if ret is not None and mm_samples > 1 else 0
     bar = _bar(len(cases) + n_mm, progress, "evaluate")
@@ -232,6 +235,17 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             from kinema.data.dataset import MotionDataset
 
             datasets[key] = MotionDataset(src["data"], src["split"])
+        if case["kind"] == "timeline":
+            t0 = time.perf_counter()
+            rec, motions[case["id"]], segs = run_timeline_case(model, case, modes, seed * 100003 + i, steps,
+                                                               guidance, datasets[key], _post)
+            gen_seconds += time.perf_counter() - t0
+            records.append(rec)
+            timelines.append(case)
+            for row, ms in segs.items():
+                tl_segments[row] += ms
+            bar.update(1)
+            continue
         gt = case_ground_truth(case, datasets[key])
         targets = case_targets(case, model.skeleton)
         t0 = time.perf_counter()
@@ -288,6 +302,10 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
                           seed, warn, text_cache, train_emb)
         for r in rows:
             summary[r].update(tm[r])
+    if timelines:
+        captions = [s["prompt"] for c in timelines for s in c["segments"]]
+        tl_records = [r for r in records if r["kind"] == "timeline"]
+        tl_table = timeline_summary(tl_records, captions, tl_segments, ret, text_cache, _embed)
     wall = time.perf_counter() - t_start
     data = {
         "format": "kinema-eval-report", "version": 1,
@@ -306,6 +324,7 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         "text": text_info,
         "by_kind": _by_kind(records, rows),
         "by_keyframes": _by_keyframes(records, rows),
+        "timeline": tl_table if timelines else None,
         "cases": records,
         "warnings": warn,
     }

@@ -40,7 +40,7 @@ from kinema.representation.transform import canonicalize_start, translate_featur
 
 SUITE_FORMAT, SUITE_VERSION = "kinema-eval-suite", 1
 CONSTRAINED_KINDS = ("fullbody_sparse", "inbetween", "end_effector", "waypoints", "path", "mixed")
-CASE_KINDS = ("text", *CONSTRAINED_KINDS)
+CASE_KINDS = ("text", *CONSTRAINED_KINDS, "timeline")  # timeline cases: kinema.evaluate.timeline
 MIN_SECONDS, MAX_SECONDS = 3.0, 9.0
 MAX_KEYFRAMES = 10  # sparse keyframes per constraint: 1..10, biased towards few (weights 1/K)
 INBETWEEN_BLOCK = (1, 5)  # frames per in-between block

@@ -21,15 +21,13 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
-from kinema.generate.segments import SegmentPlan, plan_segments, stack_targets
+from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
 from kinema.model.loading import LoadedModel, load_denoiser
+from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
 from kinema.representation.flat import FlatRepresentation
 from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
-
-#: seconds of overlap between consecutive timeline segments (constrained, then cross-faded)
-OVERLAP_SECONDS = 0.5
 
 #: prompt embeddings kept in memory by a loaded model (thread-safe LRU, kinema.text.MemoryCachedEncoder)
 TEXT_MEMORY_ENTRIES = 1024
@@ -42,7 +40,9 @@ class GenerationReport:
     ``residuals`` holds one post-processing report per sample (empty dicts without post-processing):
     ``{"smooth", "foot_lock", "exact": {"before", "after", ...}, "plausibility", "warnings"}``.
     ``warnings`` are the things a user must hear about (a stage undone by the guard, an unreachable
-    target); the CLI prints them on stderr.
+    target, a prompt far from every training caption); the CLI prints them on stderr.
+    ``prompts`` holds, per distinct prompt, its nearest training captions and their cosine similarity
+    (kinema.model.vocabulary; empty when the model folder has no ``known_prompts.safetensors``).
     """
 
     seconds: float = 0.0
@@ -53,6 +53,7 @@ class GenerationReport:
     seed: int = 0
     residuals: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    prompts: list[dict] = field(default_factory=list)
 
 
 class GenerationResult(Sequence):
@@ -86,9 +87,10 @@ class KinemaModel:
     (kinema.generate.keyjoints). Set them to False / 0 / 0 for the paper's imputation alone.
     """
 
-    def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder):
+    def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder, known_prompts: KnownPrompts | None = None):
         self.loaded = loaded
         self.text_encoder = text_encoder
+        self.known_prompts = known_prompts
         self.root_displacement = True
         self.root_smoothing = ROOT_SMOOTHING_SECONDS
         self.joint_sigma = JOINT_SIGMA_SECONDS
@@ -158,6 +160,7 @@ class KinemaModel:
         t0 = time.perf_counter()
         samples, steps, seed = self._check_counts(samples, steps, seed)
         segments = self._segments(prompt_or_timeline, seconds)
+        matches = self.match_prompts([s.prompt for s in segments])
         guide = self._guidance(guidance)
         plan = plan_segments(self.representation, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
@@ -166,10 +169,12 @@ class KinemaModel:
             motion, report = plan.postprocess(motion) if postprocess else (motion, {})
             motions.append(motion)
             residuals.append(report)
-        warnings = [w for r in residuals for w in r.get("warnings", [])]
+        warnings = [m.warning() for m in matches if not m.known]
+        warnings += [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
             seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
+            prompts=[m.to_dict() for m in matches],
         )
         return GenerationResult(motions, report)
 
@@ -216,6 +221,13 @@ class KinemaModel:
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
         return None if not prompt.strip() else self.text_encoder.encode([prompt]).float()
+
+    def match_prompts(self, prompts: list[str]) -> list[PromptMatch]:
+        """Nearest training captions of each distinct non-empty prompt ([] without known prompts)."""
+        if self.known_prompts is None:
+            return []
+        distinct = dict.fromkeys(p for p in prompts if p.strip())
+        return [self.known_prompts.match(p, self.encode_text(p)[0]) for p in distinct]
 
     def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
         """One motion (all segments, cross-faded) and its post-processing report ({} when off)."""
@@ -275,8 +287,13 @@ def load_model(name_or_path: str | Path = "default", text_cache: Path | None = N
     so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
     behind it that persists between processes (the CLI passes ``cache/text``).
     """
-    loaded = load_denoiser(resolve_model_path(name_or_path))
+    path = resolve_model_path(name_or_path)
+    loaded = load_denoiser(path)
     encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
     if text_memory:
         encoder = MemoryCachedEncoder(encoder, text_memory)
-    return KinemaModel(loaded, encoder)
+    known = KnownPrompts.load(loaded.path)
+    if known is not None and known.encoder_id != loaded.text_encoder_id:
+        raise KinemaError(f"{path}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
+                          f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)")
+    return KinemaModel(loaded, encoder, known)

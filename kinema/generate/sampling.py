@@ -149,13 +149,16 @@ MAX_BATCH_FRAMES = 2400
 class SampleTargets:
     """Per-row conditions of one batch: ``c_dir (B, 2)`` first-frame heading (cos, sin); optional
     unnormalised feature targets ``x_tgt``/``mask (B, T, D)`` and world joint x/z ``world_xz (B, T, J, 2)``
-    where ``world_mask (B, T, J)`` (kinema.representation.encode)."""
+    where ``world_mask (B, T, J)`` (kinema.representation.encode); ``context_mask (B, T, D)``: entries of
+    ``mask`` every guidance branch sees (a timeline's join frames;
+    :meth:`kinema.model.denoiser.Denoiser.forward_guided`)."""
 
     c_dir: torch.Tensor
     x_tgt: torch.Tensor | None = None
     mask: torch.Tensor | None = None
     world_xz: torch.Tensor | None = None
     world_mask: torch.Tensor | None = None
+    context_mask: torch.Tensor | None = None
 
     @property
     def batch_size(self) -> int:
@@ -168,7 +171,8 @@ class SampleTargets:
     def rows(self, lo: int, hi: int) -> SampleTargets:
         """Rows ``[lo, hi)`` of every tensor."""
         return SampleTargets(*(None if v is None else v[lo:hi] for v in
-                               (self.c_dir, self.x_tgt, self.mask, self.world_xz, self.world_mask)))
+                               (self.c_dir, self.x_tgt, self.mask, self.world_xz, self.world_mask,
+                                self.context_mask)))
 
     def pruned(self) -> SampleTargets:
         """Without world targets when none is set, and without a mask that constrains nothing."""
@@ -251,6 +255,7 @@ class _StepCorrections:
         self.batch, T = targets.batch_size, settings.num_frames
         self.c_dir, self.has_world = targets.c_dir, targets.has_world
         self.world_xz, self.world_mask = targets.world_xz, targets.world_mask
+        self.context_mask = targets.context_mask
         self.mask, self.tgt = _working_targets(self.batch, T, rep.dim, targets.x_tgt, targets.mask, self.has_world)
         self.smooth_frames = settings.root_smoothing * rep.fps
         self.pelvis_frames = DEFAULT_ROOT_SIGMA_SECONDS * rep.fps
@@ -270,7 +275,8 @@ class _StepCorrections:
         rep, s, mask = self.rep, self.settings, self.mask
         tgt_n = None if mask is None else rep.normalize(self.tgt) * mask
         x0 = self.denoiser.forward_guided(x_t, t, self.text_emb, self.c_dir, tgt_n, mask, None, self.guidance,
-                                          text_mask=self.text_mask)
+                                          text_mask=self.text_mask,
+                                          context_mask=None if mask is None else self.context_mask)
         rxz = rep.root_xz
         if self.smooth_frames > 0:
             x0 = x0.clone()

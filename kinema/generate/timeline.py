@@ -1,9 +1,10 @@
 """Multi-prompt timelines (Kimodo Sec. 4.4): segments generated in sequence, joined by overlaps.
 
-Each new segment starts with ``overlap`` frames copied from the end of the previous motion and
-constrained as dense full-body keyframes (positions, rotations, root and heading), so the model
-continues the pose with consistent velocities; afterwards the shared frames are cross-faded
-(root lerp, rotation slerp with raised-cosine weights) so the join has no seam.
+Each new segment starts with ``overlap`` frames that re-play the end of the previous motion; the
+first few are given to the model as full-body context (kinema.generate.segments says how many and
+why), so it continues the pose with consistent velocities and then follows its own prompt; afterwards
+the shared frames are cross-faded (root lerp, rotation slerp with raised-cosine weights) so the join
+has no seam.
 """
 
 from __future__ import annotations

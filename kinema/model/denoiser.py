@@ -210,12 +210,20 @@ class Denoiser(nn.Module):
         pad_mask: torch.Tensor | None,
         guidance: Guidance,
         text_mask: torch.Tensor | None = None,
+        context_mask: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Guided x0 ``(B, T, D)``: all branches of ``guidance`` in ONE forward pass of batch ``k * B``.
 
         Branches: "uncond" = no text, no constraints; "text" = text only; "constr" = constraints only;
         "cond" = both.  Shapes as in :meth:`forward`.  Without a mask the separated mode is reduced to
         the equivalent, cheaper regular CFG (``Guidance.without_constraints``).
+
+        ``context_mask (B, T, D)``: entries of ``mask`` that *every* branch sees (their targets in
+        ``x_tgt``), i.e. context the guidance does not extrapolate: a timeline's join frames
+        (kinema.generate.segments). Given to the constraint branch only, as constraints, they are pushed
+        ``w_constr`` times and the previous segment's motion outweighs the new prompt (issue 18). When
+        the mask holds nothing but context, the constraint branch equals the unconditional one and the
+        separated mode is reduced to regular CFG, as without a mask.
         """
         if mask is None:
             guidance = guidance.without_constraints()
@@ -223,6 +231,13 @@ class Denoiser(nn.Module):
             x_tgt = torch.zeros_like(x_t)
         elif x_tgt is None:
             raise ValueError("a constraint mask needs constraint targets x_tgt")
+        if context_mask is None:
+            context = torch.zeros_like(mask)
+        else:
+            context = context_mask.to(mask.dtype)
+            mask = torch.maximum(mask, context)
+            if not bool((mask > context).any()):
+                guidance = guidance.without_constraints()
         names = guidance.branches
         B = x_t.shape[0]
         t = t.expand(B) if t.dim() == 0 else t
@@ -231,7 +246,7 @@ class Denoiser(nn.Module):
         else:
             keep = text_mask.to(torch.bool)
         drop = torch.zeros_like(keep)
-        no_constr = torch.zeros_like(mask)
+        context_only = context
 
         def rep(x: torch.Tensor | None) -> torch.Tensor | None:
             return None if x is None else stack_branches(x, names)
@@ -243,7 +258,7 @@ class Denoiser(nn.Module):
             text_mask=stack_branches({"uncond": drop, "text": keep, "constr": drop, "cond": keep}, names),
             c_dir=rep(c_dir),
             x_tgt=stack_branches(x_tgt, names),
-            mask=stack_branches({"uncond": no_constr, "text": no_constr, "constr": mask, "cond": mask},
+            mask=stack_branches({"uncond": context_only, "text": context_only, "constr": mask, "cond": mask},
                                 names),
             pad_mask=rep(pad_mask),
         )

@@ -71,6 +71,6 @@ def execute(prep: Prepared) -> dict:
     rep = result.report
     report = {"seconds": rep.seconds, "segments": rep.segments, "frames": rep.frames, "steps": rep.steps,
               "guidance": list(rep.guidance), "seed": rep.seed, "residuals": json_safe(rep.residuals),
-              "warnings": [str(w) for w in rep.warnings]}
+              "warnings": [str(w) for w in rep.warnings], "prompts": json_safe(rep.prompts)}
     return {"model": prep.served.name, "rig": prep.served.rig, "format": prep.fmt, "motions": motions,
             "report": report}

@@ -218,6 +218,8 @@ class ReportOut(BaseModel):
     seed: int
     residuals: list[dict[str, Any]]
     warnings: list[str]
+    #: per distinct prompt: its nearest training captions and whether it counts as known (issue 18)
+    prompts: list[dict[str, Any]] = []
 
 
 class GenerateResponse(BaseModel):

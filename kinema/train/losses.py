@@ -20,6 +20,7 @@ import torch
 import torch.nn.functional as F
 
 from kinema.kinematics import positions_from_sixd
+from kinema.motion.contacts import contact_joints
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.skeleton import Skeleton
@@ -51,6 +52,8 @@ class LossWeights:
     fk_beta: float = 1.0  # in fk_unit, i.e. 10 cm
     constraint: float = 10.0  # kinema addition, see motion_loss: reproduce imputed constraints
     constraint_beta: float = 0.05  # in feature standard deviations (about 9 cm of smoothed root)
+    foot_contact: float = 0.0  # kinema addition (MDM's foot loss), see motion_loss; 0 = Eq. 1 only
+    foot_unit: float = 0.1  # metres per second per loss unit of the foot-contact term
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -68,6 +71,33 @@ def _masked_mean(elementwise: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return per_frame.sum() / count
 
 
+def foot_contact_term(
+    pred_m: torch.Tensor, target_m: torch.Tensor, mask: torch.Tensor, layout: FeatureLayout, skeleton: Skeleton,
+    fps: float, weights: LossWeights,
+) -> torch.Tensor:
+    """Foot-contact consistency (MDM's foot loss) on *unnormalised* features ``(B, T, D)``.
+
+    The predicted motion is rebuilt as the sampler's output is (features_to_motion: pelvis at the
+    predicted smoothed root + its ``j_p``, other joints by FK of the predicted global rotations); the
+    velocities (m/s, forward differences) of the four contact joints are pushed towards zero on frames
+    where the *ground-truth* contact flag of that joint is 1 and both frames are valid. Smooth L1 in
+    units of ``weights.foot_unit`` m/s (beta 1 unit), mean over the contact entries of the batch.
+    Why: Eq. 1 never asks the feet the model moves by FK to stay where the contact channels say they
+    are planted, and the raw output slides its planted feet (issue 18).
+    """
+    parts = layout.split(pred_m)
+    root = parts["joint_pos"][..., 0, :] + torch.stack(
+        [parts["root_pos"][..., 0], torch.zeros_like(parts["root_pos"][..., 1]), parts["root_pos"][..., 2]], dim=-1
+    )
+    feet = positions_from_sixd(parts["joint_rot"], root, skeleton)[..., contact_joints(skeleton), :]
+    vel = (feet[:, 1:] - feet[:, :-1]) * fps / weights.foot_unit  # (B, T-1, 4, 3)
+    planted = layout.split(target_m)["contacts"][:, :-1] > 0.5  # (B, T-1, 4)
+    use = planted & (mask[:, 1:] & mask[:, :-1])[..., None]
+    err = F.smooth_l1_loss(vel, torch.zeros_like(vel), reduction="none", beta=1.0).sum(-1)
+    err = torch.where(use, err, torch.zeros_like(err))
+    return err.sum() / use.sum().clamp_min(1)
+
+
 def motion_loss(
     pred: torch.Tensor,
     target: torch.Tensor,
@@ -77,6 +107,7 @@ def motion_loss(
     stats: NormStats,
     weights: LossWeights = LossWeights(),
     constraint_mask: torch.Tensor | None = None,
+    fps: float | None = None,
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Eq. 1: ``(total, {term: unweighted value})`` for normalised ``pred``/``target`` ``(B, T, D)``.
 
@@ -98,6 +129,9 @@ def motion_loss(
     imputed entry like any other and, with beta = 1 std, barely pulls on errors below one standard
     deviation (1.9 m for the smoothed root), so a CPU-sized run left 30 cm between its output and the
     waypoints it was given; this term teaches the model to reproduce what it was told.
+
+    Foot-contact term (not in the paper): with ``weights.foot_contact > 0`` the dict gains
+    ``"foot_contact"`` (:func:`foot_contact_term`), added with that weight; it needs ``fps``.
     """
     if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != layout.dim:
         raise ValueError(
@@ -130,9 +164,15 @@ def motion_loss(
             fk_jp / weights.fk_unit, target_jp / weights.fk_unit, reduction="none", beta=weights.fk_beta
         )
         terms["fk"] = _masked_mean(err, mask)
+        if weights.foot_contact > 0:
+            if fps is None or not fps > 0:
+                raise ValueError(f"the foot-contact term needs the motion's fps, got {fps}")
+            terms["foot_contact"] = foot_contact_term(pred_m, target_m, mask, layout, skeleton, fps, weights)
 
     total = sum(getattr(weights, name) * terms[name] for name in TERMS)
-    logged = {name: terms[name].detach() for name in TERMS}
+    if "foot_contact" in terms:
+        total = total + weights.foot_contact * terms["foot_contact"]
+    logged = {name: term.detach() for name, term in terms.items()}
     if constraint_mask is not None:
         if constraint_mask.shape != pred.shape:
             raise ValueError(f"constraint_mask has shape {tuple(constraint_mask.shape)}, expected {tuple(pred.shape)}")

@@ -70,6 +70,9 @@ class TrainConfig:
     # fine-tuning: start from the weights of this model or checkpoint folder (its EMA copy when present)
     # instead of random ones; the optimiser, step counter and schedule start fresh
     init_from: str = ""
+    # weight of the foot-contact consistency term (kinema.train.losses.foot_contact_term, MDM's foot
+    # loss); 0 trains with Eq. 1 (+ the constraint term) only, as every run before issue 18 did
+    foot_contact: float = 0.0
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -146,7 +149,9 @@ class Trainer:
         self.ema = make_ema(self.model)
         self.optimizer = build_optimizer(cfg.optimizer, self.model.parameters(), cfg.lr, cfg.weight_decay)
         self.schedule = NoiseSchedule()
-        self.weights = LossWeights()
+        if not math.isfinite(cfg.foot_contact) or cfg.foot_contact < 0:
+            raise KinemaError(f"foot_contact must be a finite weight >= 0, got {cfg.foot_contact}")
+        self.weights = LossWeights(foot_contact=cfg.foot_contact)
         self.step = 0
         self.phase1_steps = int(round(cfg.steps * cfg.phase1_fraction))
 
@@ -277,7 +282,7 @@ class Trainer:
         with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.bf16):
             pred = model(*inputs)
         loss, terms = motion_loss(pred.float(), x0, pad_mask, self.layout, self.skeleton, self.stats, self.weights,
-                                  constraint_mask=mask if phase == 2 else None)
+                                  constraint_mask=mask if phase == 2 else None, fps=self.fps)
         lr = lr_at(step, cfg.lr, cfg.warmup, cfg.steps)
         for group in self.optimizer.param_groups:
             group["lr"] = lr

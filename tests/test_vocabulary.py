@@ -1,0 +1,120 @@
+"""Known prompts (kinema/model/vocabulary.py): prompts far from every training caption get a warning."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+import kinema
+from kinema.cli import main
+from kinema.errors import KinemaError
+from kinema.model.vocabulary import FILE_NAME, UNKNOWN_BELOW, KnownPrompts
+from kinema.text import get_text_encoder
+
+CAPTIONS = ["A person walks forward.", "A person bows.", "A person waves their right hand.", "A person bows."]
+
+
+def test_round_trip_and_nearest_captions(tmp_path):
+    enc = get_text_encoder("hash-test-32")
+    known = KnownPrompts.build(CAPTIONS, enc)
+    assert known.captions == sorted(set(CAPTIONS))  # unique, sorted
+    path = known.save(tmp_path)
+    assert path == tmp_path / FILE_NAME
+    back = KnownPrompts.load(tmp_path)
+    assert back.captions == known.captions and back.encoder_id == enc.id
+    torch.testing.assert_close(back.embeddings, known.embeddings, atol=2e-3, rtol=0)  # float16 in the file
+    match = back.match("A person bows.", enc.encode(["A person bows."])[0])
+    assert match.known and match.nearest[0] == ("A person bows.", pytest.approx(1.0, abs=2e-3))
+    assert len(match.nearest) == 3 and match.to_dict()["nearest"][0]["caption"] == "A person bows."
+    far = back.match("x", -back.embeddings[0] - back.embeddings[1] - back.embeddings[2])
+    assert not far.known and far.nearest[0][1] < UNKNOWN_BELOW
+    assert "'x' is far from every caption" in far.warning() and "Nearest known captions" in far.warning()
+    assert KnownPrompts.load(tmp_path / "elsewhere") is None
+
+
+def test_bad_files_and_shapes(tmp_path):
+    (tmp_path / FILE_NAME).write_bytes(b"not a safetensors file")
+    with pytest.raises(KinemaError, match="not a known-prompts file"):
+        KnownPrompts.load(tmp_path)
+    with pytest.raises(KinemaError, match="2 captions"):
+        KnownPrompts(["a", "b"], torch.zeros(3, 4), "x")
+    known = KnownPrompts(["a"], torch.ones(1, 4), "x")
+    with pytest.raises(KinemaError, match="5 dimensions"):
+        known.match("a", torch.ones(5))
+
+
+@pytest.fixture(scope="module")
+def model():
+    return kinema.load_model()
+
+
+@pytest.mark.parametrize("prompt", ["A person sits down on a chair.", "A person jumps up in place."])
+def test_unknown_prompts_warn_with_their_nearest_captions(model, prompt):
+    """Issue 18: no sitting or jumping in the training data; the model used to raise a hand silently."""
+    rep = model.generate(prompt, seconds=1.0, steps=1, postprocess=False).report
+    assert len(rep.warnings) == 1 and rep.warnings[0].startswith(f"prompt {prompt!r} is far from every caption")
+    (entry,) = rep.prompts
+    assert entry["prompt"] == prompt and not entry["known"]
+    assert len(entry["nearest"]) == 3 and entry["nearest"][0]["similarity"] < UNKNOWN_BELOW
+    assert entry["nearest"][0]["caption"] in rep.warnings[0]
+
+
+def test_known_prompts_and_paraphrases_do_not_warn(model):
+    segments = [
+        ("A person walks forward.", 1.0),
+        ("Someone strolls slowly ahead.", 1.0),
+        ("A woman lifts her left arm up high.", 1.0),
+        ("A person walks forward.", 1.0),
+    ]
+    rep = model.generate(segments, steps=1, postprocess=False).report
+    assert rep.warnings == []
+    assert [p["prompt"] for p in rep.prompts] == [s for s, _ in segments[:3]]  # each distinct prompt once
+    assert all(p["known"] for p in rep.prompts) and rep.prompts[0]["nearest"][0]["similarity"] > 0.9
+    assert model.generate("", seconds=1.0, steps=1, postprocess=False).report.prompts == []
+
+
+def test_cli_prints_the_warning_on_stderr(tmp_path, capsys):
+    out = tmp_path / "m.bvh"
+    assert (
+        main(
+            [
+                "generate",
+                "A person sits down on a chair.",
+                "--seconds",
+                "1",
+                "--steps",
+                "1",
+                "--no-postprocess",
+                "--no-progress",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    err = capsys.readouterr().err
+    assert "kinema: warning: prompt 'A person sits down on a chair.' is far from every caption" in err
+    assert out.is_file()
+
+
+def test_export_writes_known_prompts(tiny_checkpoint, tiny_data, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "model"
+    assert main(["export", str(tiny_checkpoint), "--out", str(out), "--known-prompts", str(tiny_data)]) == 0
+    assert (out / FILE_NAME).is_file() and "known captions" in capsys.readouterr().out
+    loaded = kinema.load_model(out)
+    assert loaded.known_prompts is not None and loaded.known_prompts.encoder_id == "hash-test-32"
+    assert (
+        main(
+            [
+                "export",
+                str(tiny_checkpoint),
+                "--out",
+                str(tmp_path / "m2"),
+                "--known-prompts",
+                str(tmp_path / "nothing"),
+            ]
+        )
+        == 2
+    )
+    assert "not a dataset build" in capsys.readouterr().err and not (tmp_path / "m2").exists()
