@@ -107,7 +107,9 @@ def displace_root(
         has = m.any(dim=1)  # (B, 2)
         first = torch.where(m, torch.arange(T).view(1, T, 1), T).amin(dim=1).clamp(max=T - 1)  # (B, 2)
         r0 = torch.where(has, r.gather(1, first[:, None, :])[:, 0], r0)
+    r = r.clone()  # fresh tensors: the in-place edits below must not touch what autograd saved
     r[:, 0] = torch.where(m[:, 0], r[:, 0], r0)
+    m = m.clone()
     m[:, 0] = True
     time = torch.arange(T).view(1, T, 1).expand_as(x)
     prev = torch.where(m, time, -1).cummax(dim=1).values  # last constrained frame <= t
@@ -230,6 +232,14 @@ def sample_features(
                            num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk])
         out.append(rep.denormalize(x))
     return torch.cat(out)
+
+
+def clean_estimate_fn(denoiser: Denoiser, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+                      targets: SampleTargets, settings: SampleSettings):
+    """The clean-estimate function ``(x_t, t) -> x0`` (normalised) that :func:`sample_features` hands to
+    DDIM: guided denoiser plus the corrections of the module docstring. For callers that run their own
+    DDIM loop, e.g. a differentiable one (kinema.objectives.optimize); every operation is differentiable."""
+    return _StepCorrections(denoiser, rep, text_emb, targets.pruned(), settings)
 
 
 def _branch_count(guidance: Guidance, has_text: bool, constrained: bool) -> int:
