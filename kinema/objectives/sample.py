@@ -58,7 +58,7 @@ def sample_with_objectives(model, plan: SegmentPlan, settings: SampleSettings, t
     if opt.snap:
         for b in range(samples):
             P = rep.pose(feats[b])
-            snapped = snap_constraints(bound, P, rep.skeleton)
+            snapped = snap_constraints(bound, P, rep.skeleton, feats[b][:, rep.root_xz])
             if not snapped:
                 continue
             plans[b] = _with_constraints(plan, rep, snapped)

@@ -5,7 +5,9 @@ Noise optimisation with a few iterations brings a joint *near* its goal and, mor
 explicit controls are: as end-effector constraints at those frames, sampled again from the optimised
 noise with imputation, and met exactly by post-processing (IK). This mirrors SFControl's split: the
 objective shapes the keyjoint trajectory, dense keyjoint targets complete the body. Not every
-objective has an explicit form: ``reach`` (its target at the closest frame), ``joint-distance`` with
+objective has an explicit form: ``reach`` (its target at the closest frame, plus a root waypoint moved
+by the ground miss when the joint was more than 15 cm short, so the body walks there instead of
+stretching), ``joint-distance`` with
 ``when="any"`` (the first joint put ``distance`` from the second at the closest frame, where it is
 further) and ``path-time-agnostic`` (every frame of the window on the path at the arc-length fraction
 the motion reached; ground paths keep the motion's own height) do; ``avoid``, ``stay-within`` and
@@ -16,9 +18,13 @@ from __future__ import annotations
 
 import torch
 
-from kinema.constraints.types import EndEffectorConstraint
+from kinema.constraints.types import EndEffectorConstraint, Root2DConstraint
 from kinema.objectives.path import PathTimeAgnostic
 from kinema.objectives.terms import Bound, JointDistance, Reach
+
+
+#: a reach target further than this (metres, on the ground) from where the joint got also moves the root
+REACH_SLACK = 0.15
 
 
 def point_at_fraction(path: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
@@ -35,9 +41,10 @@ def _name(b: Bound, skeleton, k: int = 0) -> str:
     return skeleton.names[b.joints[k]]
 
 
-def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton) -> list[EndEffectorConstraint]:
-    """End-effector constraints that impose the timing ``P``'s objectives reached (module docstring)."""
-    out = []
+def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: torch.Tensor) -> list:
+    """Constraints that impose the timing ``P``'s objectives reached (module docstring); ``root_xz (T, 2)``
+    is the motion's smoothed root."""
+    out: list = []
     for b in bound:
         spec, w = b.spec, P[b.f0 : b.f1 + 1]
         if isinstance(spec, Reach):
@@ -45,6 +52,9 @@ def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton) -> list[EndE
             f = b.f0 + int(d.argmin())
             out.append(EndEffectorConstraint(joint=_name(b, skeleton), frame_indices=[f],
                                              positions=torch.tensor([spec.target], dtype=torch.float32)))
+            miss = torch.tensor([spec.target[0], spec.target[2]]) - P[f, b.joints[0], [0, 2]]
+            if float(miss.norm()) > REACH_SLACK and b.joints[0] != 0:  # walk there: move the root by the miss
+                out.append(Root2DConstraint(frame_indices=[f], positions=(root_xz[f] + miss)[None].float()))
         elif isinstance(spec, JointDistance) and spec.when == "any":
             a, c = w[:, b.joints[0]], w[:, b.joints[1]]
             d = (a - c).norm(dim=-1)
