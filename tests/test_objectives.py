@@ -35,20 +35,23 @@ def _positions(T: int = 40) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------------------- JSON
-@pytest.mark.parametrize("obj, message", [
-    ({"type": "reach", "joint": "Hand_R", "target": [0, 1, 0], "speed": 2}, "objective 0 (reach): field 'speed'"),
-    ({"type": "reach", "joint": "Hand_R"}, "field 'target': missing required field"),
-    ({"type": "reach", "joint": "Hand_R", "target": [0, 1]}, "field 'target': expected a list of 3 numbers"),
-    ({"type": "teleport"}, "unknown objective type \"teleport\""),
-    ({"type": "avoid"}, "give at least one sphere or box"),
-    ({"type": "avoid", "spheres": [{"center": [0, 1, 0], "radius": -1}]}, "radius must be positive"),
-    ({"type": "stay-within"}, "give at least one bound"),
-    ({"type": "path-time-agnostic", "joint": "Hips", "path": [[0, 0]]}, "at least 2 points"),
-    ({"type": "path-time-agnostic", "joint": "Hips", "path": [[0, 0], [1, 2, 3]]}, "all be (x, y, z) or all"),
-    ({"type": "joint-distance", "joints": ["Hand_R"]}, "expected a list of 2 joint names"),
-    ({"type": "hand-to-head", "hand": "middle"}, "field 'hand'"),
-    ({"type": "realism", "window": [2, 1]}, "field 'window'"),
-])
+@pytest.mark.parametrize(
+    "obj, message",
+    [
+        ({"type": "reach", "joint": "Hand_R", "target": [0, 1, 0], "speed": 2}, "objective 0 (reach): field 'speed'"),
+        ({"type": "reach", "joint": "Hand_R"}, "field 'target': missing required field"),
+        ({"type": "reach", "joint": "Hand_R", "target": [0, 1]}, "field 'target': expected a list of 3 numbers"),
+        ({"type": "teleport"}, 'unknown objective type "teleport"'),
+        ({"type": "avoid"}, "give at least one sphere or box"),
+        ({"type": "avoid", "spheres": [{"center": [0, 1, 0], "radius": -1}]}, "radius must be positive"),
+        ({"type": "stay-within"}, "give at least one bound"),
+        ({"type": "path-time-agnostic", "joint": "Hips", "path": [[0, 0]]}, "at least 2 points"),
+        ({"type": "path-time-agnostic", "joint": "Hips", "path": [[0, 0], [1, 2, 3]]}, "all be (x, y, z) or all"),
+        ({"type": "joint-distance", "joints": ["Hand_R"]}, "expected a list of 2 joint names"),
+        ({"type": "hand-to-head", "hand": "middle"}, "field 'hand'"),
+        ({"type": "realism", "window": [2, 1]}, "field 'window'"),
+    ],
+)
 def test_json_errors_are_one_line_and_name_the_field(obj, message) -> None:
     with pytest.raises(ObjectiveError) as err:
         load_objectives([obj])
@@ -107,11 +110,13 @@ def test_avoid_and_stay_within_measure_penetration_and_excursion() -> None:
 def test_losses_have_gradients_that_reduce_them() -> None:
     wiggle = 0.02 * torch.sin(torch.arange(40.0) * 0.7)[None, :, None, None]  # some acceleration to reduce
     P = (_positions() + wiggle).requires_grad_(True)
-    objs = [{"type": "reach", "joint": "Hand_R", "target": [0.5, 1.5, 1.0]},
-            {"type": "stay-within", "min": [0.2, None, None]},
-            {"type": "avoid", "spheres": [{"center": [0, 1.0, 1.0], "radius": 0.3}]},
-            {"type": "path-time-agnostic", "joint": "Hips", "path": [[0.5, 0], [0.5, 2]], "window": [0, 1.95]},
-            {"type": "realism"}]
+    objs = [
+        {"type": "reach", "joint": "Hand_R", "target": [0.5, 1.5, 1.0]},
+        {"type": "stay-within", "min": [0.2, None, None]},
+        {"type": "avoid", "spheres": [{"center": [0, 1.0, 1.0], "radius": 0.3}]},
+        {"type": "path-time-agnostic", "joint": "Hips", "path": [[0.5, 0], [0.5, 2]], "window": [0, 1.95]},
+        {"type": "realism"},
+    ]
     for obj in objs:
         b = _bind(obj)
         loss = b.loss(P).sum()
@@ -132,8 +137,9 @@ def test_time_agnostic_path_ignores_timing_but_not_geometry() -> None:
     T = 40
     u = torch.linspace(0, 1, T) ** 2  # accelerating along the path: no frame is where uniform timing puts it
     path = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]
-    pts = torch.where((u * 2 <= 1)[:, None], torch.stack([u * 2, torch.zeros(T)], -1),
-                      torch.stack([torch.ones(T), u * 2 - 1], -1))
+    pts = torch.where(
+        (u * 2 <= 1)[:, None], torch.stack([u * 2, torch.zeros(T)], -1), torch.stack([torch.ones(T), u * 2 - 1], -1)
+    )
     P = torch.zeros(1, T, 5, 3)
     P[0, :, 0, 0], P[0, :, 0, 2] = pts[:, 0], pts[:, 1]
     obj = {"type": "path-time-agnostic", "joint": "Hips", "path": path, "window": [0, (T - 1) / FPS]}

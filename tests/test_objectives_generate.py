@@ -47,24 +47,43 @@ def test_reach_is_met_and_fails_when_ignored(model) -> None:
 
 
 def test_objective_objects_and_measure_only(model) -> None:
-    res = model.generate(PROMPT, seconds=2.0, steps=2, objectives=[Reach(joint="right_hand", target=(0.0, 1.0, 0.5))],
-                         objective_steps=0, postprocess=False)
+    res = model.generate(
+        PROMPT,
+        seconds=2.0,
+        steps=2,
+        objectives=[Reach(joint="right_hand", target=(0.0, 1.0, 0.5))],
+        objective_steps=0,
+        postprocess=False,
+    )
     o = res.report.objectives["objectives"][0]
     assert o["before"] == o["optimised"]  # 0 iterations: nothing optimised, values only measured
 
 
 def test_timelines_and_bad_joints_are_rejected(model) -> None:
     with pytest.raises(KinemaError, match="single motion"):
-        model.generate([("A person walks.", 6.0), ("A person waves.", 6.0)], steps=2,
-                       objectives=[{"type": "realism"}], objective_steps=1)
+        model.generate(
+            [("A person walks.", 6.0), ("A person waves.", 6.0)],
+            steps=2,
+            objectives=[{"type": "realism"}],
+            objective_steps=1,
+        )
     with pytest.raises(ObjectiveError, match=r"objective 0 \(reach\): field 'joint': unknown joint or role 'Tail'"):
         model.generate(PROMPT, seconds=2.0, objectives=[{"type": "reach", "joint": "Tail", "target": [0, 1, 0]}])
 
 
 def _cli(*args, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "kinema", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=300, env={"OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin",
-                                            "PYTHONPATH": str(__import__("pathlib").Path(kinema.__file__).parents[1])})
+    return subprocess.run(
+        [sys.executable, "-m", "kinema", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+        env={
+            "OMP_NUM_THREADS": "1",
+            "PATH": "/usr/bin:/bin",
+            "PYTHONPATH": str(__import__("pathlib").Path(kinema.__file__).parents[1]),
+        },
+    )
 
 
 def test_cli_rejects_bad_objectives_in_one_line(tmp_path) -> None:
@@ -79,11 +98,31 @@ def test_cli_rejects_bad_objectives_in_one_line(tmp_path) -> None:
 
 def test_cli_generates_with_objectives_and_prints_them(tmp_path) -> None:
     c = tmp_path / "c.json"
-    c.write_text(json.dumps({"constraints": [], "objectives": [
-        {"type": "hand-to-head", "hand": "right", "distance": 0.12, "window": [0.5, 1.9]}]}))
+    c.write_text(
+        json.dumps(
+            {
+                "constraints": [],
+                "objectives": [{"type": "hand-to-head", "hand": "right", "distance": 0.12, "window": [0.5, 1.9]}],
+            }
+        )
+    )
     out = tmp_path / "m.bvh"
-    r = _cli("generate", "A person stands still.", "--seconds", "2", "--steps", "2", "--constraints", str(c),
-             "--objective-steps", "2", "--out", str(out), "--no-progress", cwd=tmp_path)
+    r = _cli(
+        "generate",
+        "A person stands still.",
+        "--seconds",
+        "2",
+        "--steps",
+        "2",
+        "--constraints",
+        str(c),
+        "--objective-steps",
+        "2",
+        "--out",
+        str(out),
+        "--no-progress",
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr
     assert "objectives (2 noise iterations, 2 DDIM steps" in r.stdout
     assert "0: joint-distance" in r.stdout

@@ -18,13 +18,24 @@ def objective_table(report: dict) -> str:
         scale = 1.0 if unit != "cm" else 100.0
         for i, (b, a) in enumerate(zip(o["before"], o["after"], strict=True)):
             final = o.get("final", [None] * len(o["before"]))[i]
-            rows.append((str(i), f"{k}: {o['type']}", f"{b * scale:.2f} {unit}", f"{a * scale:.2f} {unit}",
-                         "-" if final is None else f"{final * scale:.2f} {unit}"))
+            rows.append(
+                (
+                    str(i),
+                    f"{k}: {o['type']}",
+                    f"{b * scale:.2f} {unit}",
+                    f"{a * scale:.2f} {unit}",
+                    "-" if final is None else f"{final * scale:.2f} {unit}",
+                )
+            )
     head = ("sample", "objective", "before", "after (raw)", "final")
     widths = [max(len(r[c]) for r in [head, *rows]) for c in range(len(head))]
-    lines = [f"objectives ({report['iterations']} noise iterations, {report['ddim_steps']} DDIM steps, "
-             f"{report['seconds']:.1f} s):"]
+    lines = [
+        f"objectives ({report['iterations']} noise iterations, {report['ddim_steps']} DDIM steps, "
+        f"{report['seconds']:.1f} s):"
+    ]
     for r in [head, *rows]:
-        lines.append("  " + "  ".join(c.ljust(w) if j < 2 else c.rjust(w) for j, (c, w) in
-                                      enumerate(zip(r, widths, strict=True))))
+        lines.append(
+            "  "
+            + "  ".join(c.ljust(w) if j < 2 else c.rjust(w) for j, (c, w) in enumerate(zip(r, widths, strict=True)))
+        )
     return "\n".join(lines)

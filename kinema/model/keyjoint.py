@@ -51,9 +51,17 @@ class KeyjointConfig:
         return cls(**data)
 
     def stage_config(self) -> ModelConfig:
-        return ModelConfig(num_joints=1, width=self.width, layers=self.layers, heads=self.heads,
-                           ff_mult=self.ff_mult, dropout=self.dropout, num_registers=self.num_registers,
-                           text_dim=self.text_dim, max_frames=self.max_frames)
+        return ModelConfig(
+            num_joints=1,
+            width=self.width,
+            layers=self.layers,
+            heads=self.heads,
+            ff_mult=self.ff_mult,
+            dropout=self.dropout,
+            num_registers=self.num_registers,
+            text_dim=self.text_dim,
+            max_frames=self.max_frames,
+        )
 
 
 class KeyjointDenoiser(nn.Module):
@@ -78,8 +86,16 @@ class KeyjointDenoiser(nn.Module):
     def denormalize(self, k: torch.Tensor) -> torch.Tensor:
         return k * self.std + self.mean
 
-    def forward(self, x_t: torch.Tensor, t: torch.Tensor, text_emb: torch.Tensor, c_dir: torch.Tensor,
-                x_tgt: torch.Tensor, mask: torch.Tensor, pad_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self,
+        x_t: torch.Tensor,
+        t: torch.Tensor,
+        text_emb: torch.Tensor,
+        c_dir: torch.Tensor,
+        x_tgt: torch.Tensor,
+        mask: torch.Tensor,
+        pad_mask: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         x = mask * x_tgt + (1.0 - mask) * x_t
         return self.stage(torch.cat([x, mask], dim=-1), t, text_emb, c_dir, pad_mask)
 

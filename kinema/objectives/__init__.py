@@ -7,6 +7,17 @@ from kinema.objectives.path import PathTimeAgnostic
 from kinema.objectives.terms import Avoid, JointDistance, Objective, Reach, Realism, StayWithin
 
 __all__ = [
-    "Avoid", "JointDistance", "NoiseOptSettings", "Objective", "ObjectiveError", "PathTimeAgnostic", "Reach",
-    "Realism", "StayWithin", "bind_objectives", "load_objectives", "optimise_noise", "parse_objective",
+    "Avoid",
+    "JointDistance",
+    "NoiseOptSettings",
+    "Objective",
+    "ObjectiveError",
+    "PathTimeAgnostic",
+    "Reach",
+    "Realism",
+    "StayWithin",
+    "bind_objectives",
+    "load_objectives",
+    "optimise_noise",
+    "parse_objective",
 ]

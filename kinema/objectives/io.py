@@ -33,15 +33,29 @@ KEYS = {
     "path-time-agnostic": ("joint", "path", "scale_weight"),
     "realism": (),
 }
-REQUIRED = {"reach": ("joint", "target"), "joint-distance": ("joints",), "path-time-agnostic": ("joint", "path"),
-            "avoid": (), "stay-within": (), "hand-to-head": (), "realism": ()}
+REQUIRED = {
+    "reach": ("joint", "target"),
+    "joint-distance": ("joints",),
+    "path-time-agnostic": ("joint", "path"),
+    "avoid": (),
+    "stay-within": (),
+    "hand-to-head": (),
+    "realism": (),
+}
 
 
 class ObjectiveError(KinemaError):
     """A malformed objective: ``[source: ][objective i (type): ][field 'f': ]reason``."""
 
-    def __init__(self, reason: str, *, field: str | None = None, index: int | None = None,
-                 kind: str | None = None, source: str | None = None):
+    def __init__(
+        self,
+        reason: str,
+        *,
+        field: str | None = None,
+        index: int | None = None,
+        kind: str | None = None,
+        source: str | None = None,
+    ):
         self.reason, self.field, self.index, self.kind, self.source = reason, field, index, kind, source
         parts = [] if source is None else [str(source)]
         if index is not None:
@@ -86,16 +100,14 @@ def _shapes(obj: dict):
     out_s, out_b = [], []
     for s in spheres:
         if not isinstance(s, dict) or set(s) != {"center", "radius"}:
-            raise ObjectiveError(f"expected {{\"center\": [x, y, z], \"radius\": r}}, got {json.dumps(s)}",
-                                 field="spheres")
+            raise ObjectiveError(f'expected {{"center": [x, y, z], "radius": r}}, got {json.dumps(s)}', field="spheres")
         r = _num(s["radius"], "spheres")
         if r <= 0:
             raise ObjectiveError(f"radius must be positive, got {r:g}", field="spheres")
         out_s.append((_vec(s["center"], "spheres"), r))
     for b in boxes:
         if not isinstance(b, dict) or set(b) != {"min", "max"}:
-            raise ObjectiveError(f"expected {{\"min\": [x, y, z], \"max\": [x, y, z]}}, got {json.dumps(b)}",
-                                 field="boxes")
+            raise ObjectiveError(f'expected {{"min": [x, y, z], "max": [x, y, z]}}, got {json.dumps(b)}', field="boxes")
         out_b.append((_vec(b["min"], "boxes"), _vec(b["max"], "boxes")))
     if not out_s and not out_b:
         raise ObjectiveError("give at least one sphere or box", field="spheres")
@@ -105,7 +117,7 @@ def _shapes(obj: dict):
 def _when(obj) -> str:
     when = obj.get("when", "any")
     if when not in ("any", "all"):
-        raise ObjectiveError(f"expected \"any\" or \"all\", got {json.dumps(when)}", field="when")
+        raise ObjectiveError(f'expected "any" or "all", got {json.dumps(when)}', field="when")
     return when
 
 
@@ -116,7 +128,7 @@ def _build(kind: str, obj: dict, common: dict) -> Objective:
         if kind == "hand-to-head":
             hand = obj.get("hand", "right")
             if hand not in ("left", "right"):
-                raise ObjectiveError(f"expected \"left\" or \"right\", got {json.dumps(hand)}", field="hand")
+                raise ObjectiveError(f'expected "left" or "right", got {json.dumps(hand)}', field="hand")
             joints = (f"{hand}_hand", "head")
         else:
             joints = _names(obj["joints"], "joints", count=2)
@@ -152,8 +164,7 @@ def parse_objective(obj) -> Objective:
         raise ObjectiveError(f"expected an object, got {json.dumps(obj)[:80]}")
     kind = obj.get("type")
     if kind not in KEYS:
-        raise ObjectiveError(f"unknown objective type {json.dumps(kind)}; expected one of {sorted(KEYS)}",
-                             field="type")
+        raise ObjectiveError(f"unknown objective type {json.dumps(kind)}; expected one of {sorted(KEYS)}", field="type")
     allowed = set(COMMON) | set(KEYS[kind])
     for key in obj:
         if key not in allowed and key != "comment" and not key.startswith("_"):
@@ -186,8 +197,9 @@ def load_objectives(path_or_obj) -> list[Objective]:
     else:
         items = path_or_obj
     if not isinstance(items, list):
-        raise ObjectiveError(f"expected a list of objective objects, got {type(items).__name__}",
-                             field="objectives", source=source)
+        raise ObjectiveError(
+            f"expected a list of objective objects, got {type(items).__name__}", field="objectives", source=source
+        )
     out = []
     for i, obj in enumerate(items):
         kind = obj.get("type") if isinstance(obj, dict) else getattr(obj, "kind", None)

@@ -69,10 +69,19 @@ def errors(bound: list[Bound], P: torch.Tensor) -> list[list[float]]:
         return [[float(v) for v in b.error(P)] for b in bound]
 
 
-def optimise_noise(denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresentation, text_emb, targets: SampleTargets,
-                   settings: SampleSettings, bound: list[Bound], opt: NoiseOptSettings, *,
-                   generator: torch.Generator | None = None,
-                   progress: bool = False) -> tuple[torch.Tensor, torch.Tensor, dict]:
+def optimise_noise(
+    denoiser: Denoiser,
+    sampler: DDIMSampler,
+    rep: FlatRepresentation,
+    text_emb,
+    targets: SampleTargets,
+    settings: SampleSettings,
+    bound: list[Bound],
+    opt: NoiseOptSettings,
+    *,
+    generator: torch.Generator | None = None,
+    progress: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Optimised unnormalised features ``(B, T, D)``, the noise that gave them and a report
     ``{"iterations", "ddim_steps", "seconds", "loss": {"before", "after"}, "objectives": [{"type", "before",
     "after"}]}`` (per-sample lists)."""
@@ -110,9 +119,12 @@ def optimise_noise(denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresenta
             z.mul_(radius / z.flatten(1).norm(dim=1).clamp_min(1e-6)[:, None, None])
     after = errors(bound, rep.pose(best))
     report = {
-        "iterations": opt.iterations, "ddim_steps": steps, "seconds": round(time.perf_counter() - t0, 3),
+        "iterations": opt.iterations,
+        "ddim_steps": steps,
+        "seconds": round(time.perf_counter() - t0, 3),
         "loss": {"before": [float(v) for v in first_loss], "after": [float(v) for v in best_loss]},
-        "objectives": [{"type": b.spec.kind, "before": bf, "after": af}
-                       for b, bf, af in zip(bound, before, after, strict=True)],
+        "objectives": [
+            {"type": b.spec.kind, "before": bf, "after": af} for b, bf, af in zip(bound, before, after, strict=True)
+        ],
     }
     return best, best_z, report

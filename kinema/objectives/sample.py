@@ -34,26 +34,39 @@ def collect_objectives(constraints, objectives, skeleton, fps: float, num_frames
         from_file = load_objectives(constraints)
         source = str(constraints) if isinstance(constraints, str | os.PathLike) else None
     try:
-        return bind_objectives(from_file, skeleton, fps, num_frames) + \
-            bind_objectives(load_objectives(objectives), skeleton, fps, num_frames)
+        return bind_objectives(from_file, skeleton, fps, num_frames) + bind_objectives(
+            load_objectives(objectives), skeleton, fps, num_frames
+        )
     except ObjectiveError as err:
         raise ObjectiveError(err.reason, field=err.field, index=err.index, kind=err.kind, source=source) from None
 
 
-def sample_with_objectives(model, plan: SegmentPlan, settings: SampleSettings, text: torch.Tensor | None,
-                           g: torch.Generator, heading: float, samples: int, bound: list[Bound],
-                           opt: NoiseOptSettings, progress: bool) -> tuple[list[Motion], list[SegmentPlan], dict]:
+def sample_with_objectives(
+    model,
+    plan: SegmentPlan,
+    settings: SampleSettings,
+    text: torch.Tensor | None,
+    g: torch.Generator,
+    heading: float,
+    samples: int,
+    bound: list[Bound],
+    opt: NoiseOptSettings,
+    progress: bool,
+) -> tuple[list[Motion], list[SegmentPlan], dict]:
     """``samples`` raw motions meeting ``bound``, the plan that post-processes each (the call's plan plus
     its snapped targets) and the optimisation report (see optimise_noise; ``"optimised"`` holds the
     values before snapping, ``"after"`` those of the returned raw motions)."""
     if len(plan.segments) != 1:
-        raise KinemaError(f"objectives need a single motion of at most {model.max_seconds:g} s; "
-                          f"this call has {len(plan.segments)} segments")
+        raise KinemaError(
+            f"objectives need a single motion of at most {model.max_seconds:g} s; "
+            f"this call has {len(plan.segments)} segments"
+        )
     targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
     rep, L = model.representation, model.loaded
     text = None if text is None else text.expand(samples, -1)
-    feats, z, report = optimise_noise(L.denoiser, L.sampler, rep, text, targets, settings, bound, opt,
-                                      generator=g, progress=progress)
+    feats, z, report = optimise_noise(
+        L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=g, progress=progress
+    )
     plans = [plan] * samples
     if opt.snap:
         for b in range(samples):
@@ -63,11 +76,19 @@ def sample_with_objectives(model, plan: SegmentPlan, settings: SampleSettings, t
                 continue
             plans[b] = _with_constraints(plan, rep, snapped)
             tg, _ = stack_targets([plans[b].segment_targets(0, None, heading)])
-            feats[b] = sample_features(L.denoiser, L.sampler, rep, None if text is None else text[b : b + 1], tg,
-                                       settings, init_noise=z[b : b + 1])[0]
+            feats[b] = sample_features(
+                L.denoiser,
+                L.sampler,
+                rep,
+                None if text is None else text[b : b + 1],
+                tg,
+                settings,
+                init_noise=z[b : b + 1],
+            )[0]
         after = errors(bound, rep.pose(feats))
-        report["objectives"] = [dict(o, optimised=o["after"], after=a)
-                                for o, a in zip(report["objectives"], after, strict=True)]
+        report["objectives"] = [
+            dict(o, optimised=o["after"], after=a) for o, a in zip(report["objectives"], after, strict=True)
+        ]
         n = len(plan.constraints)
         report["snapped"] = [sum(len(c.frames(rep.fps, plan.total_frames)) for c in p.constraints[n:]) for p in plans]
     rep.shift_root_xz(feats, shift[:, None])

@@ -22,7 +22,6 @@ from kinema.constraints.types import EndEffectorConstraint, Root2DConstraint
 from kinema.objectives.path import PathTimeAgnostic
 from kinema.objectives.terms import Bound, JointDistance, Reach
 
-
 #: a reach target further than this (metres, on the ground) from where the joint got also moves the root
 REACH_SLACK = 0.15
 
@@ -50,8 +49,13 @@ def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: tor
         if isinstance(spec, Reach):
             d = (w[:, b.joints[0]] - w.new_tensor(spec.target)).norm(dim=-1)
             f = b.f0 + int(d.argmin())
-            out.append(EndEffectorConstraint(joint=_name(b, skeleton), frame_indices=[f],
-                                             positions=torch.tensor([spec.target], dtype=torch.float32)))
+            out.append(
+                EndEffectorConstraint(
+                    joint=_name(b, skeleton),
+                    frame_indices=[f],
+                    positions=torch.tensor([spec.target], dtype=torch.float32),
+                )
+            )
             miss = torch.tensor([spec.target[0], spec.target[2]]) - P[f, b.joints[0], [0, 2]]
             if float(miss.norm()) > REACH_SLACK and b.joints[0] != 0:  # walk there: move the root by the miss
                 out.append(Root2DConstraint(frame_indices=[f], positions=(root_xz[f] + miss)[None].float()))
@@ -61,8 +65,11 @@ def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: tor
             k = int(d.argmin())
             if float(d[k]) > spec.distance:
                 goal = c[k] + (a[k] - c[k]) / d[k].clamp_min(1e-6) * spec.distance
-                out.append(EndEffectorConstraint(joint=_name(b, skeleton), frame_indices=[b.f0 + k],
-                                                 positions=goal[None].float()))
+                out.append(
+                    EndEffectorConstraint(
+                        joint=_name(b, skeleton), frame_indices=[b.f0 + k], positions=goal[None].float()
+                    )
+                )
         elif isinstance(spec, PathTimeAgnostic):
             c = w[:, b.joints[0]]
             xy = c[:, [0, 2]] if spec.ground else c
@@ -71,6 +78,9 @@ def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: tor
             u = s / s[-1].clamp_min(1e-9) if float(s[-1]) > 1e-6 else torch.linspace(0, 1, len(s))
             pts = point_at_fraction(torch.tensor(spec.path, dtype=torch.float32), u)
             pos = torch.stack([pts[:, 0], c[:, 1], pts[:, 1]], -1) if spec.ground else pts
-            out.append(EndEffectorConstraint(joint=_name(b, skeleton), frame_indices=list(range(b.f0, b.f1 + 1)),
-                                             positions=pos.float()))
+            out.append(
+                EndEffectorConstraint(
+                    joint=_name(b, skeleton), frame_indices=list(range(b.f0, b.f1 + 1)), positions=pos.float()
+                )
+            )
     return out

@@ -35,8 +35,10 @@ def _frames(window: tuple[float, float] | None, fps: float, T: int) -> tuple[int
     t0, t1 = window
     f0, f1 = int(math.floor(t0 * fps + 0.5)), int(math.floor(t1 * fps + 0.5))
     if not (0 <= f0 <= f1 <= T - 1):
-        raise ConstraintError(f"window [{t0:g}, {t1:g}] s must satisfy 0 <= t0 <= t1 <= {(T - 1) / fps:g} s "
-                              f"(the motion's last frame)", field="window")
+        raise ConstraintError(
+            f"window [{t0:g}, {t1:g}] s must satisfy 0 <= t0 <= t1 <= {(T - 1) / fps:g} s (the motion's last frame)",
+            field="window",
+        )
     return f0, f1
 
 

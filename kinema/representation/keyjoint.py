@@ -68,8 +68,9 @@ def canonicalize_keyjoints(k: torch.Tensor, root_xz0: torch.Tensor, angle: torch
     return rotate_keyjoints(torch.cat([p.flatten(-2), out[..., HEADING]], dim=-1), angle - torch.atan2(hs, hc))
 
 
-def completion_targets(k: torch.Tensor, rep: FlatRepresentation, idx: list[int],
-                       mask_frames: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def completion_targets(
+    k: torch.Tensor, rep: FlatRepresentation, idx: list[int], mask_frames: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Dense body-model targets ``(x_tgt, mask) (B, T, D)`` (unnormalised) from keyjoints ``(B, T, 20)``.
 
     The smoothed root x/z is the pelvis under the representation's 0.5-s Gaussian (its definition);
@@ -130,7 +131,7 @@ def sparse_mask(T: int, g: torch.Generator) -> torch.Tensor:
         joints[:] = True
         a = int(torch.randint(T, (), generator=g))
         b = a + 1 + int(torch.randint(max(1, T // 2), (), generator=g))
-        frames[a:min(b, T)] = True
+        frames[a : min(b, T)] = True
     m = (frames[:, None] & joints[None, :]).float()  # (T, 6)
     m = m[..., None].expand(T, NUM_KEYJOINTS, 3).reshape(T, 3 * NUM_KEYJOINTS)
     return torch.cat([m, m[:, :1].expand(T, 2)], dim=-1)

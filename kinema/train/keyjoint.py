@@ -53,8 +53,9 @@ class KeyjointData:
         self.root = ds.features[:, rep.root_xz].clone()
         captions = sorted({c for r in ds.clips for c in r["captions"]})
         where = {c: i for i, c in enumerate(captions)}
-        self.clips = [(r["start"], r["length"], [where[c] for c in r["captions"]])
-                      for r in ds.clips if r["length"] >= MIN_FRAMES]
+        self.clips = [
+            (r["start"], r["length"], [where[c] for c in r["captions"]]) for r in ds.clips if r["length"] >= MIN_FRAMES
+        ]
         encoder = get_text_encoder("minilm-l6-v2", cache_dir=cache_dir)
         self.text_id = encoder.id
         self.text = encoder.encode(captions).float() if captions else torch.zeros(0, 384)
@@ -176,9 +177,16 @@ def run(args: argparse.Namespace) -> Path:
             save_state(out, model, ema, opt, step, seconds + time.perf_counter() - t0, log)
     seconds += time.perf_counter() - t0
     save_state(out, model, ema, opt, step, seconds, log)
-    info = {"steps": step, "train_seconds": round(seconds, 1), "data": str(args.data), "batch": args.batch,
-            "lr": args.lr, "fps": data.fps, "text_encoder": data.text_id,
-            "licence": "trained on Bandai Namco motion data (CC BY-NC 4.0): non-commercial use only"}
+    info = {
+        "steps": step,
+        "train_seconds": round(seconds, 1),
+        "data": str(args.data),
+        "batch": args.batch,
+        "lr": args.lr,
+        "fps": data.fps,
+        "text_encoder": data.text_id,
+        "licence": "trained on Bandai Namco motion data (CC BY-NC 4.0): non-commercial use only",
+    }
     save_keyjoint_model(ema, out / "export", info)
     print(f"done: {step} steps, {seconds / 60:.1f} min; exported {out / 'export'}", flush=True)
     return out / "export"
