@@ -132,3 +132,22 @@ def test_cli_generates_with_objectives_and_prints_them(tmp_path) -> None:
     # standing still, the hand hangs 0.6-0.7 m from the head; the snapped target is where the optimised
     # motion's head was, and the resampled head moves a few cm, so the final distance is near, not at, 0.12 m
     assert float(d) < 0.2
+
+
+def test_goal_reach_starts_from_the_given_pose_and_ends_on_the_goal(model) -> None:
+    from kinema.objectives.goal import goal_reach, start_pose
+
+    prev = model.generate(PROMPT, seconds=2.0, steps=3)[0]
+    pelvis = prev.positions[-1, 0]
+    goal = [float(pelvis[0]) + 0.3, 1.1, float(pelvis[2]) + 1.2]  # ahead, within a step or two
+    res = model.generate("A person walks forward and reaches out.", seconds=2.5, steps=3,
+                         constraints=[start_pose(prev)],
+                         objectives=[goal_reach("Hand_R", goal, seconds=2.5, fps=model.fps, hold=0.5)],
+                         objective_steps=4)
+    m = res[0]
+    start = (m.positions[0] - prev.positions[-1]).norm(dim=-1).mean()
+    assert float(start) < 0.05  # distance to start: the previous motion's last pose
+    assert _reach_error(m, "Hand_R", goal, 39, 49) < 0.02  # distance to goal, in the last 0.5 s
+    plain = model.generate("A person walks forward and reaches out.", seconds=2.5, steps=3,
+                           constraints=[start_pose(prev)])
+    assert _reach_error(plain[0], "Hand_R", goal, 39, 49) > 0.1  # without the goal it is not met
