@@ -294,7 +294,7 @@ class _StepCorrections:
             x0 = x0.clone()
             x0[..., jp] = x0[..., jp] + disp.flatten(-2) / rep.std[jp]
         if self.has_world:
-            _refresh_world(rep, x0, self.world_xz, self.world_mask, self.tgt, mask)
+            self.tgt, self.mask = _refresh_world(rep, x0, self.world_xz, self.world_mask, self.tgt, mask)
         return x0
 
 
@@ -312,9 +312,13 @@ def _working_targets(B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: t
     return mask.float().clone(), torch.nan_to_num(x_tgt.float()).clone()
 
 
-def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor,
-                   world_mask: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor) -> None:
-    """Re-target world-frame joints against the current root estimate: ``tgt``/``mask`` in place (unnormalised)."""
+def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor, world_mask: torch.Tensor,
+                   tgt: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Re-target world-frame joints against the current root estimate: new ``(tgt, mask)`` (unnormalised).
+
+    New tensors rather than in-place edits, so a differentiable chain (kinema.objectives) can reuse the
+    previous step's targets in its backward pass."""
+    tgt, mask = tgt.clone(), mask.clone()
     ix, iz = rep.joint_pos_axis(0), rep.joint_pos_axis(2)
     root = rep.denormalize(x0_norm)[..., rep.root_xz]  # (B, T, 2)
     rel = world_xz - root[:, :, None, :]  # (B, T, J, 2)
@@ -323,3 +327,4 @@ def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: tor
     tgt[..., iz] = torch.where(m > 0, rel[..., 1], tgt[..., iz])
     mask[..., ix] = torch.maximum(mask[..., ix], m)
     mask[..., iz] = torch.maximum(mask[..., iz], m)
+    return tgt, mask

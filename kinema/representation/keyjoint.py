@@ -112,7 +112,8 @@ def _frames(T: int, g: torch.Generator) -> torch.Tensor:
 
 def sparse_mask(T: int, g: torch.Generator) -> torch.Tensor:
     """One random training mask ``(T, 20)`` in {0, 1}: cross 50 %, pelvis-only 15 %, hand-only 15 %,
-    interval 10 %, nothing 10 %. Heading channels follow the pelvis."""
+    interval 10 %, nothing 10 %. Heading channels are never given (controls are positions; the first
+    frame's heading comes as ``c_dir``)."""
     u = float(torch.rand((), generator=g))
     joints = torch.zeros(NUM_KEYJOINTS, dtype=torch.bool)
     frames = torch.zeros(T, dtype=torch.bool)
@@ -134,7 +135,7 @@ def sparse_mask(T: int, g: torch.Generator) -> torch.Tensor:
         frames[a : min(b, T)] = True
     m = (frames[:, None] & joints[None, :]).float()  # (T, 6)
     m = m[..., None].expand(T, NUM_KEYJOINTS, 3).reshape(T, 3 * NUM_KEYJOINTS)
-    return torch.cat([m, m[:, :1].expand(T, 2)], dim=-1)
+    return torch.cat([m, torch.zeros(T, 2)], dim=-1)
 
 
 def subsample_every(T: int, fps: float, seconds: float) -> list[int]:

@@ -1,0 +1,131 @@
+"""`kinema evaluate --protocol sfcontrol`: SFControl's protocols, small (kinema.evaluate.sfcontrol*).
+
+Writes ``report.md`` (tables) and ``report.json`` into ``--out`` (default out/eval/sfcontrol). Cases:
+``--cases`` sparse-control crops, ``--cases`` goal crops and ``--cases`` seeds per implicit task; a
+shared 2-core CPU affords a handful (the report says how many).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from kinema.io.atomic import atomic_write_bytes
+
+SPARSE_ROWS = ("single-stage", "two-stage", "single-stage + noise opt")
+
+
+def add_arguments(p) -> None:
+    p.add_argument(
+        "--protocol",
+        choices=("suite", "sfcontrol"),
+        default="suite",
+        help="'suite' (Kimodo-style test suite, default) or 'sfcontrol' (sparse keyjoint control, "
+        "goal reaching, implicit tasks; docs/objectives.md)",
+    )
+    p.add_argument("--keyjoint-model", type=Path, help="sfcontrol: keyjoint model folder for the two-stage row")
+    p.add_argument("--objective-steps", type=int, default=8, help="sfcontrol: noise iterations (default 8)")
+    p.add_argument(
+        "--parts",
+        nargs="+",
+        choices=("sparse", "goal", "tasks"),
+        default=("sparse", "goal", "tasks"),
+        help="sfcontrol: which protocols to run (default all)",
+    )
+
+
+def _table(title: str, rows: dict, cols: list[tuple[str, str, str]]) -> str:
+    lines = [f"### {title}", "", "| row | " + " | ".join(c[1] for c in cols) + " |", "|---|" + "---|" * len(cols)]
+    for name, v in rows.items():
+        lines.append(f"| {name} | " + " | ".join(format(v[c[0]], c[2]) for c in cols) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run_sfcontrol(args: argparse.Namespace) -> int:
+    from kinema.diffusion.sampler import DDIMSampler
+    from kinema.evaluate import sfcontrol as S
+    from kinema.evaluate import sfcontrol_tasks as K
+    from kinema.generate.api import load_model
+    from kinema.model.keyjoint import load_keyjoint_model
+
+    t0 = time.perf_counter()
+    out = args.out or Path("out/eval/sfcontrol")
+    model = load_model(args.model, text_cache=Path("cache/text"))
+    report, md = {"cases": args.cases, "steps": args.steps, "objective_steps": args.objective_steps}, []
+    if "sparse" in args.parts:
+        rows = list(SPARSE_ROWS)
+        kj = None
+        if args.keyjoint_model is not None:
+            kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
+        else:
+            rows.remove("two-stage")
+        cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
+        res = S.summarize(
+            S.evaluate_sparse(
+                model,
+                cases,
+                rows=rows,
+                keyjoint=kj,
+                steps=args.steps,
+                objective_steps=args.objective_steps,
+                seed=args.seed,
+            )
+        )
+        report["sparse"] = res
+        md.append(
+            _table(
+                f"Sparse control ({len(cases)} test crops of 5 s, a target every 1.5 s on 3 of 6 keyjoints, raw)",
+                res,
+                [
+                    ("control_cm", "control error (cm)", ".2f"),
+                    ("skate", "skate (cm/s)", ".1f"),
+                    ("jerk", "jerk", ".0f"),
+                    ("seconds", "s / motion", ".1f"),
+                ],
+            )
+        )
+    if "goal" in args.parts:
+        res = K.evaluate_goal(
+            model,
+            K.goal_cases(args.data, args.cases, seed=args.seed),
+            objective_steps=args.objective_steps,
+            seed=args.seed,
+        )
+        report["goal"] = res
+        md.append(
+            _table(
+                f"Goal reaching ({args.cases} test crops of 3 s, right hand, raw)",
+                res,
+                [
+                    ("goal_cm", "dist. to goal (cm)", ".2f"),
+                    ("start_cm", "dist. to start (cm)", ".2f"),
+                    ("skate", "skate (cm/s)", ".1f"),
+                    ("seconds", "s / motion", ".1f"),
+                ],
+            )
+        )
+    if "tasks" in args.parts:
+        res = K.evaluate_tasks(model, cases=args.cases, objective_steps=args.objective_steps, seed=args.seed)
+        report["tasks"] = res
+        for task, rows in res.items():
+            md.append(
+                _table(
+                    f"{task} ({args.cases} seeds, raw)",
+                    rows,
+                    [
+                        ("error_cm", "constraint error (cm)", ".2f"),
+                        ("skate", "skate (cm/s)", ".1f"),
+                        ("jerk", "jerk", ".0f"),
+                        ("seconds", "s / motion", ".1f"),
+                    ],
+                )
+            )
+    report["wall_seconds"] = round(time.perf_counter() - t0, 1)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / "report.json", (json.dumps(report, indent=1) + "\n").encode())
+    atomic_write_bytes(out / "report.md", "\n".join(md).encode())
+    print("\n".join(md))
+    print(f"wrote {out / 'report.md'} and report.json ({report['wall_seconds']:.0f} s)")
+    return 0
