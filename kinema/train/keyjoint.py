@@ -44,7 +44,7 @@ class KeyjointData:
     """Keyjoint tracks ``(N, 20)`` and smoothed-root x/z ``(N, 2)`` of every frame of one split, the
     clips' (start, length, caption ids) and the caption embedding table."""
 
-    def __init__(self, root: str | Path, split: str, cache_dir: Path | None):
+    def __init__(self, root: str | Path, split: str, cache_dir: Path | None, text_encoder: str = "minilm-l6-v2"):
         ds = MotionDataset(root, split)
         rep = FlatRepresentation.for_skeleton(ds.skeleton, ds.fps)
         self.fps, self.skeleton = ds.fps, ds.skeleton
@@ -56,9 +56,9 @@ class KeyjointData:
         self.clips = [
             (r["start"], r["length"], [where[c] for c in r["captions"]]) for r in ds.clips if r["length"] >= MIN_FRAMES
         ]
-        encoder = get_text_encoder("minilm-l6-v2", cache_dir=cache_dir)
+        encoder = get_text_encoder(text_encoder, cache_dir=cache_dir)
         self.text_id = encoder.id
-        self.text = encoder.encode(captions).float() if captions else torch.zeros(0, 384)
+        self.text = encoder.encode(captions).float() if captions else torch.zeros(0, encoder.dim)
         lengths = torch.tensor([c[1] for c in self.clips], dtype=torch.float64)
         self.weights = lengths / lengths.sum()
 
@@ -158,8 +158,8 @@ def run(args: argparse.Namespace) -> Path:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     g = torch.Generator().manual_seed(args.seed)
-    data = KeyjointData(args.data, "train", Path(args.text_cache))
-    cfg = KeyjointConfig()
+    data = KeyjointData(args.data, "train", Path(args.text_cache), args.text_encoder)
+    cfg = KeyjointConfig(text_dim=data.text.shape[1])
     model, ema = KeyjointDenoiser(cfg), KeyjointDenoiser(cfg)
     model.set_normalization(*keyjoint_stats(data, torch.Generator().manual_seed(0)))
     ema.load_state_dict(model.state_dict())
@@ -213,6 +213,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--log-every", type=int, default=50)
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--text-cache", default="cache/text")
+    p.add_argument("--text-encoder", default="minilm-l6-v2", help="must be the body model's for generation")
     p.add_argument("--reset-ema", action="store_true", help="on resume, restart the EMA from the current weights")
     run(p.parse_args(argv))
 
