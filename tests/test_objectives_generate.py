@@ -124,7 +124,7 @@ def test_cli_generates_with_objectives_and_prints_them(tmp_path) -> None:
         cwd=tmp_path,
     )
     assert r.returncode == 0, r.stderr
-    assert "objectives (2 noise iterations, 2 DDIM steps" in r.stdout
+    assert "objectives (2 noise iterations, 2 DDIM steps" in r.stdout and "snapped (raw)" in r.stdout
     assert "0: joint-distance" in r.stdout
     motion = kinema.load_motion(out)
     hand, head = motion.skeleton.names.index("Hand_R"), motion.skeleton.names.index("Head")

@@ -6,28 +6,23 @@ UNITS = {"realism": "m/s^2"}
 
 
 def objective_table(report: dict) -> str:
-    """Rows ``sample, objective, before, after (raw), final`` for every objective and sample; "" without any.
+    """Rows ``sample, objective, before, optimised, snapped (raw), final`` per objective and sample ("" without).
 
-    Values: metres (realism: RMS joint acceleration, m/s^2). ``before`` is the motion the unoptimised
-    noise gives, ``after`` the optimised raw output, ``final`` the same after post-processing."""
+    Values: cm (realism: RMS joint acceleration, m/s^2). ``before``: the motion the unoptimised noise
+    gives; ``optimised``: after noise optimisation; ``snapped (raw)``: the raw output after snapping
+    (kinema.objectives.snap); ``final``: after post-processing."""
     if not report or not report.get("objectives"):
         return ""
     rows = []
     for k, o in enumerate(report["objectives"]):
         unit = UNITS.get(o["type"], "cm")
         scale = 1.0 if unit != "cm" else 100.0
-        for i, (b, a) in enumerate(zip(o["before"], o["after"], strict=True)):
-            final = o.get("final", [None] * len(o["before"]))[i]
-            rows.append(
-                (
-                    str(i),
-                    f"{k}: {o['type']}",
-                    f"{b * scale:.2f} {unit}",
-                    f"{a * scale:.2f} {unit}",
-                    "-" if final is None else f"{final * scale:.2f} {unit}",
-                )
-            )
-    head = ("sample", "objective", "before", "after (raw)", "final")
+        n = len(o["before"])
+        for i in range(n):
+            vals = [o.get(key, [None] * n)[i] for key in ("before", "optimised", "after", "final")]
+            cells = ("-" if v is None else f"{v * scale:.2f} {unit}" for v in vals)
+            rows.append((str(i), f"{k}: {o['type']}", *cells))
+    head = ("sample", "objective", "before", "optimised", "snapped (raw)", "final")
     widths = [max(len(r[c]) for r in [head, *rows]) for c in range(len(head))]
     lines = [
         f"objectives ({report['iterations']} noise iterations, {report['ddim_steps']} DDIM steps, "

@@ -40,6 +40,7 @@ class NoiseOptSettings:
     iterations: int = DEFAULT_ITERATIONS
     lr: float = DEFAULT_LR
     snap: bool = True  # impose the reached timing as explicit targets afterwards (kinema.objectives.snap)
+    constraint_weight: float = 1.0  # keeps the call's explicit constraints (see constraint_penalty)
 
     def __post_init__(self):
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 0:
@@ -56,6 +57,17 @@ def _chain(fn, sampler: DDIMSampler, z: torch.Tensor, steps: int) -> torch.Tenso
         x0 = fn(x, torch.full((x.shape[0],), t, dtype=torch.long))
         x = sampler.step_to(x0, t, prev, x)
     return x
+
+
+def constraint_penalty(rep: FlatRepresentation, feats: torch.Tensor, targets: SampleTargets) -> torch.Tensor:
+    """Mean squared miss ``(B,)`` of the explicit targets, in normalised feature units, on the channels
+    ``targets.mask`` constrains (0 without any). Imputation alone is soft: without this term the
+    optimiser is free to trade a keyframe (e.g. a start pose) for an objective."""
+    if targets.mask is None or targets.x_tgt is None:
+        return feats.new_zeros(feats.shape[0])
+    m = targets.mask.to(feats)
+    miss = (rep.normalize(feats) - rep.normalize(torch.nan_to_num(targets.x_tgt.to(feats)))) * m
+    return (miss**2).flatten(1).sum(dim=1) / m.flatten(1).sum(dim=1).clamp_min(1.0)
 
 
 def total_loss(bound: list[Bound], P: torch.Tensor) -> torch.Tensor:
@@ -103,7 +115,7 @@ def optimise_noise(
         fn = clean_estimate_fn(denoiser, rep, text_emb, targets, settings)  # fresh per pass: it keeps state
         feats = rep.denormalize(_chain(fn, sampler, z, steps))
         P = rep.pose(feats)
-        loss = total_loss(bound, P)
+        loss = total_loss(bound, P) + opt.constraint_weight * constraint_penalty(rep, feats, targets)
         if it == 0:
             first_loss, before = loss.detach().clone(), errors(bound, P)
         better = loss.detach() < best_loss

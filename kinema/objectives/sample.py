@@ -67,15 +67,15 @@ def sample_with_objectives(
     feats, z, report = optimise_noise(
         L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=g, progress=progress
     )
-    plans = [plan] * samples
+    plans, counts = [plan] * samples, [0] * samples
     if opt.snap:
         for b in range(samples):
             P = rep.pose(feats[b])
             snapped = snap_constraints(bound, P, rep.skeleton, feats[b][:, rep.root_xz])
             if not snapped:
                 continue
-            plans[b] = _with_constraints(plan, rep, snapped)
-            tg, _ = stack_targets([plans[b].segment_targets(0, None, heading)])
+            counts[b] = sum(len(c.frames(rep.fps, plan.total_frames)) for c in snapped)
+            tg, _ = stack_targets([_with_constraints(plan, rep, snapped).segment_targets(0, None, heading)])
             feats[b] = sample_features(
                 L.denoiser,
                 L.sampler,
@@ -85,12 +85,15 @@ def sample_with_objectives(
                 settings,
                 init_noise=z[b : b + 1],
             )[0]
+            # post-processing gets the targets snapped again on the resampled motion (it keeps the timing
+            # that motion took), time-agnostic paths left out (kinema.objectives.snap)
+            again = snap_constraints(bound, rep.pose(feats[b]), rep.skeleton, feats[b][:, rep.root_xz], paths=False)
+            plans[b] = _with_constraints(plan, rep, again)
         after = errors(bound, rep.pose(feats))
         report["objectives"] = [
             dict(o, optimised=o["after"], after=a) for o, a in zip(report["objectives"], after, strict=True)
         ]
-        n = len(plan.constraints)
-        report["snapped"] = [sum(len(c.frames(rep.fps, plan.total_frames)) for c in p.constraints[n:]) for p in plans]
+        report["snapped"] = counts  # targets (constraint frames) imposed when sampling again
     rep.shift_root_xz(feats, shift[:, None])
     return [rep.to_motion(f) for f in feats], plans, report
 

@@ -10,8 +10,9 @@ by the ground miss when the joint was more than 15 cm short, so the body walks t
 stretching), ``joint-distance`` with
 ``when="any"`` (the first joint put ``distance`` from the second at the closest frame, where it is
 further) and ``path-time-agnostic`` (every frame of the window on the path at the arc-length fraction
-the motion reached; ground paths keep the motion's own height) do; ``avoid``, ``stay-within`` and
-``realism`` keep what optimisation gave. Positions ``P (T, J, 3)`` metres.
+the motion reached; ground paths keep the motion's own height, and a ground path of the root joint
+becomes a dense ``root2d`` path, which the sampler's root displacement follows closely) do;
+``avoid``, ``stay-within`` and ``realism`` keep what optimisation gave. Positions ``P (T, J, 3)`` metres.
 """
 
 from __future__ import annotations
@@ -40,9 +41,12 @@ def _name(b: Bound, skeleton, k: int = 0) -> str:
     return skeleton.names[b.joints[k]]
 
 
-def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: torch.Tensor) -> list:
+def snap_constraints(
+    bound: list[Bound], P: torch.Tensor, skeleton, root_xz: torch.Tensor, *, paths: bool = True
+) -> list:
     """Constraints that impose the timing ``P``'s objectives reached (module docstring); ``root_xz (T, 2)``
-    is the motion's smoothed root."""
+    is the motion's smoothed root. ``paths=False`` leaves time-agnostic paths out (post-processing's
+    per-frame pass would drag a path followed at its own pace back onto one timing)."""
     out: list = []
     for b in bound:
         spec, w = b.spec, P[b.f0 : b.f1 + 1]
@@ -70,17 +74,17 @@ def snap_constraints(bound: list[Bound], P: torch.Tensor, skeleton, root_xz: tor
                         joint=_name(b, skeleton), frame_indices=[b.f0 + k], positions=goal[None].float()
                     )
                 )
-        elif isinstance(spec, PathTimeAgnostic):
+        elif isinstance(spec, PathTimeAgnostic) and paths:
             c = w[:, b.joints[0]]
             xy = c[:, [0, 2]] if spec.ground else c
             seg = (xy[1:] - xy[:-1]).norm(dim=-1)
             s = torch.cat([seg.new_zeros(1), seg.cumsum(0)])
             u = s / s[-1].clamp_min(1e-9) if float(s[-1]) > 1e-6 else torch.linspace(0, 1, len(s))
             pts = point_at_fraction(torch.tensor(spec.path, dtype=torch.float32), u)
+            frames = list(range(b.f0, b.f1 + 1))
+            if spec.ground and b.joints[0] == 0:  # the root on the ground: a dense root2d path
+                out.append(Root2DConstraint(frame_indices=frames, positions=pts.float(), dense=True))
+                continue
             pos = torch.stack([pts[:, 0], c[:, 1], pts[:, 1]], -1) if spec.ground else pts
-            out.append(
-                EndEffectorConstraint(
-                    joint=_name(b, skeleton), frame_indices=list(range(b.f0, b.f1 + 1)), positions=pos.float()
-                )
-            )
+            out.append(EndEffectorConstraint(joint=_name(b, skeleton), frame_indices=frames, positions=pos.float()))
     return out
