@@ -28,6 +28,13 @@ def add_arguments(p) -> None:
     p.add_argument("--keyjoint-model", type=Path, help="sfcontrol: keyjoint model folder for the two-stage row")
     p.add_argument("--objective-steps", type=int, default=8, help="sfcontrol: noise iterations (default 8)")
     p.add_argument(
+        "--sparse-rows",
+        nargs="+",
+        choices=SPARSE_ROWS,
+        default=SPARSE_ROWS,
+        help="sfcontrol: rows of the sparse protocol (default all; two-stage needs --keyjoint-model)",
+    )
+    p.add_argument(
         "--parts",
         nargs="+",
         choices=("sparse", "goal", "tasks"),
@@ -55,11 +62,11 @@ def run_sfcontrol(args: argparse.Namespace) -> int:
     model = load_model(args.model, text_cache=Path("cache/text"))
     report, md = {"cases": args.cases, "steps": args.steps, "objective_steps": args.objective_steps}, []
     if "sparse" in args.parts:
-        rows = list(SPARSE_ROWS)
+        rows = list(args.sparse_rows)
         kj = None
         if args.keyjoint_model is not None:
             kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
-        else:
+        elif "two-stage" in rows:
             rows.remove("two-stage")
         cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
         res = S.summarize(
