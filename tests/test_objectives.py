@@ -154,3 +154,26 @@ def test_time_agnostic_path_ignores_timing_but_not_geometry() -> None:
 def test_reach_objects_can_be_passed_directly() -> None:
     objs = load_objectives([Reach(joint="Hand_R", target=(0.0, 1.0, 0.0))])
     assert objs[0].kind == "reach"
+
+
+def test_bench_settings_and_objective_table() -> None:
+    from kinema.bench.objectives import parse_settings
+    from kinema.cli.objective_table import objective_table
+    from kinema.errors import KinemaError
+
+    assert parse_settings(["3x4", "5X12"]) == [(3, 4), (5, 12)]
+    with pytest.raises(KinemaError, match="STEPSxITERS"):
+        parse_settings(["five"])
+    report = {
+        "iterations": 8,
+        "ddim_steps": 5,
+        "seconds": 12.0,
+        "objectives": [
+            {"type": "reach", "before": [1.0], "optimised": [0.3], "after": [0.1], "final": [0.0]},
+            {"type": "realism", "before": [20.0], "optimised": [18.0], "after": [17.0], "final": [9.0]},
+        ],
+    }
+    table = objective_table(report)
+    assert "objectives (8 noise iterations, 5 DDIM steps, 12.0 s):" in table
+    assert "100.00 cm" in table and "10.00 cm" in table and "17.00 m/s^2" in table
+    assert objective_table({}) == ""
