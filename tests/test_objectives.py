@@ -177,3 +177,32 @@ def test_bench_settings_and_objective_table() -> None:
     assert "objectives (8 noise iterations, 5 DDIM steps, 12.0 s):" in table
     assert "100.00 cm" in table and "10.00 cm" in table and "17.00 m/s^2" in table
     assert objective_table({}) == ""
+
+
+def test_snap_imposes_the_timing_the_motion_reached() -> None:
+    from kinema.constraints.types import EndEffectorConstraint, Root2DConstraint
+    from kinema.objectives.snap import snap_constraints
+
+    P = _positions()[0]
+    root = P[:, 0, [0, 2]].clone()
+    objs = [
+        {"type": "reach", "joint": "Hand_R", "target": [-0.4, 1.3, 1.0], "window": [0.5, 1.5]},
+        {"type": "reach", "joint": "Hand_R", "target": [1.6, 1.3, 1.0]},
+        {"type": "stay-within", "min": [0.5, None, None], "window": [1.0, 1.5]},
+        {"type": "path-time-agnostic", "joint": "Hips", "path": [[0, 0], [0, 3]], "window": [0, 1.95]},
+    ]
+    out = snap_constraints([_bind(o) for o in objs], P, _skeleton(), root)
+    near, far, far_root, box, path = out
+    assert isinstance(near, EndEffectorConstraint) and near.frame_indices == (20,)  # closest approach at 1 s
+    assert isinstance(far_root, Root2DConstraint) and far_root.frame_indices == (20,)
+    assert torch.allclose(far_root.positions[0].float(), torch.tensor([2.0, 1.0]))  # the root moves by the 2 m miss
+    assert (
+        isinstance(box, Root2DConstraint)
+        and box.dense
+        and torch.allclose(box.positions[:, 0].float(), torch.tensor(0.53))
+    )
+    assert isinstance(path, Root2DConstraint) and path.dense and len(path.frame_indices) == 40
+    assert float(path.positions[-1, 1]) == pytest.approx(3.0) and float(path.positions[20, 1]) == pytest.approx(
+        3.0 * 20 / 39, abs=1e-4
+    )  # the pace the motion took: uniform here
+    assert snap_constraints([_bind(objs[3])], P, _skeleton(), root, paths=False) == []

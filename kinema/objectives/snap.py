@@ -12,7 +12,9 @@ stretching), ``joint-distance`` with
 further) and ``path-time-agnostic`` (every frame of the window on the path at the arc-length fraction
 the motion reached; ground paths keep the motion's own height, and a ground path of the root joint
 becomes a dense ``root2d`` path, which the sampler's root displacement follows closely) do;
-``avoid``, ``stay-within`` and ``realism`` keep what optimisation gave. Positions ``P (T, J, 3)`` metres.
+``stay-within`` on the root joint becomes a dense ``root2d`` path moved back inside the box's x/z
+bounds where the pelvis left them; ``avoid``, other ``stay-within`` and ``realism`` keep what
+optimisation gave. Positions ``P (T, J, 3)`` metres.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ import torch
 
 from kinema.constraints.types import EndEffectorConstraint, Root2DConstraint
 from kinema.objectives.path import PathTimeAgnostic
-from kinema.objectives.terms import Bound, JointDistance, Reach
+from kinema.objectives.terms import Bound, JointDistance, Reach, StayWithin
 
+#: how far inside a stay-within box (metres) a root that left it is put back
+BOX_MARGIN = 0.03
 #: a reach target further than this (metres, on the ground) from where the joint got also moves the root
 REACH_SLACK = 0.15
 
@@ -35,6 +39,19 @@ def point_at_fraction(path: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
     i = (torch.searchsorted(s.contiguous(), target.contiguous(), right=True) - 1).clamp(0, len(path) - 2)
     w = ((target - s[i]) / (s[i + 1] - s[i]).clamp_min(1e-9)).clamp(0, 1)[:, None]
     return (1 - w) * path[i] + w * path[i + 1]
+
+
+def _corridor(spec: StayWithin, b: Bound, pelvis: torch.Tensor, root_xz: torch.Tensor) -> list:
+    """A dense root path over the window: the smoothed root moved by what puts the pelvis ``(W, 3)`` back
+    inside the box's x/z bounds (with a margin); nothing when it never left them."""
+    lo = torch.tensor([-torch.inf if v is None else v + BOX_MARGIN for v in (spec.min[0], spec.min[2])])
+    hi = torch.tensor([torch.inf if v is None else v - BOX_MARGIN for v in (spec.max[0], spec.max[2])])
+    p = pelvis[:, [0, 2]]
+    shift = torch.minimum(torch.maximum(p, lo), hi) - p
+    if float(shift.abs().max()) < 1e-4:
+        return []
+    frames = list(range(b.f0, b.f1 + 1))
+    return [Root2DConstraint(frame_indices=frames, positions=(root_xz[b.f0 : b.f1 + 1] + shift).float(), dense=True)]
 
 
 def _name(b: Bound, skeleton, k: int = 0) -> str:
@@ -74,6 +91,8 @@ def snap_constraints(
                         joint=_name(b, skeleton), frame_indices=[b.f0 + k], positions=goal[None].float()
                     )
                 )
+        elif isinstance(spec, StayWithin) and b.joints == (0,):
+            out += _corridor(spec, b, w[:, 0], root_xz)
         elif isinstance(spec, PathTimeAgnostic) and paths:
             c = w[:, b.joints[0]]
             xy = c[:, [0, 2]] if spec.ground else c
