@@ -14,7 +14,7 @@ from pathlib import Path
 
 from kinema.io.atomic import atomic_write_bytes
 
-SPARSE_ROWS = ("single-stage", "two-stage", "single-stage + noise opt")
+SPARSE_ROWS = ("single-stage", "two-stage", "two-stage (root path)", "single-stage + noise opt")
 
 
 def add_arguments(p) -> None:
@@ -66,8 +66,8 @@ def run_sfcontrol(args: argparse.Namespace) -> int:
         kj = None
         if args.keyjoint_model is not None:
             kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
-        elif "two-stage" in rows:
-            rows.remove("two-stage")
+        else:
+            rows = [r for r in rows if not r.startswith("two-stage")]
         cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
         res = S.summarize(
             S.evaluate_sparse(

@@ -9,6 +9,8 @@ positions. Rows (all *raw*, no post-processing):
   sampler's root/joint corrections);
 - ``two-stage``: the keyjoint model completes the keyjoint trajectory, which the body model follows
   densely (kinema.generate.twostage);
+- ``two-stage (root path)``: the keyjoint model's smoothed pelvis as a dense root path, the sparse
+  targets as the single-stage row's end-effector constraints;
 - ``single-stage + noise opt``: single-stage with each target also a ``reach`` objective on its frame
   (noise optimisation, then snapping: kinema.objectives).
 
@@ -30,6 +32,7 @@ from kinema.evaluate.metrics import foot_skate, jerk
 from kinema.evaluate.suite import ground_truth_motion
 from kinema.generate.twostage import complete_body, sample_keyjoints
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.keyjoint import KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices, subsample_every
 
@@ -103,6 +106,23 @@ def run_two_stage(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | 
     return rep.to_motion(feats[0])
 
 
+def run_two_stage_root(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | None) -> Motion:
+    """Two-stage, root only: the keyjoint model's pelvis (smoothed) becomes a dense root path, the sparse
+    targets stay end-effector constraints of the body model (the single-stage row plus a planned root)."""
+    rep: FlatRepresentation = model.representation
+    T = case["gt"].num_frames
+    g = torch.Generator().manual_seed(seed)
+    k_tgt, k_mask = keyjoint_targets(case["targets"], rep.skeleton, T)
+    text = model.encode_text(case["prompt"])
+    keys = sample_keyjoints(kj, kj_sampler, text, torch.tensor([[1.0, 0.0]]), k_tgt, k_mask, generator=g)
+    root = smooth_time(keys[0, :, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * rep.fps)
+    path = {"type": "root2d", "frame_indices": list(range(T)), "smooth_root_2d": root.tolist(), "dense": True}
+    cons = [path, *as_constraints(case["targets"], rep.skeleton)]
+    return model.generate(case["prompt"], seconds=SECONDS, constraints=cons, steps=steps, seed=seed, postprocess=False)[
+        0
+    ]
+
+
 def score(motion: Motion, case: dict, seconds: float) -> dict:
     return {
         "control_cm": 100 * control_error(motion, case["targets"]),
@@ -131,6 +151,8 @@ def evaluate_sparse(
             t0 = time.perf_counter()
             if row == "two-stage":
                 m = run_two_stage(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
+            elif row == "two-stage (root path)":
+                m = run_two_stage_root(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
             else:
                 objs = as_objectives(case["targets"], sk, model.fps) if row.endswith("noise opt") else None
                 m = model.generate(
