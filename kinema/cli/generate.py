@@ -60,7 +60,7 @@ def register(sub) -> None:
     p.add_argument("--no-postprocess", action="store_true", help="raw model output (no foot lock / IK)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
     p.add_argument("--objective-steps", type=non_negative_int, metavar="N",
-                   help="noise-optimisation iterations for the constraints file's objectives (default 8; "
+                   help="noise-optimisation iterations for the constraints file's objectives (default 12; "
                    "docs/objectives.md)")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")

@@ -162,7 +162,7 @@ class KinemaModel:
             objectives: implicit controls met by optimising the diffusion noise (kinema.objectives,
                 docs/objectives.md): JSON-style dicts or Objective objects, added to a constraints file's
                 ``"objectives"``; the chain then runs ``steps`` (default 5) DDIM steps.
-            objective_steps: Adam iterations on the noise (default 8 when there are objectives).
+            objective_steps: Adam iterations on the noise (default 12 when there are objectives).
         """
         t0 = time.perf_counter()
         steps_given = steps

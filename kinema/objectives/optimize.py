@@ -28,10 +28,10 @@ from kinema.representation.flat import FlatRepresentation
 
 #: DDIM steps inside the optimisation loop when the caller gives none (docs/objectives.md: trade-off)
 DEFAULT_DDIM_STEPS = 5
-#: Adam iterations when the caller gives none. kinema bench objectives (reach, 5-s walk, 5 DDIM steps):
-#: 8 iterations 13.7 cm raw after snapping, 12 iterations 10.1 cm at 1.5x the time; 0 cm after
-#: post-processing both (docs/objectives.md)
-DEFAULT_ITERATIONS = 8
+#: Adam iterations when the caller gives none. kinema bench objectives (reach, 5-s walk, 5 DDIM steps,
+#: one thread, load average 4.5): 8 iterations 10.1 s, 13.7 cm raw after snapping; 12 iterations 10.6 s,
+#: 10.1 cm (noise optimisation alone 10.4 cm); 0 cm after post-processing both (docs/objectives.md)
+DEFAULT_ITERATIONS = 12
 DEFAULT_LR = 0.5
 
 
