@@ -140,14 +140,33 @@ def test_goal_reach_starts_from_the_given_pose_and_ends_on_the_goal(model) -> No
     prev = model.generate(PROMPT, seconds=2.0, steps=3)[0]
     pelvis = prev.positions[-1, 0]
     goal = [float(pelvis[0]) + 0.3, 1.1, float(pelvis[2]) + 1.2]  # ahead, within a step or two
-    res = model.generate("A person walks forward and reaches out.", seconds=2.5, steps=3,
-                         constraints=[start_pose(prev)],
-                         objectives=[goal_reach("Hand_R", goal, seconds=2.5, fps=model.fps, hold=0.5)],
-                         objective_steps=4)
+    res = model.generate(
+        "A person walks forward and reaches out.",
+        seconds=2.5,
+        steps=3,
+        constraints=[start_pose(prev)],
+        objectives=[goal_reach("Hand_R", goal, seconds=2.5, fps=model.fps, hold=0.5)],
+        objective_steps=4,
+    )
     m = res[0]
     start = (m.positions[0] - prev.positions[-1]).norm(dim=-1).mean()
     assert float(start) < 0.05  # distance to start: the previous motion's last pose
     assert _reach_error(m, "Hand_R", goal, 39, 49) < 0.02  # distance to goal, in the last 0.5 s
-    plain = model.generate("A person walks forward and reaches out.", seconds=2.5, steps=3,
-                           constraints=[start_pose(prev)])
+    plain = model.generate(
+        "A person walks forward and reaches out.", seconds=2.5, steps=3, constraints=[start_pose(prev)]
+    )
     assert _reach_error(plain[0], "Hand_R", goal, 39, 49) > 0.1  # without the goal it is not met
+
+
+def test_time_agnostic_path_is_followed_and_not_when_ignored(model) -> None:
+    obj = {
+        "type": "path-time-agnostic",
+        "joint": "Hips",
+        "path": [[0.0, 0.3], [0.5, 1.0], [1.2, 1.4]],
+        "window": [0.25, 2.25],
+    }
+    res = model.generate(PROMPT, seconds=2.5, steps=3, objectives=[obj], objective_steps=2, postprocess=False)
+    o = res.report.objectives["objectives"][0]
+    assert o["before"][0] > 0.5  # the unoptimised walk does not trace this bend
+    assert o["optimised"][0] < o["before"][0]  # two iterations already move towards it
+    assert o["after"][0] < 0.05 and res.report.objectives["snapped"] == [41]  # one root target per window frame
