@@ -50,85 +50,73 @@ def _table(title: str, rows: dict, cols: list[tuple[str, str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_sfcontrol(args: argparse.Namespace) -> int:
+SPARSE_COLS = [
+    ("control_cm", "control error (cm)", ".2f"),
+    ("skate", "skate (cm/s)", ".1f"),
+    ("jerk", "jerk", ".0f"),
+    ("seconds", "s / motion", ".1f"),
+]
+GOAL_COLS = [
+    ("goal_cm", "dist. to goal (cm)", ".2f"),
+    ("start_cm", "dist. to start (cm)", ".2f"),
+    ("skate", "skate (cm/s)", ".1f"),
+    ("seconds", "s / motion", ".1f"),
+]
+TASK_COLS = [
+    ("error_cm", "constraint error (cm)", ".2f"),
+    ("skate", "skate (cm/s)", ".1f"),
+    ("jerk", "jerk", ".0f"),
+    ("seconds", "s / motion", ".1f"),
+]
+
+
+def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     from kinema.diffusion.sampler import DDIMSampler
     from kinema.evaluate import sfcontrol as S
-    from kinema.evaluate import sfcontrol_tasks as K
-    from kinema.generate.api import load_model
     from kinema.model.keyjoint import load_keyjoint_model
+
+    rows, kj = list(args.sparse_rows), None
+    if args.keyjoint_model is not None:
+        kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
+    else:
+        rows = [r for r in rows if not r.startswith("two-stage")]
+    cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
+    res = S.summarize(
+        S.evaluate_sparse(
+            model, cases, rows=rows, keyjoint=kj, steps=args.steps, objective_steps=args.objective_steps, seed=args.seed
+        )
+    )
+    title = f"Sparse control ({len(cases)} test crops of 5 s, a target every 1.5 s on 3 of 6 keyjoints, raw)"
+    return res, [_table(title, res, SPARSE_COLS)]
+
+
+def _goal(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
+    from kinema.evaluate import sfcontrol_tasks as K
+
+    res = K.evaluate_goal(
+        model, K.goal_cases(args.data, args.cases, seed=args.seed), objective_steps=args.objective_steps, seed=args.seed
+    )
+    return res, [_table(f"Goal reaching ({args.cases} test crops of 3 s, right hand, raw)", res, GOAL_COLS)]
+
+
+def _tasks(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
+    from kinema.evaluate import sfcontrol_tasks as K
+
+    res = K.evaluate_tasks(model, cases=args.cases, objective_steps=args.objective_steps, seed=args.seed)
+    return res, [_table(f"{task} ({args.cases} seeds, raw)", rows, TASK_COLS) for task, rows in res.items()]
+
+
+def run_sfcontrol(args: argparse.Namespace) -> int:
+    from kinema.generate.api import load_model
 
     t0 = time.perf_counter()
     out = args.out or Path("out/eval/sfcontrol")
     model = load_model(args.model, text_cache=Path("cache/text"))
     report, md = {"cases": args.cases, "steps": args.steps, "objective_steps": args.objective_steps}, []
-    if "sparse" in args.parts:
-        rows = list(args.sparse_rows)
-        kj = None
-        if args.keyjoint_model is not None:
-            kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
-        else:
-            rows = [r for r in rows if not r.startswith("two-stage")]
-        cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
-        res = S.summarize(
-            S.evaluate_sparse(
-                model,
-                cases,
-                rows=rows,
-                keyjoint=kj,
-                steps=args.steps,
-                objective_steps=args.objective_steps,
-                seed=args.seed,
-            )
-        )
-        report["sparse"] = res
-        md.append(
-            _table(
-                f"Sparse control ({len(cases)} test crops of 5 s, a target every 1.5 s on 3 of 6 keyjoints, raw)",
-                res,
-                [
-                    ("control_cm", "control error (cm)", ".2f"),
-                    ("skate", "skate (cm/s)", ".1f"),
-                    ("jerk", "jerk", ".0f"),
-                    ("seconds", "s / motion", ".1f"),
-                ],
-            )
-        )
-    if "goal" in args.parts:
-        res = K.evaluate_goal(
-            model,
-            K.goal_cases(args.data, args.cases, seed=args.seed),
-            objective_steps=args.objective_steps,
-            seed=args.seed,
-        )
-        report["goal"] = res
-        md.append(
-            _table(
-                f"Goal reaching ({args.cases} test crops of 3 s, right hand, raw)",
-                res,
-                [
-                    ("goal_cm", "dist. to goal (cm)", ".2f"),
-                    ("start_cm", "dist. to start (cm)", ".2f"),
-                    ("skate", "skate (cm/s)", ".1f"),
-                    ("seconds", "s / motion", ".1f"),
-                ],
-            )
-        )
-    if "tasks" in args.parts:
-        res = K.evaluate_tasks(model, cases=args.cases, objective_steps=args.objective_steps, seed=args.seed)
-        report["tasks"] = res
-        for task, rows in res.items():
-            md.append(
-                _table(
-                    f"{task} ({args.cases} seeds, raw)",
-                    rows,
-                    [
-                        ("error_cm", "constraint error (cm)", ".2f"),
-                        ("skate", "skate (cm/s)", ".1f"),
-                        ("jerk", "jerk", ".0f"),
-                        ("seconds", "s / motion", ".1f"),
-                    ],
-                )
-            )
+    for part, fn in (("sparse", _sparse), ("goal", _goal), ("tasks", _tasks)):
+        if part in args.parts:
+            report[part], tables = fn(args, model)
+            md += tables
     report["wall_seconds"] = round(time.perf_counter() - t0, 1)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "report.json", (json.dumps(report, indent=1) + "\n").encode())
