@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 
 from kinema.cli._args import non_negative_float, positive_int, seed
+from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
+from kinema.cli.evaluate_sfcontrol import run_sfcontrol
 
 
 def register(sub) -> None:
@@ -32,6 +34,7 @@ def register(sub) -> None:
                    help="multimodality: prompts x samples (default 3 4; SAMPLES < 2 skips it)")
     p.add_argument("--filmstrips", type=int, default=4, help="rendered cases (default 4)")
     p.add_argument("--no-progress", action="store_true")
+    add_sfcontrol_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -46,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
     from kinema.evaluate.timeline import build_timeline_cases
     from kinema.generate.api import load_model, resolve_model_path
 
+    if args.protocol == "sfcontrol":
+        return run_sfcontrol(args)
     t0 = time.perf_counter()
     if args.cases < 1 or args.timeline_cases < 0:
         raise KinemaError("--cases must be at least 1 and --timeline-cases at least 0")

@@ -11,7 +11,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import finite_float, non_negative_float, positive_float, positive_int, seed
+from kinema.cli._args import (
+    finite_float,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    seed,
+)
 
 #: Defaults of the arguments a Kimodo meta.json can fill (their argparse default is None = "not given").
 DEFAULT_SECONDS = 5.0
@@ -52,6 +59,9 @@ def register(sub) -> None:
                    "(default: the model's fps)")
     p.add_argument("--no-postprocess", action="store_true", help="raw model output (no foot lock / IK)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
+    p.add_argument("--objective-steps", type=non_negative_int, metavar="N",
+                   help="noise-optimisation iterations for the constraints file's objectives (default 12; "
+                   "docs/objectives.md)")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
@@ -102,6 +112,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     """Output suffix, constraint and timeline files: checked before anything is loaded."""
     from kinema.errors import KinemaError
     from kinema.generate.timeline import parse_timeline
+    from kinema.objectives.io import load_objectives
 
     if args.preview:
         if args.steps is not None:
@@ -112,6 +123,8 @@ def _check_inputs(args: argparse.Namespace) -> None:
         raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb")
     if args.constraints is not None and not args.constraints.is_file():
         raise KinemaError(f"{args.constraints}: no such constraints file")
+    if args.constraints is not None:
+        load_objectives(args.constraints)  # objective syntax errors before the model loads
     if args.timeline is not None:
         if args.timeline.suffix.lower() != ".json":
             raise KinemaError(f"{args.timeline}: a timeline must be a .json file")
@@ -123,6 +136,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     import math
 
+    from kinema.cli.objective_table import objective_table
     from kinema.cli.report import print_warnings, residual_table, use_plain_warnings
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
@@ -158,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
         what, seconds=seconds, constraints=args.constraints, samples=samples, steps=args.steps,
         guidance=guidance, seed=DEFAULT_SEED if args.seed is None else args.seed,
         postprocess=not args.no_postprocess, heading=math.radians(args.heading), progress=not args.no_progress,
-        **extra,
+        objective_steps=args.objective_steps, **extra,
     )
     for motion, path in zip(motions, outputs, strict=True):
         if args.fps is not None:
@@ -170,6 +184,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"generated {len(motions)} motion(s), {rep.segments} segment(s), {rep.steps} DDIM steps in "
           f"{rep.seconds:.2f} s")
     table = residual_table(rep.residuals)
+    if table:
+        print(table)
+    table = objective_table(rep.objectives)
     if table:
         print(table)
     print_warnings(rep.warnings)

@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
     except (EOFError, OSError) as err:  # e.g. a truncated .gz
         raise KinemaError(f"{src}: cannot read ({err})") from None
     targets = None if args.constraints is None else constraint_targets(args.constraints, motion)
+    if args.constraints is not None:
+        from kinema.objectives.display import objective_targets  # lazy, like the other CLI imports
+
+        targets += objective_targets(args.constraints)
     title = args.title if args.title is not None else src.name
     if kind == ".png":
         frames = 8 if args.frames is None else args.frames

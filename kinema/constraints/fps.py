@@ -32,7 +32,7 @@ from kinema.constraints.types import (
 )
 from kinema.errors import KinemaError
 
-FILE_KEYS = ("fps", "constraints")
+FILE_KEYS = ("fps", "constraints", "objectives")  # objectives: read by kinema.objectives.io
 
 
 def read_constraints_json(path_or_obj, base_dir=None) -> tuple[list, str | None, list[Path], float | None]:
@@ -76,6 +76,8 @@ def _object_form(data: dict, source: str | None) -> tuple[object, float | None]:
         if key not in FILE_KEYS and key != "comment" and not key.startswith("_"):
             raise ConstraintError(f"unknown top-level field; expected {list(FILE_KEYS)} (and 'comment', '_...')",
                                   field=key, source=source)
+    if "constraints" not in data and "objectives" in data:
+        data = dict(data, constraints=[])  # objectives only (kinema.objectives)
     if "constraints" not in data:
         raise ConstraintError("missing required field (the list of constraint objects)", field="constraints",
                               source=source)

@@ -26,6 +26,8 @@ from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_l
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
+from kinema.objectives.optimize import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
+from kinema.objectives.sample import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.representation.flat import FlatRepresentation
 from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
 
@@ -54,6 +56,7 @@ class GenerationReport:
     residuals: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     prompts: list[dict] = field(default_factory=list)
+    objectives: dict = field(default_factory=dict)
 
 
 class GenerationResult(Sequence):
@@ -136,6 +139,8 @@ class KinemaModel:
         postprocess: bool = True,
         heading: float = 0.0,
         progress: bool = False,
+        objectives=None,
+        objective_steps: int | None = None,
     ) -> GenerationResult:
         """Generate ``samples`` motions; returns them with this call's report (``result.report``).
 
@@ -156,25 +161,44 @@ class KinemaModel:
                 noise from one generator stream, so sample i also depends on ``samples``.
             postprocess: foot locking + IK + exact constraint hitting, guarded (kinema.postprocess.guard).
             heading: first-frame facing in radians about +Y (0 faces +Z).
+            objectives: implicit controls met by optimising the diffusion noise (kinema.objectives,
+                docs/objectives.md): JSON-style dicts or Objective objects, added to a constraints file's
+                ``"objectives"``; the chain then runs ``steps`` (default 5) DDIM steps.
+            objective_steps: Adam iterations on the noise (default 12 when there are objectives).
         """
         t0 = time.perf_counter()
+        steps_given = steps
         samples, steps, seed = self._check_counts(samples, steps, seed)
         segments = self._segments(prompt_or_timeline, seconds)
         matches = self.match_prompts([s.prompt for s in segments])
         guide = self._guidance(guidance)
         plan = plan_segments(self.representation, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
+        bound = collect_objectives(constraints, objectives, self.skeleton, self.fps, plan.total_frames)
+        obj_report: dict = {}
+        if bound:
+            settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
+                                          DEFAULT_DDIM_STEPS)
+            steps = settings.steps
+            opt = NoiseOptSettings(DEFAULT_ITERATIONS if objective_steps is None else objective_steps)
+            text = self.encode_text(plan.segments[0].prompt)
+            raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
+                                                            opt, progress)
+        else:
+            raw, plans = self._sample_batch(plan, guide, steps, g, heading, samples, progress), [plan] * samples
         motions, residuals = [], []
-        for motion in self._sample_batch(plan, guide, steps, g, heading, samples, progress):
-            motion, report = plan.postprocess(motion) if postprocess else (motion, {})
+        for motion, sample_plan in zip(raw, plans, strict=True):
+            motion, report = sample_plan.postprocess(motion) if postprocess else (motion, {})
             motions.append(motion)
             residuals.append(report)
+        if bound:
+            obj_report = add_final(obj_report, bound, motions)
         warnings = [m.warning() for m in matches if not m.known]
         warnings += [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
             seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
-            prompts=[m.to_dict() for m in matches],
+            prompts=[m.to_dict() for m in matches], objectives=obj_report,
         )
         return GenerationResult(motions, report)
 
@@ -234,6 +258,11 @@ class KinemaModel:
         motion = self._sample_batch(plan, guide, steps, g, heading, 1, progress)[0]
         return plan.postprocess(motion) if postprocess else (motion, {})
 
+    def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
+        return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,
+                              anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
+                              joint_sigma=self.joint_sigma)
+
     def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress) -> list[Motion]:
         """``samples`` raw motions (all segments, cross-faded), sampled as one batch per segment.
 
@@ -249,9 +278,7 @@ class KinemaModel:
             rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
                     else [plan.segment_targets(k, m, heading) for m in motions])
             targets, shift = stack_targets(rows)
-            settings = SampleSettings(seg.num_frames, guide, steps, root_displacement=self.root_displacement,
-                                      anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
-                                      joint_sigma=self.joint_sigma)
+            settings = self._settings(seg.num_frames, guide, steps)
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
             feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,

@@ -107,7 +107,9 @@ def displace_root(
         has = m.any(dim=1)  # (B, 2)
         first = torch.where(m, torch.arange(T).view(1, T, 1), T).amin(dim=1).clamp(max=T - 1)  # (B, 2)
         r0 = torch.where(has, r.gather(1, first[:, None, :])[:, 0], r0)
+    r = r.clone()  # fresh tensors: the in-place edits below must not touch what autograd saved
     r[:, 0] = torch.where(m[:, 0], r[:, 0], r0)
+    m = m.clone()
     m[:, 0] = True
     time = torch.arange(T).view(1, T, 1).expand_as(x)
     prev = torch.where(m, time, -1).cummax(dim=1).values  # last constrained frame <= t
@@ -236,6 +238,14 @@ def sample_features(
     return torch.cat(out)
 
 
+def clean_estimate_fn(denoiser: Denoiser, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+                      targets: SampleTargets, settings: SampleSettings):
+    """The clean-estimate function ``(x_t, t) -> x0`` (normalised) that :func:`sample_features` hands to
+    DDIM: guided denoiser plus the corrections of the module docstring. For callers that run their own
+    DDIM loop, e.g. a differentiable one (kinema.objectives.optimize); every operation is differentiable."""
+    return _StepCorrections(denoiser, rep, text_emb, targets.pruned(), settings)
+
+
 def _branch_count(guidance: Guidance, has_text: bool, constrained: bool) -> int:
     """Denoiser rows per motion at every step (what ``_StepCorrections`` and ``forward_guided`` will run)."""
     if not has_text and not constrained:
@@ -290,7 +300,7 @@ class _StepCorrections:
             x0 = x0.clone()
             x0[..., jp] = x0[..., jp] + disp.flatten(-2) / rep.std[jp]
         if self.has_world:
-            _refresh_world(rep, x0, self.world_xz, self.world_mask, self.tgt, mask)
+            self.tgt, self.mask = _refresh_world(rep, x0, self.world_xz, self.world_mask, self.tgt, mask)
         return x0
 
 
@@ -308,9 +318,13 @@ def _working_targets(B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: t
     return mask.float().clone(), torch.nan_to_num(x_tgt.float()).clone()
 
 
-def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor,
-                   world_mask: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor) -> None:
-    """Re-target world-frame joints against the current root estimate: ``tgt``/``mask`` in place (unnormalised)."""
+def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor, world_mask: torch.Tensor,
+                   tgt: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Re-target world-frame joints against the current root estimate: new ``(tgt, mask)`` (unnormalised).
+
+    New tensors rather than in-place edits, so a differentiable chain (kinema.objectives) can reuse the
+    previous step's targets in its backward pass."""
+    tgt, mask = tgt.clone(), mask.clone()
     ix, iz = rep.joint_pos_axis(0), rep.joint_pos_axis(2)
     root = rep.denormalize(x0_norm)[..., rep.root_xz]  # (B, T, 2)
     rel = world_xz - root[:, :, None, :]  # (B, T, J, 2)
@@ -319,3 +333,4 @@ def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: tor
     tgt[..., iz] = torch.where(m > 0, rel[..., 1], tgt[..., iz])
     mask[..., ix] = torch.maximum(mask[..., ix], m)
     mask[..., iz] = torch.maximum(mask[..., iz], m)
+    return tgt, mask

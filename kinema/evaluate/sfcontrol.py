@@ -1,0 +1,181 @@
+"""SFControl's sparse control protocol on a dataset build (paper Sec. 4.1, Table 1 setting).
+
+Cases: 5-s crops of test clips (first caption as the prompt), moved so the first smoothed root is over
+the origin facing +Z. Targets: one frame every 1.5 s (frames 0, 30, 60, 90 at 20 fps) and, on each,
+a random half (3) of the six keyjoints (pelvis, head, hands, ankles) at their ground-truth world
+positions. Rows (all *raw*, no post-processing):
+
+- ``single-stage``: today's sampler, each target an ``end-effector`` constraint (imputation plus the
+  sampler's root/joint corrections);
+- ``two-stage``: the keyjoint model completes the keyjoint trajectory, which the body model follows
+  densely (kinema.generate.twostage);
+- ``two-stage (root path)``: the keyjoint model's smoothed pelvis as a dense root path, the sparse
+  targets as the single-stage row's end-effector constraints;
+- ``single-stage + noise opt``: single-stage with each target also a ``reach`` objective on its frame
+  (noise optimisation, then snapping: kinema.objectives).
+
+Metrics: control error (mean distance of the FK joint to its target, cm), foot skate (cm/s, on the
+model's own contact labels), jerk, seconds per motion, and R@3 over the whole case set when the
+retrieval model is available (not the paper's batch-of-32 R@3: too few cases).
+"""
+
+from __future__ import annotations
+
+import random
+import statistics
+import time
+
+import torch
+
+from kinema.data.dataset import MotionDataset
+from kinema.evaluate.metrics import foot_skate, jerk
+from kinema.evaluate.suite import ground_truth_motion
+from kinema.generate.twostage import complete_body, sample_keyjoints
+from kinema.motion.core import Motion
+from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
+from kinema.representation.flat import FlatRepresentation
+from kinema.representation.keyjoint import KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices, subsample_every
+
+SECONDS, EVERY, FRACTION = 5.0, 1.5, 0.5
+
+
+def sparse_cases(data_dir, num_cases: int, seed: int = 0, split: str = "test") -> list[dict]:
+    """Deterministic cases: ``{"clip", "prompt", "gt": Motion, "targets": [(frame, joint, [x, y, z])]}``."""
+    ds = MotionDataset(data_dir, split)
+    T = round(SECONDS * ds.fps)
+    rng = random.Random(seed)
+    pool = [i for i, r in enumerate(ds.clips) if r["length"] >= T and not r["mirrored"]]
+    picks = sorted(rng.sample(pool, min(num_cases, len(pool))))
+    idx = keyjoint_indices(ds.skeleton)
+    cases = []
+    for i in picks:
+        item = ds[i]
+        start = rng.randrange(item["features"].shape[0] - T + 1)
+        gt = ground_truth_motion(item["features"][start : start + T], ds)
+        P = gt.positions
+        targets = []
+        for f in subsample_every(T, ds.fps, EVERY):
+            for k in sorted(rng.sample(range(NUM_KEYJOINTS), round(FRACTION * NUM_KEYJOINTS))):
+                targets.append((f, idx[k], [float(v) for v in P[f, idx[k]]]))
+        cases.append({"clip": item["clip"]["clip_id"], "prompt": item["captions"][0], "gt": gt, "targets": targets})
+    return cases
+
+
+def control_error(motion: Motion, targets) -> float:
+    """Mean distance (metres) of each targeted joint to its target on its frame."""
+    P = motion.positions
+    return statistics.fmean(float((P[f, j] - torch.tensor(p, dtype=P.dtype)).norm()) for f, j, p in targets)
+
+
+def as_constraints(targets, skeleton) -> list[dict]:
+    return [
+        {"type": "end-effector", "joint": skeleton.names[j], "frame_indices": [f], "positions": [p]}
+        for f, j, p in targets
+    ]
+
+
+def as_objectives(targets, skeleton, fps: float) -> list[dict]:
+    return [
+        {"type": "reach", "joint": skeleton.names[j], "target": p, "window": [f / fps, f / fps]} for f, j, p in targets
+    ]
+
+
+def keyjoint_targets(targets, skeleton, T: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sparse keyjoint targets / mask ``(1, T, 20)`` of the case's targets."""
+    idx = keyjoint_indices(skeleton)
+    k = torch.zeros(1, T, KEYJOINT_DIM)
+    m = torch.zeros_like(k)
+    for f, j, p in targets:
+        c = idx.index(j)
+        k[0, f, 3 * c : 3 * c + 3] = torch.tensor(p)
+        m[0, f, 3 * c : 3 * c + 3] = 1.0
+    return k, m
+
+
+def run_two_stage(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | None) -> Motion:
+    """One two-stage motion for a case (keyjoint model ``kj`` then the body model of ``model``)."""
+    rep: FlatRepresentation = model.representation
+    T = case["gt"].num_frames
+    g = torch.Generator().manual_seed(seed)
+    k_tgt, k_mask = keyjoint_targets(case["targets"], rep.skeleton, T)
+    text = model.encode_text(case["prompt"])
+    c_dir = torch.tensor([[1.0, 0.0]])
+    keys = sample_keyjoints(kj, kj_sampler, text, c_dir, k_tgt, k_mask, generator=g)
+    L = model.loaded
+    feats = complete_body(L.denoiser, L.sampler, rep, text, keys, L.guidance, steps=steps, generator=g)
+    return rep.to_motion(feats[0])
+
+
+def run_two_stage_root(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | None) -> Motion:
+    """Two-stage, root only: the keyjoint model's pelvis (smoothed) becomes a dense root path, the sparse
+    targets stay end-effector constraints of the body model (the single-stage row plus a planned root)."""
+    rep: FlatRepresentation = model.representation
+    T = case["gt"].num_frames
+    g = torch.Generator().manual_seed(seed)
+    k_tgt, k_mask = keyjoint_targets(case["targets"], rep.skeleton, T)
+    text = model.encode_text(case["prompt"])
+    keys = sample_keyjoints(kj, kj_sampler, text, torch.tensor([[1.0, 0.0]]), k_tgt, k_mask, generator=g)
+    root = smooth_time(keys[0, :, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * rep.fps)
+    path = {"type": "root2d", "frame_indices": list(range(T)), "smooth_root_2d": root.tolist(), "dense": True}
+    cons = [path, *as_constraints(case["targets"], rep.skeleton)]
+    return model.generate(case["prompt"], seconds=SECONDS, constraints=cons, steps=steps, seed=seed, postprocess=False)[
+        0
+    ]
+
+
+def score(motion: Motion, case: dict, seconds: float) -> dict:
+    return {
+        "control_cm": 100 * control_error(motion, case["targets"]),
+        "skate": foot_skate(motion),
+        "jerk": jerk(motion),
+        "seconds": seconds,
+    }
+
+
+def evaluate_sparse(
+    model,
+    cases: list[dict],
+    *,
+    rows,
+    keyjoint=None,
+    steps: int | None = None,
+    objective_steps: int = 8,
+    seed: int = 0,
+    progress=print,
+) -> dict:
+    """Per row: mean metrics over the cases and the generated motions (for R@3)."""
+    out = {r: {"scores": [], "motions": []} for r in rows}
+    for n, case in enumerate(cases):
+        sk = model.skeleton
+        for row in rows:
+            t0 = time.perf_counter()
+            if row == "two-stage":
+                m = run_two_stage(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
+            elif row == "two-stage (root path)":
+                m = run_two_stage_root(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
+            else:
+                objs = as_objectives(case["targets"], sk, model.fps) if row.endswith("noise opt") else None
+                m = model.generate(
+                    case["prompt"],
+                    seconds=SECONDS,
+                    constraints=as_constraints(case["targets"], sk),
+                    steps=steps,
+                    seed=seed,
+                    postprocess=False,
+                    objectives=objs,
+                    objective_steps=objective_steps if objs else None,
+                )[0]
+            out[row]["scores"].append(score(m, case, time.perf_counter() - t0))
+            out[row]["motions"].append(m)
+        progress(
+            f"case {n + 1}/{len(cases)}: " + ", ".join(f"{r} {out[r]['scores'][-1]['control_cm']:.1f} cm" for r in rows)
+        )
+    return out
+
+
+def summarize(result: dict) -> dict:
+    return {
+        row: {k: statistics.fmean(s[k] for s in r["scores"]) for k in r["scores"][0]}
+        for row, r in result.items()
+        if r["scores"]
+    }

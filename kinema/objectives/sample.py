@@ -1,0 +1,129 @@
+"""Generation with objectives: what ``KinemaModel.generate(..., objectives=...)`` runs.
+
+The objectives of a call come from the constraints file's ``"objectives"`` list and the ``objectives``
+argument; they are bound to the model's rig and the motion length, the noise of a short DDIM chain is
+optimised for them (kinema.objectives.optimize) with the file's explicit constraints imputed as usual,
+and the report gives every objective's value before optimisation, after it (raw) and on the final,
+post-processed motion. Objectives act on one motion of at most the model's ``max_seconds`` (one
+segment), not on multi-prompt timelines.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.generate.sampling import SampleSettings, sample_features
+from kinema.generate.segments import SegmentPlan, stack_targets
+from kinema.generate.targets import UserTargets
+from kinema.motion.core import Motion
+from kinema.objectives.io import ObjectiveError, bind_objectives, load_objectives
+from kinema.objectives.optimize import NoiseOptSettings, errors, optimise_noise
+from kinema.objectives.snap import snap_constraints
+from kinema.objectives.terms import Bound
+
+
+def collect_objectives(constraints, objectives, skeleton, fps: float, num_frames: int) -> list[Bound]:
+    """Bound objectives of a call: the constraints file's (a path or a parsed object) then ``objectives``."""
+    from_file = []
+    source = None
+    if isinstance(constraints, str | os.PathLike | dict):
+        from_file = load_objectives(constraints)
+        source = str(constraints) if isinstance(constraints, str | os.PathLike) else None
+    try:
+        return bind_objectives(from_file, skeleton, fps, num_frames) + bind_objectives(
+            load_objectives(objectives), skeleton, fps, num_frames
+        )
+    except ObjectiveError as err:
+        raise ObjectiveError(err.reason, field=err.field, index=err.index, kind=err.kind, source=source) from None
+
+
+def sample_with_objectives(
+    model,
+    plan: SegmentPlan,
+    settings: SampleSettings,
+    text: torch.Tensor | None,
+    g: torch.Generator,
+    heading: float,
+    samples: int,
+    bound: list[Bound],
+    opt: NoiseOptSettings,
+    progress: bool,
+) -> tuple[list[Motion], list[SegmentPlan], dict]:
+    """``samples`` raw motions meeting ``bound``, the plan that post-processes each (the call's plan plus
+    its snapped targets) and the optimisation report (see optimise_noise; ``"optimised"`` holds the
+    values before snapping, ``"after"`` those of the returned raw motions)."""
+    if len(plan.segments) != 1:
+        raise KinemaError(
+            f"objectives need a single motion of at most {model.max_seconds:g} s; "
+            f"this call has {len(plan.segments)} segments"
+        )
+    targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
+    rep, L = model.representation, model.loaded
+    text = None if text is None else text.expand(samples, -1)
+    feats, z, report = optimise_noise(
+        L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=g, progress=progress
+    )
+    plans, counts = [plan] * samples, [0] * samples
+    if opt.snap:
+        for b in range(samples):
+            P = rep.pose(feats[b])
+            snapped = snap_constraints(bound, P, rep.skeleton, feats[b][:, rep.root_xz])
+            if not snapped:
+                continue
+            counts[b] = sum(len(c.frames(rep.fps, plan.total_frames)) for c in snapped)
+            tg, _ = stack_targets([_with_constraints(plan, rep, snapped).segment_targets(0, None, heading)])
+            feats[b] = sample_features(
+                L.denoiser,
+                L.sampler,
+                rep,
+                None if text is None else text[b : b + 1],
+                tg,
+                settings,
+                init_noise=z[b : b + 1],
+            )[0]
+            # post-processing gets the targets snapped again on the resampled motion (it keeps the timing
+            # that motion took), time-agnostic paths left out (kinema.objectives.snap)
+            again = snap_constraints(bound, rep.pose(feats[b]), rep.skeleton, feats[b][:, rep.root_xz], paths=False)
+            plans[b] = _with_constraints(plan, rep, again)
+        after = errors(bound, rep.pose(feats))
+        report["objectives"] = [
+            dict(o, optimised=o["after"], after=a) for o, a in zip(report["objectives"], after, strict=True)
+        ]
+        report["snapped"] = counts  # targets (constraint frames) imposed when sampling again
+    rep.shift_root_xz(feats, shift[:, None])
+    return [rep.to_motion(f) for f in feats], plans, report
+
+
+def _with_constraints(plan: SegmentPlan, rep, extra: list) -> SegmentPlan:
+    """``plan`` with ``extra`` constraint objects encoded into its targets and added to its post-processing."""
+    T = plan.total_frames
+    for c in extra:
+        c.check(rep.skeleton, rep.fps, T)
+    enc = rep.encode(extra, T)
+    u = plan.targets
+    on = enc.mask > 0
+    x = torch.where(on, enc.x_tgt.float(), u.x_tgt)
+    m = torch.maximum(u.mask, enc.mask.float())
+    wxz, wm = u.world_xz, u.world_mask
+    if bool(enc.world_mask.any()):
+        ew = enc.world_mask > 0
+        wxz = torch.where(ew[..., None], enc.world_xz.float(), enc.world_xz.float() if wxz is None else wxz)
+        wm = torch.maximum(enc.world_mask.float(), torch.zeros_like(enc.world_mask.float()) if wm is None else wm)
+    return replace(plan, targets=UserTargets(x, m, wxz, wm), constraints=[*plan.constraints, *extra])
+
+
+def add_final(report: dict, bound: list[Bound], motions: list[Motion]) -> dict:
+    """``report`` with each objective's value on the final (post-processed) motions as ``"final"``."""
+    P = torch.stack([m.positions.float() for m in motions])
+    final = errors(bound, P)
+    objs = [dict(o, final=f) for o, f in zip(report["objectives"], final, strict=True)]
+    return dict(report, objectives=objs)
+
+
+def objective_settings(settings: SampleSettings, steps_given: int | None, default_steps: int) -> SampleSettings:
+    """The chain's DDIM steps: the caller's ``steps`` when given, else ``default_steps``."""
+    return replace(settings, steps=default_steps if steps_given is None else steps_given)

@@ -1,0 +1,45 @@
+"""SFControl protocol cases: targets on the ground truth, their constraint/objective/keyjoint forms."""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.constraints.io import load_constraints
+from kinema.evaluate.sfcontrol import (
+    as_constraints,
+    as_objectives,
+    control_error,
+    keyjoint_targets,
+    sparse_cases,
+)
+from kinema.evaluate.sfcontrol_tasks import TASKS, uniform_waypoints
+from kinema.objectives import bind_objectives, load_objectives
+from kinema.representation.keyjoint import keyjoint_indices
+
+
+def test_sparse_cases_put_half_the_keyjoints_every_1_5_s_on_the_ground_truth(tiny_data) -> None:
+    cases = sparse_cases(tiny_data, 2, split="all")
+    assert cases
+    case = cases[0]
+    gt, targets = case["gt"], case["targets"]
+    assert gt.num_frames == 100 and {f for f, _, _ in targets} == {0, 30, 60, 90}
+    assert len(targets) == 4 * 3 and {j for _, j, _ in targets} <= set(keyjoint_indices(gt.skeleton))
+    assert control_error(gt, targets) < 1e-5
+    cons = load_constraints(as_constraints(targets, gt.skeleton), gt.skeleton, gt.fps, gt.num_frames)
+    assert len(cons) == len(targets)
+    objs = bind_objectives(load_objectives(as_objectives(targets, gt.skeleton, gt.fps)), gt.skeleton, gt.fps, 100)
+    assert max(float(b.error(gt.positions.float()[None])[0]) for b in objs) < 1e-4
+    k, m = keyjoint_targets(targets, gt.skeleton, 100)
+    assert int(m.sum()) == 3 * len(targets) and float(m[..., 18:].sum()) == 0
+
+
+def test_uniform_timing_baseline_spreads_the_path_over_the_window() -> None:
+    obj = TASKS["time-agnostic path"][1]
+    c = uniform_waypoints(obj, 20.0)
+    assert c["frame_indices"][0] == 10 and c["frame_indices"][-1] == 90
+    pts = torch.tensor(c["smooth_root_2d"])
+    assert torch.allclose(pts[0], torch.tensor(obj["path"][0])) and torch.allclose(
+        pts[-1], torch.tensor(obj["path"][-1])
+    )
+    steps = (pts[1:] - pts[:-1]).norm(dim=-1)
+    assert float(steps.max() - steps.min()) < 5e-3  # uniform in arc length (chords cut the corners slightly)
