@@ -28,7 +28,6 @@ class AppServer:
         self.model, self.steps = model, steps
         self.pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="kinema-app-generate")
         self.sessions: dict[int, Session] = {}
-        self.seconds_per_work = 2e-4  # refined by learn_rate after each generation
         self._lock = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="kinema", verbose=verbose)
         self.server.scene.set_up_direction("+y")
@@ -40,11 +39,6 @@ class AppServer:
     @property
     def url(self) -> str:
         return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def learn_rate(self, work: float, seconds: float) -> None:
-        """Running estimate of seconds per unit of work (frames x steps x samples), for progress bars."""
-        with self._lock:
-            self.seconds_per_work = 0.5 * self.seconds_per_work + 0.5 * seconds / max(work, 1.0)
 
     def _connect(self, client) -> None:
         session = Session(self, client)

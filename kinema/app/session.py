@@ -1,12 +1,11 @@
 """One browser tab: its document, motions, scene and panels. Generation runs on the app's worker pool
-(never on viser's callback threads), with an estimated progress bar; results and errors come back as
-scene updates and notifications. Tabs share the loaded model (``generate`` is thread-safe) and
+(never on viser's callback threads), with a progress bar fed by ``generate``'s step callback; results
+and errors come back as scene updates and notifications. Tabs share the loaded model (``generate`` is thread-safe) and
 nothing else."""
 
 from __future__ import annotations
 
 import threading
-import time
 import traceback
 
 from kinema.app.constraint_panel import ConstraintPanel
@@ -163,18 +162,14 @@ class Session:
             steps=self.doc.settings.steps,
             seed=self.doc.settings.seed,
         )
-        work = sum(round(s["seconds"] * self.model.fps) for s in timeline) * args["steps"] * (1 + args["samples"]) / 2
         self.gen_btn.disabled = True
         self.progress.value, self.progress.visible = 0.0, True
         self.status.content = "Generating..."
-        self.job = self.app.pool.submit(self._run, timeline, args, work)
-        threading.Thread(target=self._tick, args=(self.job, work), daemon=True).start()
+        self.job = self.app.pool.submit(self._run, timeline, args)
 
-    def _run(self, timeline, args, work) -> None:
-        t0 = time.perf_counter()
+    def _run(self, timeline, args) -> None:
         try:
-            result = self.model.generate(timeline, **args)
-            self.app.learn_rate(work, time.perf_counter() - t0)
+            result = self.model.generate(timeline, progress=self._progress, **args)
             self.show_motions(result.motions, report=result.report, source="generated")
             self._report(result.report)
         except KinemaError as err:
@@ -189,13 +184,10 @@ class Session:
             self.gen_btn.disabled = False
             self.progress.visible = False
 
-    def _tick(self, job, work: float) -> None:
-        """Progress estimated from the measured speed of earlier generations (generate has no callback)."""
-        t0, expected = time.perf_counter(), max(0.3, work * self.app.seconds_per_work)
-        while not job.done():
-            frac = min(0.95, (time.perf_counter() - t0) / expected)
-            self.progress.value = 100.0 * frac
-            time.sleep(0.1)
+    def _progress(self, done: int, total: int) -> None:
+        """The denoiser steps done so far (``generate``'s progress callback, on the worker thread)."""
+        self.progress.value = 100.0 * done / total
+        self.status.content = f"Generating... step {done} of {total}"
 
     def _report(self, report) -> None:
         text = (

@@ -20,6 +20,7 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.generate.progress import ProgressFn, StepProgress, split_progress
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
@@ -133,7 +134,7 @@ class KinemaModel:
         seed: int = 0,
         postprocess: bool = True,
         heading: float = 0.0,
-        progress: bool = False,
+        progress: bool | ProgressFn = False,
     ) -> GenerationResult:
         """Generate ``samples`` motions; returns them with this call's report (``result.report``).
 
@@ -154,6 +155,9 @@ class KinemaModel:
                 noise from one generator stream, so sample i also depends on ``samples``.
             postprocess: foot locking + IK + exact constraint hitting, guarded (kinema.postprocess.guard).
             heading: first-frame facing in radians about +Y (0 faces +Z).
+            progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
+                steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
+                changes the result.
         """
         t0 = time.perf_counter()
         samples, steps, seed = self._check_counts(samples, steps, seed)
@@ -233,6 +237,8 @@ class KinemaModel:
         """
         motions: list[Motion] | None = None
         rep, L = self.representation, self.loaded
+        bar, callback = split_progress(progress)
+        counter = None if callback is None else StepProgress(callback, segments=len(plan.segments), steps=steps)
         for k, seg in enumerate(plan.segments):
             rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
                     else [plan.segment_targets(k, m, heading) for m in motions])
@@ -243,7 +249,7 @@ class KinemaModel:
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
             feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
-                                    progress=progress)
+                                    progress=bar, on_step=None if counter is None else counter.segment(k))
             rep.shift_root_xz(feats, shift[:, None])
             parts = [rep.to_motion(f) for f in feats]
             motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
