@@ -4,7 +4,8 @@
 - ``hexapod()``: an insect, a body chain of 3 segments with a 3-joint leg on each side of each (6 legs);
 - ``quadruped()``: spine + neck/head + tail, 4 legs of hip/knee/ankle/toe joints with creature names;
 - ``fish()``: a horizontal body with fins and a 3-joint tail (no legs);
-- ``snake2()``: two joints in a line (the smallest rig).
+- ``snake2()``: two joints in a line (the smallest rig);
+- ``walking(skeleton)``: a motion on any of them whose feet skate.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from importlib.resources import files
 
 import torch
 
+from kinema.geometry.rotations import axis_angle_to_quat
+from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
 
@@ -30,8 +33,8 @@ def _build(rows: list[tuple[str, str | None, tuple[float, float, float]]], name:
 
 def hexapod() -> Skeleton:
     rows = [("Thorax", None, (0.0, 0.12, 0.0))]
-    for k, z in enumerate((0.06, -0.06)):
-        rows.append((f"Seg{k + 1}", "Thorax" if k == 0 else f"Seg{k}", (0.0, 0.0, z - (0.0 if k == 0 else 0.0))))
+    for k in range(2):  # two more body segments behind the thorax
+        rows.append((f"Seg{k + 1}", "Thorax" if k == 0 else f"Seg{k}", (0.0, 0.0, -0.06)))
     bodies = ["Thorax", "Seg1", "Seg2"]
     for i, body in enumerate(bodies):
         for side, x in (("A", 1.0), ("B", -1.0)):
@@ -76,6 +79,18 @@ def fish() -> Skeleton:
         ("Tail_3", "Tail_2", (0.0, 0.0, -0.2)),
     ]
     return _build(rows, "fish")
+
+
+def walking(skeleton: Skeleton, frames: int = 30, speed: float = 0.1, fps: float = 20.0) -> Motion:
+    """The rest pose gliding forward (+Z) at ``speed`` m/s with a small sway in every joint: every
+    foot skates at about ``speed``."""
+    t = torch.arange(frames, dtype=torch.float64) / fps
+    J = skeleton.num_joints
+    aa = torch.zeros(frames, J, 3, dtype=torch.float64)
+    aa[..., 0] = 0.05 * torch.sin(2 * torch.pi * t)[:, None] * torch.linspace(-1, 1, J)
+    root = skeleton.offsets[0].expand(frames, 3).clone()
+    root[:, 2] += speed * t
+    return Motion(skeleton, fps, root, axis_angle_to_quat(aa))
 
 
 def snake2() -> Skeleton:

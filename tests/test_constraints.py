@@ -13,17 +13,17 @@ from kinema.constraints import (
     ConstraintError,
     EndEffectorConstraint,
     FootContactConstraint,
-    FullBodyConstraint,
     Root2DConstraint,
-    encode_constraints,
     load_constraints,
     save_constraints,
-    world_to_relative,
 )
+from kinema.constraints.io import fullbody_from_bvh
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_to_axis_angle
 from kinema.io.bvh import read_bvh
-from kinema.motion.features import FeatureLayout, motion_to_features
+from kinema.representation.encode import encode_constraints, world_to_relative
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 
 REPO = Path(__file__).resolve().parents[1]
@@ -81,7 +81,7 @@ def test_example_loads_and_encodes(path, skel, layout, monkeypatch, bandai_workd
 def test_fullbody_from_bvh_matches_features(clip, motion, skel, layout):
     feats = motion_to_features(motion)
     frames = [0, 30, 100, motion.num_frames - 1]
-    c = FullBodyConstraint.from_bvh(clip, frames, skeleton=skel, fps=FPS, scale=0.01)
+    c = fullbody_from_bvh(clip, frames, skeleton=skel, fps=FPS, scale=0.01)
     t = encode([c], skel, layout, motion.num_frames)
     got, want = layout.split(t.x_tgt[frames]), layout.split(feats[frames])
     m = layout.split(t.mask[frames])
@@ -107,7 +107,7 @@ def test_fullbody_from_bvh_matches_features(clip, motion, skel, layout):
 
 def test_fullbody_arrays_equal_bvh_source(clip, motion, skel, layout):
     frames = [3, 40]
-    from_file = FullBodyConstraint.from_bvh(clip, frames, skeleton=skel, fps=FPS, scale=0.01)
+    from_file = fullbody_from_bvh(clip, frames, skeleton=skel, fps=FPS, scale=0.01)
     obj = [{"type": "fullbody", "frame_indices": frames,
             "local_joints_rot": quat_to_axis_angle(motion.local_rotations[frames]).tolist(),
             "root_positions": motion.root_translation[frames].tolist()}]
@@ -117,7 +117,7 @@ def test_fullbody_arrays_equal_bvh_source(clip, motion, skel, layout):
 
 
 def test_from_bvh_native_fps_and_recenter(clip, skel, layout):
-    c = FullBodyConstraint.from_bvh(clip, None, skeleton=skel, fps=30.0, scale=0.01, source_times=[0.0, 3.0],
+    c = fullbody_from_bvh(clip, None, skeleton=skel, fps=30.0, scale=0.01, source_times=[0.0, 3.0],
                                     recenter=True)
     assert c.times == (0.0, 3.0)
     assert torch.allclose(c.root_positions[0, [0, 2]], torch.zeros(2, dtype=torch.float64))
@@ -258,9 +258,9 @@ def test_bvh_missing_joints_and_wrong_scale(clip, skel):
     names = [n if n != "Hand_L" else "LeftHandX" for n in skel.names]
     other = Skeleton(names, skel.parents, skel.offsets)
     with pytest.raises(ConstraintError, match="LeftHandX"):
-        FullBodyConstraint.from_bvh(clip, [0], skeleton=other, fps=FPS, scale=0.01)
+        fullbody_from_bvh(clip, [0], skeleton=other, fps=FPS, scale=0.01)
     with pytest.raises(ConstraintError, match="field 'scale'"):
-        FullBodyConstraint.from_bvh(clip, [0], skeleton=skel, fps=FPS)  # centimetres read as metres
+        fullbody_from_bvh(clip, [0], skeleton=skel, fps=FPS)  # centimetres read as metres
 
 
 # ---------------------------------------------------------------------------- round trip

@@ -23,8 +23,9 @@ from kinema.data.captions import mirror_content
 from kinema.data.dataset import MotionDataset
 from kinema.data.split import assign_splits, group_of
 from kinema.errors import DataError
-from kinema.motion.features import FeatureLayout, motion_to_features
-from kinema.motion.stats import NormStats
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
 
 LIMIT = 12
 
@@ -134,7 +135,7 @@ def test_stats_cover_the_train_split_only(build, records):
     assert torch.isfinite(stats.std).all() and (stats.std > 0).all() and torch.isfinite(stats.mean).all()
     feats = load_file(str(build / "features.safetensors"))["features"]
     train = [feats[r["start"] : r["start"] + r["length"]] for r in records if r["split"] == "train"]
-    from kinema.motion.transform import canonicalize_start
+    from kinema.representation.transform import canonicalize_start
 
     layout = FeatureLayout(21)
     expect = NormStats.compute((canonicalize_start(f, layout) for f in train), xz_pairs=layout.xz_pairs())

@@ -9,16 +9,16 @@ import torch
 
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.motion.core import Motion
-from kinema.motion.features import (
-    FeatureLayout,
+from kinema.motion.smoothing import smooth_time
+from kinema.representation.kimodo import (
     features_to_motion,
     global_to_local_root,
     heading_from_positions,
     local_to_global_root,
     motion_to_features,
 )
-from kinema.motion.smoothing import smooth_time
-from kinema.motion.stats import NormStats
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
 from tests.test_motion import random_motion
 from tests.test_skeleton import SCHEMES, humanoid
 
@@ -135,7 +135,7 @@ def test_real_clip_features_round_trip_within_a_millimetre(clip, bandai_root):
 
 def test_rotate_features_matches_rotating_the_motion():
     from kinema.geometry.rotations import quat_mul, quat_rotate
-    from kinema.motion.transform import rotate_features
+    from kinema.representation.transform import rotate_features
 
     m = random_motion(T=20)
     layout = FeatureLayout(m.num_joints)
@@ -150,7 +150,7 @@ def test_rotate_features_matches_rotating_the_motion():
 
 
 def test_isotropic_stats_are_rotation_invariant():
-    from kinema.motion.transform import rotate_features
+    from kinema.representation.transform import rotate_features
 
     m = random_motion(T=30)
     layout = FeatureLayout(m.num_joints)

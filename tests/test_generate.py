@@ -44,7 +44,7 @@ def test_same_seed_same_motion(model):
 
 
 def test_heading_sets_the_first_frame_facing(model):
-    from kinema.motion.features import heading_from_positions
+    from kinema.representation.kimodo import heading_from_positions
 
     m = model.generate("", seconds=1.0, steps=5, heading=np.pi / 2, postprocess=False)[0]
     h = heading_from_positions(m.positions[:1], m.skeleton)[0]
@@ -224,7 +224,10 @@ def test_root_targets_compensate_the_smoothed_pelvis_offset() -> None:
     from kinema.generate.sampling import pelvis_offset_targets
     from kinema.model.config import get_config
     from kinema.model.denoiser import Denoiser
-    from kinema.motion.features import FeatureLayout
+    from kinema.representation.flat import FlatRepresentation
+    from kinema.representation.layout import FeatureLayout
+    from kinema.representation.stats import NormStats
+    from kinema.rig import Rig
 
     J, T = 3, 30
     layout = FeatureLayout(J)
@@ -240,25 +243,35 @@ def test_root_targets_compensate_the_smoothed_pelvis_offset() -> None:
     mask[0, 10, [rx, rz]] = 1
     tgt[0, 20, [rx, rz, px, pz]] = torch.tensor([3.0, 4.0, 0.05, 0.0])  # a full-body-like frame
     mask[0, 20, [rx, rz, px, pz]] = 1
-    aim = den.denormalize(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0))
+    rep = FlatRepresentation(Rig.from_skeleton(_three_joint_skeleton()), 20.0, NormStats(den.feat_mean, den.feat_std))
+    aim = den.denormalize(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, rep, 10.0))
     assert torch.allclose(aim[0, 10, [rx, rz]], torch.tensor([0.9, 2.2]), atol=1e-5)
     assert torch.allclose(aim[0, 20, [rx, rz, px, pz]], torch.tensor([3.0, 4.0, 0.05, 0.0]), atol=1e-5)
     unmasked = mask == 0
-    assert torch.equal(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, den, 10.0)[unmasked],
+    assert torch.equal(pelvis_offset_targets(den.normalize(x), den.normalize(tgt) * mask, mask, rep, 10.0)[unmasked],
                        (den.normalize(tgt) * mask)[unmasked])
 
 
+def _three_joint_skeleton():
+    from kinema.skeleton import Skeleton
+
+    return Skeleton(["Hips", "Spine", "Head"], [-1, 0, 1], torch.tensor([[0.0, 0.9, 0.0], [0.0, 0.3, 0.0],
+                                                                          [0.0, 0.3, 0.0]]))
+
+
 def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
-    from kinema.generate.sampling import sample_features
+    from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
 
     L = model.loaded
     text = model.encode_text("a person walks")
-    f = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
-                        generator=torch.Generator().manual_seed(0))[0]
+    targets = SampleTargets(torch.tensor([[1.0, 0.0]]))
+    f = sample_features(L.denoiser, L.sampler, L.representation, text, targets,
+                        SampleSettings(40, L.guidance, steps=5), generator=torch.Generator().manual_seed(0))[0]
     assert f[0, [0, 2]].abs().max() < 1e-5
     accel = (f[2:, [0, 2]] - 2 * f[1:-1, [0, 2]] + f[:-2, [0, 2]]).norm(dim=-1)
-    raw = sample_features(L.denoiser, L.sampler, 40, text, torch.tensor([[1.0, 0.0]]), L.guidance, steps=5,
-                          generator=torch.Generator().manual_seed(0), root_smoothing=0.0, root_displacement=False)[0]
+    off = SampleSettings(40, L.guidance, steps=5, root_smoothing=0.0, root_displacement=False)
+    raw = sample_features(L.denoiser, L.sampler, L.representation, text, targets, off,
+                          generator=torch.Generator().manual_seed(0))[0]
     accel_raw = (raw[2:, [0, 2]] - 2 * raw[1:-1, [0, 2]] + raw[:-2, [0, 2]]).norm(dim=-1)
     assert accel.mean() < 0.5 * accel_raw.mean()
 

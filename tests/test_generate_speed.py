@@ -83,17 +83,11 @@ def _rowwise(monkeypatch):
     """Replace the batched sampling by one call per sample, fed the same noise rows from the same generator."""
     real = api.sample_features
 
-    def one_by_one(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, *, generator, **kw):
-        B = c_dir.shape[0]
-        noise = torch.randn((B, T, denoiser.config.feature_dim), generator=generator)
-
-        def row(v, i):
-            return None if v is None else v[i : i + 1]
-
-        keys = ("world_xz", "world_mask")
-        rows = [real(denoiser, sampler, T, row(text, i), c_dir[i : i + 1], guide, row(x_tgt, i), row(mask, i),
-                     generator=generator, init_noise=noise[i : i + 1], **{k: row(v, i) if k in keys else v
-                                                                             for k, v in kw.items()})
+    def one_by_one(denoiser, sampler, rep, text, targets, settings, *, generator, **kw):
+        B = targets.batch_size
+        noise = torch.randn((B, settings.num_frames, rep.dim), generator=generator)
+        rows = [real(denoiser, sampler, rep, None if text is None else text[i : i + 1], targets.rows(i, i + 1),
+                     settings, generator=generator, init_noise=noise[i : i + 1], **kw)
                 for i in range(B)]
         return torch.cat(rows)
 
@@ -119,9 +113,9 @@ def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
     seen = []
     real = api.sample_features
 
-    def spy(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw):
-        seen.append((x_tgt.clone(), mask.clone(), c_dir.clone()))
-        return real(denoiser, sampler, T, text, c_dir, guide, x_tgt, mask, **kw)
+    def spy(denoiser, sampler, rep, text, targets, settings, **kw):
+        seen.append((targets.x_tgt.clone(), targets.mask.clone(), targets.c_dir.clone()))
+        return real(denoiser, sampler, rep, text, targets, settings, **kw)
 
     monkeypatch.setattr(api, "sample_features", spy)
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=2, steps=3, seed=1, postprocess=False)
@@ -133,15 +127,16 @@ def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
 
 
 def test_chunked_batches_give_the_same_rows(model, batch_sizes):
-    from kinema.generate.sampling import sample_features
+    from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
 
     L = model.loaded
     text = model.encode_text(PROMPT).expand(5, -1)
     c_dir = torch.tensor([[1.0, 0.0]]).expand(5, 2)
 
     def run(max_batch_frames):
-        return sample_features(L.denoiser, L.sampler, 20, text, c_dir, L.guidance, steps=3,
-                               generator=torch.Generator().manual_seed(2), max_batch_frames=max_batch_frames)
+        return sample_features(L.denoiser, L.sampler, L.representation, text, SampleTargets(c_dir),
+                               SampleSettings(20, L.guidance, steps=3), generator=torch.Generator().manual_seed(2),
+                               max_batch_frames=max_batch_frames)
 
     whole = run(10_000)
     assert batch_sizes == [10] * 3

@@ -1,12 +1,14 @@
-"""Keyjoint targets, the feature poser and the sampler's smooth joint displacement."""
+"""Keyjoint targets, the representation's poser and the sampler's smooth joint displacement."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from kinema.generate.keyjoints import FeaturePoser, KeyjointTargets, displace_joints, gaussian_spread
-from kinema.motion.features import FeatureLayout, features_to_motion
+from kinema.generate.keyjoints import KeyjointTargets, displace_joints, gaussian_spread
+from kinema.representation.flat import FlatRepresentation
+from kinema.representation.kimodo import features_to_motion
+from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 
 
@@ -15,6 +17,11 @@ def _skeleton() -> Skeleton:
     names = ["Hips", "Spine", "Hand_L", "UpperLeg_L"]
     offsets = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.3, 0.0], [0.4, 0.0, 0.0], [0.1, -0.4, 0.0]])
     return Skeleton(names, [-1, 0, 1, 0], offsets)
+
+
+def _rep(J: int = 4) -> FlatRepresentation:
+    assert J == 4
+    return FlatRepresentation.for_skeleton(_skeleton(), 20.0)
 
 
 def _random_features(layout: FeatureLayout, T: int, seed: int = 0) -> torch.Tensor:
@@ -26,7 +33,7 @@ def test_poser_places_joints_like_features_to_motion() -> None:
     sk = _skeleton()
     layout = FeatureLayout(sk.num_joints)
     f = _random_features(layout, 7)
-    P = FeaturePoser(sk)(f.float())
+    P = _rep().pose(f.float())
     expected = features_to_motion(f[0], sk, 20.0).positions
     assert torch.allclose(P[0].double(), expected, atol=1e-4)
 
@@ -48,7 +55,7 @@ def test_keyjoint_targets_resolve_relative_and_world_xz() -> None:
     wxz, wm = torch.zeros(1, T, J, 2), torch.zeros(1, T, J)
     wxz[0, 5, 2] = torch.tensor([3.0, 4.0])
     wm[0, 5, 2] = 1
-    keys = KeyjointTargets(x, m, J, wxz, wm)
+    keys = KeyjointTargets(_rep(J), x, m, wxz, wm)
     assert torch.allclose(keys.pos[0, 2, 2], torch.tensor([1.5, 1.0, 1.5]))
     assert torch.allclose(keys.pos[0, 5, 2], torch.tensor([3.0, 1.2, 4.0]))
     assert keys.mask[0, 2, 2].tolist() == [1, 1, 1] and keys.mask[0, 5, 2].tolist() == [1, 1, 1]
@@ -61,7 +68,7 @@ def test_relative_xz_without_a_known_root_is_not_a_target() -> None:
     x, m = torch.zeros(1, T, layout.dim), torch.zeros(1, T, layout.dim)
     jp = layout.slices["joint_pos"].start
     m[0, 1, jp + 6: jp + 9] = 1  # x/y/z features but no root x/z target at that frame
-    keys = KeyjointTargets(x, m, J)
+    keys = KeyjointTargets(_rep(J), x, m)
     assert keys.mask[0, 1, 2].tolist() == [0, 1, 0]
 
 
@@ -86,9 +93,9 @@ def test_displace_joints_moves_the_keyjoint_but_not_full_body_frames() -> None:
     sk = _skeleton()
     J, T = sk.num_joints, 30
     layout = FeatureLayout(J)
-    poser = FeaturePoser(sk)
+    rep = _rep(J)
     f = _random_features(layout, T, seed=3).float() * 0.1
-    P = poser(f)
+    P = rep.pose(f)
     pos, mask = torch.zeros(1, T, J, 3), torch.zeros(1, T, J, 3)
     pos[0, 10, 2] = P[0, 10, 2] + torch.tensor([0.2, 0.1, 0.0])  # hand 20 cm right, 10 cm up
     mask[0, 10, 2] = 1
@@ -96,7 +103,7 @@ def test_displace_joints_moves_the_keyjoint_but_not_full_body_frames() -> None:
     mask[0, 25] = 1
     keys = KeyjointTargets.__new__(KeyjointTargets)
     keys.pos, keys.mask = pos, mask
-    out = displace_joints(f, keys, poser, sigma_frames=3.0)
+    out = displace_joints(f, keys, rep, sigma_frames=3.0)
     jp = layout.split(out)["joint_pos"] - layout.split(f)["joint_pos"]
     assert torch.allclose(jp[0, 10, 2], torch.tensor([0.2, 0.1, 0.0]), atol=1e-5)
     assert jp[0, 10, [0, 1, 3]].abs().max() < 1e-6  # other joints keep their channels

@@ -16,14 +16,14 @@ from kinema.constraints import (
     ConstraintWarning,
     EndEffectorConstraint,
     Root2DConstraint,
-    encode_constraints,
     load_constraints,
     read_kimodo_meta,
 )
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
 from kinema.kinematics import forward_kinematics
-from kinema.motion.features import FeatureLayout
+from kinema.representation.encode import encode_constraints
+from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 
 REPO = Path(__file__).resolve().parents[1]

@@ -24,7 +24,7 @@ from kinema.evaluate.retrieval_train import (
     retrieval_metrics,
     train_retrieval,
 )
-from kinema.motion.transform import rotate_features, translate_features
+from kinema.representation.transform import rotate_features, translate_features
 
 TINY = RetrievalConfig(width=32, layers=2, heads=2, embed_dim=32, text_hidden=64, dropout=0.0)
 

@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from kinema.generate.sampling import sample_features
+from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
 from kinema.model.loading import load_denoiser
-from kinema.motion.features import features_to_motion
-from kinema.motion.transform import canonicalize_start
+from kinema.representation.kimodo import features_to_motion
+from kinema.representation.transform import canonicalize_start
 from kinema.train.trainer import TrainConfig, Trainer
 
 
@@ -86,8 +86,9 @@ def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
     loaded = load_denoiser(tmp_path / "run")
     gt = canonicalize_start(trainer.batches.clips[0][None], trainer.layout)[0]
     text = trainer.text_table[:1]
-    out = sample_features(loaded.denoiser, loaded.sampler, 40, text, gt[None, 0, 3:5], loaded.guidance.__class__(
-        mode="none"), steps=20, generator=torch.Generator().manual_seed(0))
+    settings = SampleSettings(40, loaded.guidance.__class__(mode="none"), steps=20)
+    out = sample_features(loaded.denoiser, loaded.sampler, loaded.representation, text, SampleTargets(gt[None, 0, 3:5]),
+                          settings, generator=torch.Generator().manual_seed(0))
     pos = features_to_motion(out[0], loaded.skeleton, loaded.fps).positions
     ref = features_to_motion(gt, loaded.skeleton, loaded.fps).positions
     err = (pos - ref).norm(dim=-1).mean().item()
@@ -172,8 +173,8 @@ def test_content_balance_weights_rare_contents_up():
 
 
 def test_batch_sampler_draws_clips_in_proportion_to_their_weights():
-    from kinema.motion.features import FeatureLayout
-    from kinema.motion.stats import NormStats
+    from kinema.representation.layout import FeatureLayout
+    from kinema.representation.stats import NormStats
     from kinema.train.batching import BatchSampler
 
     layout = FeatureLayout(3)

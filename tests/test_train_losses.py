@@ -10,8 +10,9 @@ import torch
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, matrix_to_sixd, sixd_to_matrix
 from kinema.motion.core import Motion
-from kinema.motion.features import FeatureLayout, motion_to_features
-from kinema.motion.stats import NormStats
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
 from kinema.skeleton import Skeleton
 from kinema.train.constraints import (
     effector_joints,

@@ -74,7 +74,7 @@ def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_p
     times["text_encoding"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     samples, steps, seed = m._check_counts(1, steps, 0)
-    plan = plan_segments(m, m._segments(prompt, seconds), None, None)
+    plan = plan_segments(m.representation, m._segments(prompt, seconds), None, None)
     motion, _ = m._generate_one(plan, m._guidance(None), steps, torch.Generator().manual_seed(seed), 0.0,
                                 False, False)
     times["sampling"] = time.perf_counter() - t0

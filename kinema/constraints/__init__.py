@@ -1,21 +1,22 @@
-"""Kinematic constraints for generation: typed objects, the JSON format and the feature encoding.
+"""Kinematic constraints for generation: typed objects and the JSON format.
 
 - kinema.constraints.types: `FullBodyConstraint`, `EndEffectorConstraint`, `Root2DConstraint`,
   `FootContactConstraint`, `ConstraintError`;
 - kinema.constraints.io: `load_constraints` / `save_constraints` (docs/constraints.md);
 - kinema.constraints.fps: the ``{"fps", "constraints"}`` file form and frame conversion;
 - kinema.constraints.kimodo: Kimodo's example folders (`read_kimodo_meta`) and whole-pose constraints;
-- kinema.constraints.encode: `encode_constraints` -> `ConstraintTargets` (x_tgt, mask, world x/z).
+
+Their encoding as model features lives with the representation (kinema.representation.encode), which
+imports this package, never the reverse.
 """
 
-from kinema.constraints.encode import ConstraintTargets, encode_constraints, world_to_relative
-from kinema.constraints.fps import ConstraintWarning
 from kinema.constraints.io import constraint_to_json, dumps_constraints, load_constraints, save_constraints
 from kinema.constraints.kimodo import KIMODO_FPS, KimodoMeta, find_kimodo_meta, read_kimodo_meta
 from kinema.constraints.types import (
     CONTACT_NAMES,
     Constraint,
     ConstraintError,
+    ConstraintWarning,
     EndEffectorConstraint,
     FootContactConstraint,
     FullBodyConstraint,
@@ -27,7 +28,6 @@ __all__ = [
     "KIMODO_FPS",
     "Constraint",
     "ConstraintError",
-    "ConstraintTargets",
     "ConstraintWarning",
     "EndEffectorConstraint",
     "FootContactConstraint",
@@ -36,10 +36,8 @@ __all__ = [
     "Root2DConstraint",
     "constraint_to_json",
     "dumps_constraints",
-    "encode_constraints",
     "find_kimodo_meta",
     "load_constraints",
     "read_kimodo_meta",
     "save_constraints",
-    "world_to_relative",
 ]

@@ -22,14 +22,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from kinema.constraints.types import Constraint, ConstraintError, Root2DConstraint, frames_from_times
+from kinema.constraints.kimodo import KIMODO_FPS, find_kimodo_meta
+from kinema.constraints.types import (
+    Constraint,
+    ConstraintError,
+    ConstraintWarning,
+    Root2DConstraint,
+    frames_from_times,
+)
 from kinema.errors import KinemaError
 
 FILE_KEYS = ("fps", "constraints")
-
-
-class ConstraintWarning(UserWarning):
-    """Something in a constraints file was interpreted or dropped (the CLI prints it on stderr)."""
 
 
 def read_constraints_json(path_or_obj, base_dir=None) -> tuple[list, str | None, list[Path], float | None]:
@@ -102,8 +105,6 @@ def source_fps_for(data: list, *, file_fps: float | None, source_fps: float | No
     """The fps a file's frame numbers are at: the file's ``fps`` and the caller's ``source_fps`` must
     agree when both are given; a list file next to a Kimodo ``meta.json`` is at Kimodo's 30 fps (a
     `ConstraintWarning` says so); otherwise the model fps."""
-    from kinema.constraints.kimodo import KIMODO_FPS, find_kimodo_meta
-
     if source_fps is not None:
         try:
             source_fps = check_fps(source_fps, what="constraints fps")

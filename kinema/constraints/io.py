@@ -34,9 +34,12 @@ from kinema.constraints.types import (
     EndEffectorConstraint,
     FullBodyConstraint,
     frames_from_times,
+    json_array,
 )
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_inverse, quat_mul, quat_normalize, quat_to_axis_angle
+from kinema.io.atomic import atomic_write_bytes
+from kinema.io.bvh import read_bvh
 from kinema.skeleton import Skeleton
 
 #: Per type: JSON key -> dataclass attribute (first key of each attribute is the one `save` writes).
@@ -56,23 +59,6 @@ SCALE_RATIO_LIMIT = 4.0
 
 
 # ---------------------------------------------------------------------------- JSON values
-def _array(value, key: str, allow_bool: bool = False) -> torch.Tensor:
-    """Nested JSON lists of numbers -> float64 tensor (ragged rows and non-numbers are errors)."""
-
-    def shape_of(v) -> tuple:
-        if isinstance(v, list):
-            shapes = {shape_of(x) for x in v}
-            if len(shapes) > 1:
-                raise ConstraintError("rows have different lengths (ragged array)", field=key)
-            return (len(v), *(shapes.pop() if shapes else ()))
-        if (isinstance(v, bool) and not allow_bool) or not isinstance(v, int | float):
-            raise ConstraintError(f"expected numbers, found {json.dumps(v)}", field=key)
-        return ()
-
-    shape_of(value)
-    return torch.tensor(value, dtype=torch.float64)
-
-
 def _int_list(value, key: str) -> list[int]:
     if not isinstance(value, list):
         raise ConstraintError(f"expected a list of integers, got {json.dumps(value)}", field=key)
@@ -92,6 +78,24 @@ def _resolve_file(path: str, base_dirs: Sequence[Path]) -> Path:
 
 
 # ---------------------------------------------------------------------------- poses from BVH
+def fullbody_from_bvh(path, source_frames: Sequence[int] | None, frames: Sequence[int] | None = None, *,
+                      skeleton: Skeleton, fps: float, scale: float = 1.0, times: Sequence[float] | None = None,
+                      source_times: Sequence[float] | None = None, recenter: bool = False) -> FullBodyConstraint:
+    """A `FullBodyConstraint` with poses taken from a BVH file (the in-betweening workflow).
+
+    ``source_frames`` index the clip *after* resampling to ``fps`` (or ``source_times``, seconds);
+    the poses go to ``frames`` (or ``times``; default: the same frames/times as the source). Joints
+    are matched by name; ``scale`` multiplies the file's lengths (0.01 for centimetres). See
+    :func:`poses_from_bvh`.
+    """
+    rots, root = poses_from_bvh(path, source_frames, skeleton=skeleton, fps=fps, scale=scale,
+                                recenter=recenter, source_times=source_times)
+    if frames is None and times is None:
+        frames = None if source_frames is None else list(source_frames)
+        times = None if source_times is None else list(source_times)
+    return FullBodyConstraint(frame_indices=frames, times=times, local_rotations=rots, root_positions=root)
+
+
 def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skeleton, fps: float,
                    scale: float = 1.0, recenter: bool = False,
                    source_times: Sequence[float] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -106,8 +110,6 @@ def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skele
     turned into local rotations with the model's parents. ``recenter`` shifts the poses horizontally
     so that the first one's root is above the origin (where the model's training clips start).
     """
-    from kinema.io.bvh import read_bvh
-
     if isinstance(scale, bool) or not isinstance(scale, int | float) or not (math.isfinite(scale) and scale > 0):
         raise ConstraintError(f"expected a positive number, got {scale!r}", field="scale")
     if not Path(path).is_file():
@@ -204,7 +206,7 @@ def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton 
                 raise ConstraintError(f"expected true or false, got {json.dumps(value)}", field=key)
             kwargs[attr] = value
         else:
-            kwargs[attr] = _array(value, key, allow_bool=canonical == "foot-contact")
+            kwargs[attr] = json_array(value, key, allow_bool=canonical == "foot-contact")
     if joint:
         kwargs["joint"] = joint
     elif canonical == "end-effector" and "joint" not in kwargs:
@@ -346,8 +348,6 @@ def dumps_constraints(constraints: Sequence[Constraint]) -> str:
 
 def save_constraints(constraints: Sequence[Constraint], path: str | os.PathLike) -> Path:
     """Write constraints as JSON atomically (temp file + rename); `load_constraints` reads it back."""
-    from kinema.io.atomic import atomic_write_bytes
-
     text = dumps_constraints(constraints)
     atomic_write_bytes(Path(path), text.encode("utf-8"))
     return Path(path)

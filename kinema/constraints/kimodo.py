@@ -27,10 +27,11 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from kinema.constraints.fps import ConstraintWarning
-from kinema.constraints.types import EFFECTOR_SHORTHANDS, ConstraintError, resolve_joint
+from kinema.constraints.types import EFFECTOR_SHORTHANDS, ConstraintError, ConstraintWarning, json_array, resolve_joint
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
+from kinema.kinematics import forward_kinematics
 from kinema.skeleton import Skeleton
 
 KIMODO_FPS = 30.0
@@ -208,9 +209,8 @@ def adapt_pose_form(obj, skeleton: Skeleton, foreign_poses: str = "root") -> tup
 
 
 def _arr(value, key: str):
-    from kinema.constraints.io import _array  # the parser's checks and messages (lazy: io imports us)
 
-    return _array(value, key)
+    return json_array(value, key)
 
 
 def _allowed_pose_keys(obj: dict) -> None:
@@ -254,8 +254,6 @@ def _name(skeleton: Skeleton) -> str:
 
 def _effector_from_pose(obj: dict, rot_key: str, rots, skeleton: Skeleton) -> dict:
     """World position and rotation of the constrained joint, by forward kinematics of the pose."""
-    from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
-    from kinema.kinematics import forward_kinematics
 
     _allowed_pose_keys(obj)
     joint = obj.get("joint", EFFECTOR_SHORTHANDS.get(obj["type"]))

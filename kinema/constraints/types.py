@@ -12,12 +12,13 @@ Each holds its keyframes as ``frame_indices`` (ints at the model fps) or ``times
 ``floor(t * fps + 0.5)``), exactly one of the two, and arrays with one row per keyframe (``K``).
 Units: metres, radians (axis-angle vectors), world frame Y up (docs/conventions.md). The objects are
 plain data: `check` validates them against a skeleton, fps and duration and returns the frames;
-kinema.constraints.encode turns them into model features; kinema.constraints.io reads/writes JSON.
+kinema.representation.encode turns them into model features; kinema.constraints.io reads/writes JSON.
 Errors are `ConstraintError` (a `KinemaError`) naming the constraint, the field and the reason.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
 from collections.abc import Sequence
@@ -55,6 +56,27 @@ class ConstraintError(KinemaError):
             self.reason, field=name, index=self.index if self.index is not None else index,
             kind=self.kind or kind, source=self.source if self.source is not None else source,
         )
+
+
+class ConstraintWarning(UserWarning):
+    """Something in a constraints file was interpreted or dropped (the CLI prints it on stderr)."""
+
+
+def json_array(value, key: str, allow_bool: bool = False) -> torch.Tensor:
+    """Nested JSON lists of numbers -> float64 tensor (ragged rows and non-numbers are errors)."""
+
+    def shape_of(v) -> tuple:
+        if isinstance(v, list):
+            shapes = {shape_of(x) for x in v}
+            if len(shapes) > 1:
+                raise ConstraintError("rows have different lengths (ragged array)", field=key)
+            return (len(v), *(shapes.pop() if shapes else ()))
+        if (isinstance(v, bool) and not allow_bool) or not isinstance(v, int | float):
+            raise ConstraintError(f"expected numbers, found {json.dumps(v)}", field=key)
+        return ()
+
+    shape_of(value)
+    return torch.tensor(value, dtype=torch.float64)
 
 
 def as_array(value, name: str) -> torch.Tensor | None:
@@ -200,7 +222,7 @@ class FullBodyConstraint(Constraint):
     skeleton's joint order (parent frame -> joint frame, all zeros = rest pose).
     ``root_positions (K, 3)``: world position of the root joint (metres).
     ``smooth_root_2d (K, 2)``: optional smoothed-root (x, z); without it the pelvis ground projection
-    stands in (see kinema.constraints.encode).
+    stands in (see kinema.representation.encode).
     """
 
     kind: ClassVar[str] = "fullbody"
@@ -210,25 +232,6 @@ class FullBodyConstraint(Constraint):
     local_rotations: torch.Tensor | None = None
     root_positions: torch.Tensor | None = None
     smooth_root_2d: torch.Tensor | None = None
-
-    @classmethod
-    def from_bvh(cls, path, source_frames: Sequence[int] | None, frames: Sequence[int] | None = None, *,
-                 skeleton: Skeleton, fps: float, scale: float = 1.0, times: Sequence[float] | None = None,
-                 source_times: Sequence[float] | None = None, recenter: bool = False) -> FullBodyConstraint:
-        """Poses taken from a BVH file (the in-betweening workflow); see kinema.constraints.io.poses_from_bvh.
-
-        ``source_frames`` index the clip *after* resampling to ``fps`` (or ``source_times``, seconds);
-        the poses go to ``frames`` (or ``times``; default: the same frames/times as the source). Joints
-        are matched by name; ``scale`` multiplies the file's lengths (0.01 for centimetres).
-        """
-        from kinema.constraints.io import poses_from_bvh
-
-        rots, root = poses_from_bvh(path, source_frames, skeleton=skeleton, fps=fps, scale=scale,
-                                    recenter=recenter, source_times=source_times)
-        if frames is None and times is None:
-            frames = None if source_frames is None else list(source_frames)
-            times = None if source_times is None else list(source_times)
-        return cls(frame_indices=frames, times=times, local_rotations=rots, root_positions=root)
 
 
 @dataclass(eq=False, kw_only=True)
@@ -308,7 +311,7 @@ EFFECTOR_SHORTHANDS = {"left-hand": "left_hand", "right-hand": "right_hand",
                        "left-foot": "left_foot", "right-foot": "right_foot"}
 
 __all__ = [
-    "CONSTRAINT_TYPES", "CONTACT_NAMES", "EFFECTOR_SHORTHANDS", "Constraint", "ConstraintError",
+    "CONSTRAINT_TYPES", "CONTACT_NAMES", "EFFECTOR_SHORTHANDS", "Constraint", "ConstraintError", "ConstraintWarning",
     "EndEffectorConstraint", "FootContactConstraint", "FullBodyConstraint", "Root2DConstraint",
-    "as_array", "frames_from_times", "resolve_joint",
+    "as_array", "frames_from_times", "json_array", "resolve_joint",
 ]

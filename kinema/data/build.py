@@ -38,10 +38,11 @@ from kinema.data.captions import captions_for, mirror_content
 from kinema.data.split import SPLITS, assign_splits, group_of
 from kinema.errors import DataError
 from kinema.motion.contacts import ContactThresholds
-from kinema.motion.features import FeatureLayout, motion_to_features
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
-from kinema.motion.stats import NormStats
-from kinema.motion.transform import canonicalize_start
+from kinema.representation.kimodo import motion_to_features
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
+from kinema.representation.transform import canonicalize_start
 from kinema.skeleton import Skeleton
 
 FORMAT_VERSION = 1
@@ -156,8 +157,8 @@ def with_clean_rest_pose(skeleton: Skeleton, feats: list, records: list[dict], f
     raise-up-both-hands clip, which starts standing still, or of the first clip), turned to face +Z.
     BVH export re-bases onto it so the exported rest pose is clean (kinema.motion.rest) instead of
     Bandai's pose lying along +X."""
-    from kinema.motion.features import features_to_motion
     from kinema.motion.rest import standing_rest_pose
+    from kinema.representation.kimodo import features_to_motion
 
     def preference(i: int):
         r = records[i]

@@ -16,8 +16,8 @@ import torch
 
 from kinema.data.build import FILES, FORMAT_VERSION
 from kinema.errors import DataError, KinemaError
-from kinema.motion.features import FeatureLayout
-from kinema.motion.stats import NormStats
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
 from kinema.skeleton import Skeleton
 
 SPLIT_CHOICES = ("train", "val", "test", "all")

@@ -40,9 +40,9 @@ from torch import nn
 
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_write_bytes, atomic_write_text
-from kinema.motion.features import FeatureLayout
-from kinema.motion.stats import NormStats
-from kinema.motion.transform import canonicalize_start
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
+from kinema.representation.transform import canonicalize_start
 
 FORMAT = "kinema-retrieval-1"
 WEIGHTS_FILE = "model.safetensors"

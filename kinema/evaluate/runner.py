@@ -24,7 +24,7 @@ from kinema.errors import KinemaError
 from kinema.evaluate import metrics as M
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
 from kinema.motion.core import Motion
-from kinema.motion.features import motion_to_features
+from kinema.representation.kimodo import motion_to_features
 
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")
@@ -179,7 +179,7 @@ def _post(model, motion: Motion, case: dict) -> Motion:
 
     cons = load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames) \
         if case["constraints"] else []
-    return run_postprocess(motion, cons, model)[0]
+    return run_postprocess(motion, cons, model.representation)[0]
 
 
 def _guidance_meta(model, guidance):

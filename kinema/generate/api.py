@@ -20,13 +20,12 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.keyjoints import FeaturePoser
-from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, sample_features
-from kinema.generate.segments import SegmentPlan, plan_segments
+from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
+from kinema.generate.segments import SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.motion.core import Motion
-from kinema.motion.features import features_to_motion
+from kinema.representation.flat import FlatRepresentation
 from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
 
 #: seconds of overlap between consecutive timeline segments (constrained, then cross-faded)
@@ -103,6 +102,12 @@ class KinemaModel:
         return self.loaded.fps
 
     @property
+    def representation(self) -> FlatRepresentation:
+        """The model's feature representation (rig, layout, statistics) that planning, sampling and
+        post-processing work on."""
+        return self.loaded.representation
+
+    @property
     def max_seconds(self) -> float:
         return self.loaded.denoiser.config.max_frames / self.fps
 
@@ -154,7 +159,7 @@ class KinemaModel:
         samples, steps, seed = self._check_counts(samples, steps, seed)
         segments = self._segments(prompt_or_timeline, seconds)
         guide = self._guidance(guidance)
-        plan = plan_segments(self, segments, constraints, constraints_fps)
+        plan = plan_segments(self.representation, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
         motions, residuals = [], []
         for motion in self._sample_batch(plan, guide, steps, g, heading, samples, progress):
@@ -227,35 +232,24 @@ class KinemaModel:
         samples returned for the same seed, nor what the earlier one-sample-after-another loop did.
         """
         motions: list[Motion] | None = None
-        poser = FeaturePoser(self.skeleton) if self.joint_sigma > 0 else None
+        rep, L = self.representation, self.loaded
         for k, seg in enumerate(plan.segments):
-            x_tgt, mask, world_xz, world_mask, c_dir, shift = _stacked_targets(plan, k, motions, heading, samples)
+            rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
+                    else [plan.segment_targets(k, m, heading) for m in motions])
+            targets, shift = stack_targets(rows)
+            settings = SampleSettings(seg.num_frames, guide, steps, root_displacement=self.root_displacement,
+                                      anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
+                                      joint_sigma=self.joint_sigma)
             text = self.encode_text(seg.prompt)
-            feats = sample_features(
-                self.loaded.denoiser, self.loaded.sampler, seg.num_frames,
-                None if text is None else text.expand(samples, -1), c_dir, guide,
-                x_tgt, mask, steps=steps, generator=g, progress=progress, world_xz=world_xz, world_mask=world_mask,
-                root_displacement=self.root_displacement, anchor_start=self.root_displacement,
-                root_smoothing=self.root_smoothing, joint_sigma=self.joint_sigma, joint_poser=poser,
-            )
-            feats[:, :, 0] += shift[:, None, 0]
-            feats[:, :, 2] += shift[:, None, 1]
-            parts = [features_to_motion(f, self.skeleton, self.fps) for f in feats]
+            text = None if text is None else text.expand(samples, -1)
+            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
+                                    progress=progress)
+            rep.shift_root_xz(feats, shift[:, None])
+            parts = [rep.to_motion(f) for f in feats]
             motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
                                                                                                  strict=True)]
         assert motions is not None
         return motions
-
-
-def _stacked_targets(plan: SegmentPlan, k: int, motions: list[Motion] | None, heading: float, samples: int):
-    """Segment k's targets for every sample, stacked on a leading batch axis (see ``segment_targets``).
-
-    The first segment's targets are the same for every sample (computed once); later segments are
-    conditioned on each sample's own motion so far.
-    """
-    rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
-            else [plan.segment_targets(k, m, heading) for m in motions])
-    return tuple(None if row[0] is None else torch.stack(row) for row in zip(*rows, strict=True))
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:

@@ -28,9 +28,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.kinematics import positions_from_sixd
-from kinema.motion.features import FeatureLayout
-from kinema.skeleton import Skeleton
+from kinema.representation.flat import FlatRepresentation
 
 
 class KeyjointTargets:
@@ -42,14 +40,11 @@ class KeyjointTargets:
     x/z target.
     """
 
-    def __init__(self, x_tgt: torch.Tensor, mask: torch.Tensor, num_joints: int,
+    def __init__(self, rep: FlatRepresentation, x_tgt: torch.Tensor, mask: torch.Tensor,
                  world_xz: torch.Tensor | None = None, world_mask: torch.Tensor | None = None):
-        B, T, _ = x_tgt.shape
-        J = num_joints
-        layout = FeatureLayout(J)
-        jp = layout.split(x_tgt)["joint_pos"]
-        m = (layout.split(mask)["joint_pos"] > 0).clone()
-        rx, rz = layout.root_xz
+        jp = rep.split(x_tgt)["joint_pos"]
+        m = (rep.split(mask)["joint_pos"] > 0).clone()
+        rx, rz = rep.root_xz
         root_known = ((mask[..., rx] > 0) & (mask[..., rz] > 0))[..., None]  # (B, T, 1)
         pos = jp.clone()
         pos[..., 0] += x_tgt[..., rx, None]
@@ -69,26 +64,6 @@ class KeyjointTargets:
         return bool(self.mask.any())
 
 
-class FeaturePoser:
-    """World joint positions of unnormalised features, posed exactly as ``features_to_motion`` does.
-
-    Pelvis = ``joint_pos[0]`` plus the root x/z; every other joint by FK from the global rotations.
-    Vectorised over (B, T) without Python loops over joints (``Skeleton.ancestor_matrix``).
-    """
-
-    def __init__(self, skeleton: Skeleton):
-        self.skeleton = skeleton
-        self.layout = FeatureLayout(skeleton.num_joints)
-
-    def __call__(self, feats: torch.Tensor) -> torch.Tensor:
-        """``feats (B, T, D)`` -> positions ``(B, T, J, 3)``."""
-        parts = self.layout.split(feats)
-        rx, rz = self.layout.root_xz
-        p = parts["joint_pos"][..., 0, :]
-        pelvis = torch.stack([p[..., 0] + feats[..., rx], p[..., 1], p[..., 2] + feats[..., rz]], dim=-1)
-        return positions_from_sixd(parts["joint_rot"], pelvis, self.skeleton)
-
-
 def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames: float) -> torch.Tensor:
     """Spread sparse per-frame ``residual (B, T, J, 3)`` (zero where absent) over time.
 
@@ -104,24 +79,24 @@ def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames:
     return spread / norm[..., None]
 
 
-def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, poser: FeaturePoser,
+def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation,
                        sigma_frames: float) -> torch.Tensor:
     """Metres to add to the ``joint_pos`` channels of unnormalised ``feats (B, T, D)``: ``(B, T, J, 3)``.
 
-    Keyjoint residuals (target - FK joint) spread over time (see module); frames whose every joint
-    coordinate is constrained (full-body keyframes) contribute nothing.
+    Keyjoint residuals (target - FK joint, posed by ``rep.pose``) spread over time (see module); frames
+    whose every joint coordinate is constrained (full-body keyframes) contribute nothing.
     """
-    P = poser(feats)
+    P = rep.pose(feats)
     full = keys.mask.flatten(-2).amin(-1) > 0  # (B, T)
     m = keys.mask * (~full)[..., None, None].to(keys.mask)
     residual = (keys.pos - P) * m
     return gaussian_spread(residual, m.amax(-1) > 0, sigma_frames)
 
 
-def displace_joints(feats: torch.Tensor, keys: KeyjointTargets, poser: FeaturePoser,
+def displace_joints(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation,
                     sigma_frames: float) -> torch.Tensor:
     """Unnormalised ``feats (B, T, D)`` with :func:`joint_displacement` added to ``joint_pos``."""
     out = feats.clone()
-    jp = poser.layout.slices["joint_pos"]
-    out[..., jp] = feats[..., jp] + joint_displacement(feats, keys, poser, sigma_frames).flatten(-2)
+    jp = rep.joint_pos
+    out[..., jp] = feats[..., jp] + joint_displacement(feats, keys, rep, sigma_frames).flatten(-2)
     return out

@@ -1,7 +1,10 @@
 """Sample Kimodo features from a denoiser with DDIM, guidance and constraint imputation.
 
 Shapes: ``text_emb (B, E)``, ``c_dir (B, 2)``, ``x_tgt``/``mask`` ``(B, T, D)`` in *unnormalised*
-feature units (metres, radians...) — they are normalised here, with the model's statistics.
+feature units (metres, radians...) — they are normalised here, with the representation's statistics
+(kinema.representation.flat, which also names every channel used below). Inputs come as two small
+dataclasses: `SampleTargets` (per-row conditions) and `SampleSettings` (length, guidance, steps and
+the corrections below).
 Returns the model's unnormalised x0 prediction ``(B, T, D)``. Constraints enter through the model's
 own imputation (Kimodo Sec. 4.2) and, for the smoothed root only, through ``displace_root`` after every
 step (``root_displacement``, on by default; not in the paper): the small CPU-trained root stage predicts
@@ -42,15 +45,16 @@ The first step runs without these channels; by the last step root and target agr
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
-from kinema.generate.keyjoints import FeaturePoser, KeyjointTargets, joint_displacement
+from kinema.generate.keyjoints import KeyjointTargets, joint_displacement
 from kinema.model.denoiser import Denoiser
-from kinema.motion.features import FeatureLayout
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
+from kinema.representation.flat import FlatRepresentation
 
 #: Gaussian (seconds) applied to the predicted smoothed-root x/z after every step. The smoothed root
 #: is itself the pelvis under a 0.5-s Gaussian, so a further 0.25-s filter leaves a valid one almost
@@ -82,7 +86,7 @@ def displace_root(
     anywhere: a path that starts 1.9 m from the origin three frames in was missed by 39 cm; 100 test
     cases, 2D root 5.21 -> 2.59 cm; 24 validation cases 4.24 -> 2.11 cm; jerk unchanged or lower), or
     (ii) is pinned to the origin when it has none: every training crop starts with its smoothed root
-    there (kinema.motion.transform.canonicalize_start), and saying it stops an imprecise root stage from
+    there (kinema.representation.transform.canonicalize_start), and saying it stops an imprecise root stage from
     starting the motion half a metre away (measured at step 6000: 0.5-0.7 m along +Z for a walk).
     ``origin`` is the origin in the normalised units of ``x0``. Without ``anchor_start`` a free frame 0
     keeps its value.
@@ -116,7 +120,7 @@ def displace_root(
 
 
 def pelvis_offset_targets(
-    x0: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor, denoiser: Denoiser, sigma_frames: float,
+    x0: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor, rep: FlatRepresentation, sigma_frames: float,
 ) -> torch.Tensor:
     """Root x/z targets for :func:`displace_root` that put the *smoothed pelvis* on the target.
 
@@ -124,23 +128,13 @@ def pelvis_offset_targets(
     x/z target, ``tgt.root_xz -= smooth(x0.pelvis_xz_offset)`` (Gaussian over ``sigma_frames``, the
     smoothed root's own filter), converted to normalised units; other channels and frames unchanged.
     """
-    J = denoiser.config.num_joints
-    rxz = FeatureLayout(J).root_xz
-    ix, iz = _world_channels(J)
-    pxz = [int(ix[0]), int(iz[0])]  # the pelvis is joint 0: its joint_pos is the offset from the root
-    mean, std = denoiser.feat_mean, denoiser.feat_std
+    rxz, pxz = rep.root_xz, rep.pelvis_xz  # the pelvis's joint_pos x/z is its offset from the root
+    mean, std = rep.mean, rep.std
     bias = smooth_time(x0[..., pxz] * std[pxz] + mean[pxz], sigma_frames)  # (B, T, 2) metres
     free = (mask[..., rxz] > 0) & (mask[..., pxz] == 0)
     out = tgt.clone()
     out[..., rxz] = torch.where(free, tgt[..., rxz] - bias / std[rxz], tgt[..., rxz])
     return out
-
-
-def _world_channels(num_joints: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Feature indices of joint_pos x and z for every joint: (J,), (J,)."""
-    start = FeatureLayout(num_joints).slices["joint_pos"].start
-    x = start + 3 * torch.arange(num_joints)
-    return x, x + 2
 
 
 #: Most rows x frames in one denoiser pass (guidance branches count as rows). The batch rows are
@@ -151,64 +145,95 @@ def _world_channels(num_joints: int) -> tuple[torch.Tensor, torch.Tensor]:
 MAX_BATCH_FRAMES = 2400
 
 
+@dataclass(frozen=True)
+class SampleTargets:
+    """Per-row conditions of one batch: ``c_dir (B, 2)`` first-frame heading (cos, sin); optional
+    unnormalised feature targets ``x_tgt``/``mask (B, T, D)`` and world joint x/z ``world_xz (B, T, J, 2)``
+    where ``world_mask (B, T, J)`` (kinema.representation.encode)."""
+
+    c_dir: torch.Tensor
+    x_tgt: torch.Tensor | None = None
+    mask: torch.Tensor | None = None
+    world_xz: torch.Tensor | None = None
+    world_mask: torch.Tensor | None = None
+
+    @property
+    def batch_size(self) -> int:
+        return int(self.c_dir.shape[0])
+
+    @property
+    def has_world(self) -> bool:
+        return self.world_xz is not None and self.world_mask is not None and bool(self.world_mask.any())
+
+    def rows(self, lo: int, hi: int) -> SampleTargets:
+        """Rows ``[lo, hi)`` of every tensor."""
+        return SampleTargets(*(None if v is None else v[lo:hi] for v in
+                               (self.c_dir, self.x_tgt, self.mask, self.world_xz, self.world_mask)))
+
+    def pruned(self) -> SampleTargets:
+        """Without world targets when none is set, and without a mask that constrains nothing."""
+        if self.has_world:
+            return self
+        if self.mask is not None and not bool(self.mask.any()):
+            return SampleTargets(self.c_dir)
+        return replace(self, world_xz=None, world_mask=None)
+
+
+@dataclass(frozen=True)
+class SampleSettings:
+    """How to sample: ``num_frames``, ``guidance``, DDIM ``steps`` (None: the sampler's default) and the
+    per-step corrections of the module docstring (``root_displacement`` with ``anchor_start``,
+    ``root_smoothing`` and ``joint_sigma`` in seconds; 0 / False turns one off)."""
+
+    num_frames: int
+    guidance: Guidance
+    steps: int | None = None
+    root_displacement: bool = True
+    anchor_start: bool = True
+    root_smoothing: float = ROOT_SMOOTHING_SECONDS
+    joint_sigma: float = JOINT_SIGMA_SECONDS
+
+
 @torch.no_grad()
 def sample_features(
-    denoiser: Denoiser,
-    sampler: DDIMSampler,
-    num_frames: int,
-    text_emb: torch.Tensor | None,
-    c_dir: torch.Tensor,
-    guidance: Guidance,
-    x_tgt: torch.Tensor | None = None,
-    mask: torch.Tensor | None = None,
-    steps: int | None = None,
-    generator: torch.Generator | None = None,
-    progress: bool = False,
-    world_xz: torch.Tensor | None = None,
-    world_mask: torch.Tensor | None = None,
-    init_noise: torch.Tensor | None = None,
-    max_batch_frames: int = MAX_BATCH_FRAMES,
-    **options,
+    denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+    targets: SampleTargets, settings: SampleSettings, *, generator: torch.Generator | None = None,
+    progress: bool = False, init_noise: torch.Tensor | None = None, max_batch_frames: int = MAX_BATCH_FRAMES,
 ) -> torch.Tensor:
-    """Run the reverse process for a batch of ``c_dir.shape[0]`` motions of ``num_frames`` frames.
+    """Run the reverse process for ``targets.batch_size`` motions of ``settings.num_frames`` frames;
+    returns unnormalised features ``(B, T, D)``.
 
     The batch rows are independent motions: row i depends only on its own noise and targets (the
     denoiser, the root / joint corrections and DDIM all act per row), so the batch is sampled in
     chunks of at most ``max_batch_frames`` rows x frames per denoiser pass. The initial noise is one
     ``(B, T, D)`` N(0, I) draw from ``generator`` (or ``init_noise``), so the chunking never changes
-    which noise a row gets. ``options``: ``root_displacement``, ``root_smoothing``, ``anchor_start``,
-    ``joint_poser``, ``joint_sigma`` (see the module docstring; with ``joint_poser``, the model's
-    skeleton, keyjoint targets pull the clean estimate after every step,
-    :func:`kinema.generate.keyjoints.displace_joints`).
+    which noise a row gets.
 
     A mask with nothing constrained (and no world targets) is dropped: with an all-zero mask the
     separated-guidance constraint branch sees exactly the unconditional branch's input, so
     ``(1 - w_t - w_c) D0 + w_t D_text + w_c D_constr`` equals the two-branch ``(1 - w_t) D0 + w_t D_text``
     up to float rounding, and every step runs 2 branches instead of 3 (docs/speed.md).
     """
-    B, D = c_dir.shape[0], denoiser.config.feature_dim
-    has_world = world_xz is not None and world_mask is not None and bool(world_mask.any())
-    if not has_world:
-        world_xz = world_mask = None
-        if mask is not None and not bool(mask.any()):
-            mask = x_tgt = None  # nothing constrained: no constraint branch
+    B, T, D = targets.batch_size, settings.num_frames, rep.dim
+    targets = targets.pruned()
     if init_noise is None:
         gen_device = generator.device if generator is not None else "cpu"
-        init_noise = torch.randn((B, num_frames, D), generator=generator, device=gen_device)
-    branches = _branch_count(guidance, text_emb is not None, mask is not None or has_world)
-    chunk = max(1, max_batch_frames // (branches * num_frames))
-    rows = [text_emb, c_dir, x_tgt, mask, world_xz, world_mask, init_noise]
+        init_noise = torch.randn((B, T, D), generator=generator, device=gen_device)
+    constrained = targets.mask is not None or targets.has_world
+    branches = _branch_count(settings.guidance, text_emb is not None, constrained)
+    chunk = max(1, max_batch_frames // (branches * T))
     out = []
     for lo in range(0, B, chunk):
-        text_c, c_dir_c, x_tgt_c, mask_c, wxz_c, wm_c, noise_c = (None if v is None else v[lo : lo + chunk]
-                                                                 for v in rows)
-        out.append(_sample_rows(denoiser, sampler, num_frames, text_c, c_dir_c, guidance, x_tgt_c, mask_c, steps,
-                                generator, progress, wxz_c, wm_c, init_noise=noise_c, **options))
+        text = None if text_emb is None else text_emb[lo : lo + chunk]
+        step = _StepCorrections(denoiser, rep, text, targets.rows(lo, lo + chunk), settings)
+        x = sampler.sample(step, (step.batch, T, D), generator=generator, progress=progress,
+                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk])
+        out.append(rep.denormalize(x))
     return torch.cat(out)
 
 
 def _branch_count(guidance: Guidance, has_text: bool, constrained: bool) -> int:
-    """Denoiser rows per motion at every step (what ``_sample_rows`` and ``forward_guided`` will run)."""
+    """Denoiser rows per motion at every step (what ``_StepCorrections`` and ``forward_guided`` will run)."""
     if not has_text and not constrained:
         return 1  # no condition at all: the guidance is "none"
     if not constrained:
@@ -216,57 +241,51 @@ def _branch_count(guidance: Guidance, has_text: bool, constrained: bool) -> int:
     return len(guidance.branches)
 
 
-def _sample_rows(
-    denoiser: Denoiser, sampler: DDIMSampler, num_frames: int, text_emb: torch.Tensor | None, c_dir: torch.Tensor,
-    guidance: Guidance, x_tgt: torch.Tensor | None = None, mask: torch.Tensor | None = None,
-    steps: int | None = None, generator: torch.Generator | None = None, progress: bool = False,
-    world_xz: torch.Tensor | None = None, world_mask: torch.Tensor | None = None,
-    root_displacement: bool = True, root_smoothing: float = ROOT_SMOOTHING_SECONDS, anchor_start: bool = True,
-    joint_poser: FeaturePoser | None = None, joint_sigma: float = JOINT_SIGMA_SECONDS,
-    init_noise: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """:func:`sample_features` for one chunk of rows, all in one denoiser batch per step."""
-    B = c_dir.shape[0]
-    D = denoiser.config.feature_dim
-    J = denoiser.config.num_joints
-    has_world = world_xz is not None and world_mask is not None and bool(world_mask.any())
-    mask, tgt = _working_targets(B, num_frames, D, x_tgt, mask, has_world)
-    smooth_frames = root_smoothing * denoiser.config.fps
-    pelvis_frames = DEFAULT_ROOT_SIGMA_SECONDS * denoiser.config.fps
-    layout = FeatureLayout(J)
-    rxz, jp = layout.root_xz, layout.slices["joint_pos"]
-    origin = tuple(float(v) for v in denoiser.normalize(torch.zeros(D))[rxz])
-    if text_emb is None:
-        text_mask = torch.zeros(B, dtype=torch.bool)
-        if mask is None:
-            guidance = Guidance(mode="none")
-    else:
-        text_mask = None
-    keys = None
-    if joint_poser is not None and mask is not None and joint_sigma > 0:
-        keys = KeyjointTargets(tgt, mask, J, world_xz if has_world else None, world_mask if has_world else None)
-        keys = keys if keys.any else None
+class _StepCorrections:
+    """The clean-estimate function DDIM calls at every step for one chunk of rows: guided denoiser, then
+    root smoothing, root displacement, keyjoint displacement and world-target refresh (module docstring)."""
 
-    def denoise(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        tgt_n = None if mask is None else denoiser.normalize(tgt) * mask
-        x0 = denoiser.forward_guided(x_t, t, text_emb, c_dir, tgt_n, mask, None, guidance, text_mask=text_mask)
-        if smooth_frames > 0:
+    def __init__(self, denoiser: Denoiser, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+                 targets: SampleTargets, settings: SampleSettings):
+        self.denoiser, self.rep, self.text_emb, self.settings = denoiser, rep, text_emb, settings
+        self.batch, T = targets.batch_size, settings.num_frames
+        self.c_dir, self.has_world = targets.c_dir, targets.has_world
+        self.world_xz, self.world_mask = targets.world_xz, targets.world_mask
+        self.mask, self.tgt = _working_targets(self.batch, T, rep.dim, targets.x_tgt, targets.mask, self.has_world)
+        self.smooth_frames = settings.root_smoothing * rep.fps
+        self.pelvis_frames = DEFAULT_ROOT_SIGMA_SECONDS * rep.fps
+        self.origin = tuple(float(v) for v in rep.normalize(torch.zeros(rep.dim))[rep.root_xz])
+        self.guidance, self.text_mask = settings.guidance, None
+        if text_emb is None:
+            self.text_mask = torch.zeros(self.batch, dtype=torch.bool)
+            if self.mask is None:
+                self.guidance = Guidance(mode="none")
+        self.keys = None
+        if self.mask is not None and settings.joint_sigma > 0:
+            keys = KeyjointTargets(rep, self.tgt, self.mask, self.world_xz if self.has_world else None,
+                                   self.world_mask if self.has_world else None)
+            self.keys = keys if keys.any else None
+
+    def __call__(self, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        rep, s, mask = self.rep, self.settings, self.mask
+        tgt_n = None if mask is None else rep.normalize(self.tgt) * mask
+        x0 = self.denoiser.forward_guided(x_t, t, self.text_emb, self.c_dir, tgt_n, mask, None, self.guidance,
+                                          text_mask=self.text_mask)
+        rxz = rep.root_xz
+        if self.smooth_frames > 0:
             x0 = x0.clone()
-            x0[..., rxz] = smooth_time(x0[..., rxz], smooth_frames)
-        if root_displacement:
-            aim = tgt_n if mask is None else pelvis_offset_targets(x0, tgt_n, mask, denoiser, pelvis_frames)
-            x0 = displace_root(x0, aim, mask, anchor_start=anchor_start, origin=origin, channels=rxz)
-        if keys is not None:  # metres / std: the displacement in the normalised joint_pos channels
-            disp = joint_displacement(denoiser.denormalize(x0), keys, joint_poser, joint_sigma * denoiser.config.fps)
+            x0[..., rxz] = smooth_time(x0[..., rxz], self.smooth_frames)
+        if s.root_displacement:
+            aim = tgt_n if mask is None else pelvis_offset_targets(x0, tgt_n, mask, rep, self.pelvis_frames)
+            x0 = displace_root(x0, aim, mask, anchor_start=s.anchor_start, origin=self.origin, channels=rxz)
+        if self.keys is not None:  # metres / std: the displacement in the normalised joint_pos channels
+            disp = joint_displacement(rep.denormalize(x0), self.keys, rep, s.joint_sigma * rep.fps)
+            jp = rep.joint_pos
             x0 = x0.clone()
-            x0[..., jp] = x0[..., jp] + disp.flatten(-2) / denoiser.feat_std[jp]
-        if has_world:
-            _refresh_world(denoiser, x0, world_xz, world_mask, tgt, mask)
+            x0[..., jp] = x0[..., jp] + disp.flatten(-2) / rep.std[jp]
+        if self.has_world:
+            _refresh_world(rep, x0, self.world_xz, self.world_mask, self.tgt, mask)
         return x0
-
-    x = sampler.sample(denoise, (B, num_frames, D), generator=generator, progress=progress, num_inference_steps=steps,
-                       init_noise=init_noise)
-    return denoiser.denormalize(x)
 
 
 def _working_targets(B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: torch.Tensor | None,
@@ -283,12 +302,11 @@ def _working_targets(B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: t
     return mask.float().clone(), torch.nan_to_num(x_tgt.float()).clone()
 
 
-def _refresh_world(denoiser: Denoiser, x0_norm: torch.Tensor, world_xz: torch.Tensor, world_mask: torch.Tensor,
-                   tgt: torch.Tensor, mask: torch.Tensor) -> None:
+def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor,
+                   world_mask: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor) -> None:
     """Re-target world-frame joints against the current root estimate: ``tgt``/``mask`` in place (unnormalised)."""
-    J = denoiser.config.num_joints
-    ix, iz = _world_channels(J)
-    root = denoiser.denormalize(x0_norm)[..., FeatureLayout(J).root_xz]  # (B, T, 2)
+    ix, iz = rep.joint_pos_axis(0), rep.joint_pos_axis(2)
+    root = rep.denormalize(x0_norm)[..., rep.root_xz]  # (B, T, 2)
     rel = world_xz - root[:, :, None, :]  # (B, T, J, 2)
     m = world_mask.float()
     tgt[..., ix] = torch.where(m > 0, rel[..., 0], tgt[..., ix])

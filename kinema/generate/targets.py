@@ -8,6 +8,7 @@ targets (joint positions and rotations, smoothed-root x/z, contacts) for kinema.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +19,6 @@ from kinema.constraints import (
     FootContactConstraint,
     FullBodyConstraint,
     Root2DConstraint,
-    encode_constraints,
     load_constraints,
 )
 from kinema.constraints.types import resolve_joint
@@ -27,27 +27,41 @@ from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
 from kinema.postprocess import PostTargets, postprocess
+from kinema.representation.flat import FlatRepresentation
 
 
-def encode_user_constraints(model, constraints, total_frames: int, constraints_fps: float | None = None):
-    """(constraint objects, x_tgt (T, D), mask (T, D), world_xz (T, J, 2) | None, world_mask (T, J) | None).
+@dataclass(frozen=True)
+class UserTargets:
+    """The user's constraints encoded for the whole output of ``T`` frames: unnormalised ``x_tgt`` /
+    ``mask (T, D)`` and world joint x/z ``world_xz (T, J, 2)`` where ``world_mask (T, J)`` (None when
+    no joint waits for the root)."""
+
+    x_tgt: torch.Tensor
+    mask: torch.Tensor
+    world_xz: torch.Tensor | None = None
+    world_mask: torch.Tensor | None = None
+
+
+def encode_user_constraints(rep: FlatRepresentation, constraints, total_frames: int,
+                            constraints_fps: float | None = None) -> tuple[list, UserTargets]:
+    """(constraint objects, their `UserTargets`) at ``rep.fps``.
 
     ``constraints_fps``: the rate a file's ``frame_indices`` were written at (default: the file's own
-    ``fps`` key, else the model's)."""
-    D = model.loaded.layout.dim
+    ``fps`` key, else the representation's)."""
+    D = rep.dim
     if constraints is None or (isinstance(constraints, list) and not constraints):
-        return [], torch.zeros(total_frames, D), torch.zeros(total_frames, D), None, None
+        return [], UserTargets(torch.zeros(total_frames, D), torch.zeros(total_frames, D))
     if isinstance(constraints, (str, Path)):
         constraints = Path(constraints)
     if constraints_fps is not None and not (isinstance(constraints_fps, (int, float)) and
                                             math.isfinite(constraints_fps) and constraints_fps > 0):
         raise KinemaError(f"constraints_fps must be a positive number, got {constraints_fps!r}")
-    cons = load_constraints(constraints, model.skeleton, model.fps, total_frames, source_fps=constraints_fps)
-    enc = encode_constraints(cons, model.skeleton, model.loaded.layout, model.fps, total_frames)
+    cons = load_constraints(constraints, rep.skeleton, rep.fps, total_frames, source_fps=constraints_fps)
+    enc = rep.encode(cons, total_frames)
     wxz, wm = enc.world_xz, enc.world_mask
     if wm is not None and not bool(wm.any()):
         wxz = wm = None
-    return cons, enc.x_tgt.float(), enc.mask.float(), wxz, wm
+    return cons, UserTargets(enc.x_tgt.float(), enc.mask.float(), wxz, wm)
 
 
 def _append(store: dict, key, frames: torch.Tensor, values: torch.Tensor) -> None:
@@ -102,8 +116,9 @@ def post_targets(constraints, skeleton, fps: float, num_frames: int) -> PostTarg
     return targets
 
 
-def run_postprocess(motion: Motion, constraints, model) -> tuple[Motion, dict]:
-    """Foot locking + IK + exact constraint hitting; returns the motion and a compact residual report."""
-    targets = post_targets(constraints, model.skeleton, model.fps, motion.num_frames) if constraints else None
-    motion, report = postprocess(motion, targets)
+def run_postprocess(motion: Motion, constraints, rep: FlatRepresentation) -> tuple[Motion, dict]:
+    """Foot locking + IK + exact constraint hitting on ``rep``'s rig; returns the motion and a compact
+    residual report."""
+    targets = post_targets(constraints, rep.skeleton, rep.fps, motion.num_frames) if constraints else None
+    motion, report = postprocess(motion, targets, rig=rep.rig)
     return motion, report

@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from kinema.errors import KinemaError
-from kinema.motion.features import ROOT_DIM, FeatureLayout
+from kinema.representation.layout import ROOT_DIM, FeatureLayout
 
 ONE_STAGE_SUFFIX = "-1stage"
 

@@ -33,8 +33,9 @@ from torch import nn
 from kinema.diffusion.guidance import Guidance, combine, split_branches, stack_branches
 from kinema.model.config import ModelConfig
 from kinema.model.layers import StageTransformer
-from kinema.motion.features import LOCAL_ROOT_DIM, ROOT_DIM, global_to_local_root
-from kinema.motion.stats import NormStats
+from kinema.representation.kimodo import global_to_local_root
+from kinema.representation.layout import LOCAL_ROOT_DIM, ROOT_DIM
+from kinema.representation.stats import NormStats
 
 
 def impute(x_t: torch.Tensor, x_tgt: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

@@ -15,8 +15,10 @@ from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
 from kinema.model.config import ModelConfig
 from kinema.model.denoiser import Denoiser
-from kinema.motion.features import FeatureLayout
-from kinema.motion.stats import NormStats
+from kinema.representation.flat import FlatRepresentation
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
+from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
 
@@ -35,7 +37,8 @@ def find_checkpoint(path: str | Path) -> Path:
 
 @dataclass
 class LoadedModel:
-    """A denoiser in eval mode plus its skeleton, fps, feature layout, sampler and guidance defaults."""
+    """A denoiser in eval mode plus its skeleton, fps, feature layout, representation (the rig, layout and
+    the denoiser's own normalisation statistics), sampler and guidance defaults."""
 
     denoiser: Denoiser
     skeleton: Skeleton
@@ -47,6 +50,7 @@ class LoadedModel:
     text_encoder_id: str
     info: dict
     path: Path
+    representation: FlatRepresentation
 
 
 def weights_file(ckpt: Path, ema: bool = True) -> Path:
@@ -100,9 +104,12 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
         model = Denoiser(config)
         model.load_state_dict({k: v.float() for k, v in state.items()})
         layout = FeatureLayout(int(info["feature_layout"]["num_joints"]))
+        skeleton = Skeleton.from_dict(info["skeleton"])
+        rep = FlatRepresentation(Rig.from_skeleton(skeleton), float(info["fps"]),
+                                 NormStats(model.feat_mean, model.feat_std))
         loaded = LoadedModel(
             denoiser=model.eval(),
-            skeleton=Skeleton.from_dict(info["skeleton"]),
+            skeleton=skeleton,
             fps=float(info["fps"]),
             layout=layout,
             stats=NormStats.from_dict(info["stats"]),
@@ -111,6 +118,7 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
             text_encoder_id=str(info["text_encoder"]),
             info=info,
             path=ckpt,
+            representation=rep,
         )
     except KinemaError as err:  # e.g. a SkeletonError for a malformed skeleton entry
         raise KinemaError(f"{ckpt}: cannot load model ({err})") from None

@@ -8,6 +8,7 @@ the ankle stands in for it (Bandai Namco: ``Foot_*`` and ``Toes_*``). The floor 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -43,16 +44,26 @@ def foot_contacts(
     skeleton: Skeleton,
     thresholds: ContactThresholds = ContactThresholds(),
     floor: float = 0.0,
+    joints: Sequence[int] | None = None,
 ) -> torch.Tensor:
-    """(T, 4) float {0, 1} contact flags from global positions (T, J, 3) in metres."""
-    idx = contact_joints(skeleton)
-    p = positions[:, idx]  # (T, 4, 3)
+    """(T, C) float {0, 1} contact flags from global positions (T, J, 3) in metres.
+
+    ``joints`` are the C contact joints (a rig's ``contacts``; default: the human four of
+    :func:`contact_joints`). A joint with children (an ankle) is planted below ``heel_height``, a leaf
+    (a toe, an insect's foot) below ``toe_height``."""
+    if joints is None:
+        idx = contact_joints(skeleton)
+        heights = [thresholds.heel_height, thresholds.toe_height] * 2
+    else:
+        idx = list(joints)
+        heights = [thresholds.heel_height if skeleton.children[j] else thresholds.toe_height for j in idx]
+    p = positions[:, idx]  # (T, C, 3)
     speed = torch.zeros(p.shape[:2], dtype=p.dtype)
     if p.shape[0] > 1:
         v = (p[1:] - p[:-1]).norm(dim=-1) * fps
         # speed of frame t: mean of the two adjacent finite differences
         speed[1:-1] = 0.5 * (v[1:] + v[:-1])
         speed[0], speed[-1] = v[0], v[-1]
-    h_thr = torch.tensor([thresholds.heel_height, thresholds.toe_height] * 2, dtype=p.dtype)
+    h_thr = torch.tensor(heights, dtype=p.dtype)
     planted = (p[..., 1] < floor + h_thr) & (speed < thresholds.speed)
     return planted.to(positions.dtype)

@@ -8,11 +8,14 @@ of the rest pose) and new global rotations ``G'_j = G_j G0_j^-1``. Joint positio
 
 from __future__ import annotations
 
+import math
+
 import torch
 
-from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
+from kinema.geometry.rotations import axis_angle_to_quat, quat_inverse, quat_mul, quat_rotate
 from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
+from kinema.motion.heading import heading_from_positions
 from kinema.skeleton import Skeleton
 
 
@@ -51,11 +54,6 @@ def rebase_rest_pose(motion: Motion, rest_local: torch.Tensor | None = None) -> 
 
 def standing_rest_pose(motion: Motion, frame: int = 0) -> torch.Tensor:
     """Local rotations (J, 4) of ``motion``'s pose at ``frame``, turned to face +Z (heading 0)."""
-    import math
-
-    from kinema.geometry.rotations import axis_angle_to_quat
-    from kinema.motion.features import heading_from_positions
-
     L = motion.local_rotations[frame].double().clone()
     h = heading_from_positions(motion.positions[frame : frame + 1].double(), motion.skeleton)[0]
     psi = math.atan2(float(h[1]), float(h[0]))

@@ -45,12 +45,13 @@ from kinema.geometry.rotations import (
     quat_to_axis_angle,
 )
 from kinema.kinematics import forward_kinematics
+from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
-from kinema.postprocess import PostTargets
 from kinema.postprocess.ik import limb_chain, single_thread, solve_ik, spread_corrections
 from kinema.postprocess.reach import clip_to_reach, reach_radius_seconds, reach_shift
 from kinema.postprocess.residuals import constraint_residuals, unmet_targets
+from kinema.postprocess.targets import PostTargets
 from kinema.postprocess.waypoints import frame_envelope, root_waypoints, smoothing_matrix
 
 
@@ -132,8 +133,6 @@ def optimise(
         S_rows = smoothing_matrix(T, sigma)[targets.root_xz[0]]
     planted = None
     if targets.contacts is not None:
-        from kinema.motion.contacts import contact_joints
-
         planted = torch.zeros(T, 4, dtype=torch.bool)
         planted[targets.contacts[0]] = targets.contacts[1] > 0.5
         planted = planted[1:] & planted[:-1]

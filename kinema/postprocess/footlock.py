@@ -24,14 +24,24 @@ some shortfall exceeds ``REACH_TOLERANCE``). Measured on the same 8 prompts: ska
 largest IK miss 33 -> 3 cm, pelvis moved by up to 0.5 m (walks, dances), 0.1 s per 5-s motion. Not in
 the paper.
 
+Any rig: the contact joints and legs come from a `kinema.rig.Rig` (human: [L heel, L toe, R heel, R toe]
+on the left and right legs). Each leg (a rig limb holding contact joints) locks its last two contacts
+as heel and toe (one contact: translate only) with two-bone IK on the three joints ending at its
+ankle (the heel joint, or the heel's parent when the heel is a side branch). An insect's six legs lock
+one after another; a rig without contacts (a fish) is returned unchanged.
+
 Foot skate is measured like the paper's metric: the mean horizontal speed (cm/s) of contact joints
 over consecutive frames that are both flagged as planted.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import torch
 
+from kinema.errors import KinemaError
 from kinema.geometry.rotations import (
     axis_angle_to_quat,
     quat_between,
@@ -42,7 +52,8 @@ from kinema.geometry.rotations import (
 from kinema.motion.contacts import contact_joints
 from kinema.motion.contacts import foot_contacts as estimate_contacts
 from kinema.motion.core import Motion
-from kinema.postprocess.ik import limb_chain, single_thread, solve_ik, spread_corrections
+from kinema.postprocess.ik import check_chain, single_thread, solve_ik, spread_corrections
+from kinema.rig import Rig
 
 PAD_SECONDS = 0.05
 REACH_TOLERANCE = 0.005  # metres of ankle shortfall below which the pelvis is left alone
@@ -85,10 +96,43 @@ def clean_contacts(
     return out
 
 
-def foot_skate(motion: Motion, planted: torch.Tensor) -> float:
-    """Mean horizontal speed (cm/s) of the contact joints over consecutive planted frames (0 if none)."""
-    P = motion.positions[:, contact_joints(motion.skeleton)][..., [0, 2]].to(torch.float64)
-    if P.shape[0] < 2:
+@dataclass(frozen=True)
+class LegLock:
+    """One leg's locking: IK ``chain`` (a, b, ankle), the contact channels of its heel and toe (``toe``
+    None for a leg with one contact joint) and their joints."""
+
+    chain: tuple[int, int, int]
+    heel: int
+    toe: int | None
+    heel_joint: int
+    toe_joint: int
+
+
+def leg_locks(rig: Rig) -> list[LegLock]:
+    """The legs of ``rig`` that foot locking can solve, in the rig's limb order (see module)."""
+    skel, out = rig.skeleton, []
+    for limb in rig.legs().values():
+        ks = sorted((k for k, j in enumerate(rig.contacts) if j in limb), key=lambda k: limb.index(rig.contacts[k]))
+        heel, toe = (ks[-2], ks[-1]) if len(ks) > 1 else (ks[0], None)
+        end = rig.contacts[heel]
+        if toe is not None and end not in skel.path_from_root(rig.contacts[toe]):
+            end = skel.parents[end]  # a heel beside the toe: the ankle is their common parent
+        path = skel.path_from_root(end)
+        if len(path) < 3:
+            continue
+        chain = (path[-3], path[-2], path[-1])
+        check_chain(skel, chain)
+        toe_joint = rig.contacts[heel] if toe is None else rig.contacts[toe]
+        out.append(LegLock(chain, heel, toe, rig.contacts[heel], toe_joint))
+    return out
+
+
+def foot_skate(motion: Motion, planted: torch.Tensor, joints: Sequence[int] | None = None) -> float:
+    """Mean horizontal speed (cm/s) of the contact ``joints`` (default: the human four) over consecutive
+    planted frames (0 if none)."""
+    joints = contact_joints(motion.skeleton) if joints is None else list(joints)
+    P = motion.positions[:, joints][..., [0, 2]].to(torch.float64)
+    if P.shape[0] < 2 or not joints:
         return 0.0
     both = planted[1:] & planted[:-1]
     speed = (P[1:] - P[:-1]).norm(dim=-1) * motion.fps
@@ -117,35 +161,45 @@ def foot_lock(
     min_seconds: float = 0.0,
     pad_seconds: float | None = None,
     reach_passes: int | None = None,
+    rig: Rig | None = None,
 ) -> tuple[Motion, dict]:
     """Lock planted heels/toes in place with leg IK; returns the new motion and a report.
 
-    ``contacts (T, 4)`` defaults to ``motion.foot_contacts`` and, when the motion has none, to
-    contacts estimated from joint heights and speeds. The report holds ``skate_before``/
+    ``rig`` (default: found from the motion's skeleton) names the contact joints and legs. ``contacts
+    (T, C)``, one column per contact joint, defaults to ``motion.foot_contacts`` and, when the motion has
+    none, to contacts estimated from joint heights and speeds. The report holds ``skate_before``/
     ``skate_after`` (cm/s), the number of locked segments and the largest remaining distance
     (cm) between a locked ankle and its target (non-zero only where the leg could not reach).
     """
     with single_thread():
         pad = PAD_SECONDS if pad_seconds is None else pad_seconds
         passes = REACH_PASSES if reach_passes is None else reach_passes
+        rig = Rig.from_skeleton(motion.skeleton) if rig is None else rig
+        legs = leg_locks(rig)
+        if not legs:  # a fish, or a rig whose contacts sit on no solvable leg: nothing to lock
+            return motion, {"skate_before": 0.0, "segments": 0, "root_shift_cm": 0.0, "max_ik_error_cm": 0.0,
+                            "skate_after": 0.0}
         return _foot_lock(motion, contacts, threshold, blend_seconds, floor, max_gap_seconds, min_seconds, pad,
-                          passes)
+                          passes, rig, legs)
 
 
 def _foot_lock(motion, contacts, threshold, blend_seconds, floor, max_gap_seconds, min_seconds, pad_seconds,
-               reach_passes):
+               reach_passes, rig: Rig, legs: list[LegLock]):
     if contacts is None:
         contacts = motion.foot_contacts
     if contacts is None:
-        contacts = estimate_contacts(motion.positions, motion.fps, motion.skeleton)
+        contacts = estimate_contacts(motion.positions, motion.fps, motion.skeleton, joints=rig.contacts)
+    if torch.as_tensor(contacts).shape[-1] != len(rig.contacts):
+        raise KinemaError(f"{torch.as_tensor(contacts).shape[-1]} contact channels for a rig with "
+                          f"{len(rig.contacts)} contact joints {rig.joint_names(rig.contacts)}")
     dtype = motion.dtype
     m = motion.to(torch.float64)
     planted = clean_contacts(torch.as_tensor(contacts), m.fps, threshold, max_gap_seconds, min_seconds,
                              pad_seconds)
     radius = max(blend_seconds * m.fps, 1.0)
-    locks, segments = _lock_points(m, planted, floor)
-    report = {"skate_before": foot_skate(m, planted), "segments": segments, "root_shift_cm": 0.0}
-    out, deficit = _apply_locks(m, planted, locks, radius)
+    locks, segments = _lock_points(m, planted, floor, rig.contacts)
+    report = {"skate_before": foot_skate(m, planted, rig.contacts), "segments": segments, "root_shift_cm": 0.0}
+    out, deficit = _apply_locks(m, planted, locks, radius, legs)
     moved = torch.zeros_like(m.root_translation)
     for _ in range(reach_passes):
         frames = torch.nonzero(deficit.norm(dim=-1) > REACH_TOLERANCE).flatten()
@@ -155,39 +209,39 @@ def _foot_lock(motion, contacts, threshold, blend_seconds, floor, max_gap_second
         m = Motion(m.skeleton, m.fps, m.root_translation + shift, m.local_rotations, m.foot_contacts)
         moved = moved + shift
         report["root_shift_cm"] = float(moved.norm(dim=-1).max()) * 100.0
-        out, deficit = _apply_locks(m, planted, locks, radius)
+        out, deficit = _apply_locks(m, planted, locks, radius, legs)
     report["max_ik_error_cm"] = float(deficit.norm(dim=-1).max()) * 100.0 if deficit.numel() else 0.0
-    report["skate_after"] = foot_skate(out, planted)
+    report["skate_after"] = foot_skate(out, planted, rig.contacts)
     result = Motion(out.skeleton, out.fps, out.root_translation, out.local_rotations, motion.foot_contacts)
     return result.to(dtype), report
 
 
-def _lock_points(m: Motion, planted: torch.Tensor, floor: float) -> tuple[dict, int]:
-    """Per contact joint index, its (T, 3) lock points (NaN off contact); and the number of segments."""
+def _lock_points(m: Motion, planted: torch.Tensor, floor: float, contacts: Sequence[int]) -> tuple[dict, int]:
+    """Per contact channel, its (T, 3) lock points (NaN off contact); and the number of segments."""
     P = m.positions
     locks, segments = {}, 0
-    for k, j in enumerate(contact_joints(m.skeleton)):
+    for k, j in enumerate(contacts):
         locks[k], segs = _locked_points(P[:, j], planted[:, k], floor)
         segments += len(segs)
     return locks, segments
 
 
-def _apply_locks(m: Motion, planted: torch.Tensor, locks: dict, radius: float) -> tuple[Motion, torch.Tensor]:
+def _apply_locks(m: Motion, planted: torch.Tensor, locks: dict, radius: float,
+                 legs: list[LegLock]) -> tuple[Motion, torch.Tensor]:
     """Move planted feet onto their lock points with leg IK. Returns the motion and, per frame, the
     mean horizontal ankle shortfall ``(T, 3)`` (metres, y = 0) over the legs planted on that frame:
     how far the pelvis would have to move for the legs to reach their locks."""
     T = m.num_frames
     G, P = m.global_transforms()
-    cj = contact_joints(m.skeleton)
     out = m
     shortfall = torch.zeros(T, 3, dtype=torch.float64)
-    legs = torch.zeros(T, dtype=torch.float64)
-    for side, (hk, tk) in (("left", (0, 1)), ("right", (2, 3))):
-        chain = limb_chain(m.skeleton, f"{side}_leg")
+    count = torch.zeros(T, dtype=torch.float64)
+    for leg in legs:
+        chain, hk, tk = leg.chain, leg.heel, leg.toe
         ankle = chain[2]
-        heel, toe = cj[hk], cj[tk]
-        heel_lock, toe_lock = locks[hk], locks[tk]
-        hl, tl = planted[:, hk], planted[:, tk]
+        heel, toe = leg.heel_joint, leg.toe_joint
+        heel_lock, hl = locks[hk], planted[:, hk]
+        toe_lock, tl = (locks[tk], planted[:, tk]) if tk is not None else (P[:, heel], torch.zeros_like(hl))
         any_lock = hl | tl
         if not any_lock.any():
             continue
@@ -209,5 +263,5 @@ def _apply_locks(m: Motion, planted: torch.Tensor, locks: dict, radius: float) -
         out = solve_ik(out, chain, target, weight=(env > 0).to(torch.float64), end_rotation=end_rot)
         miss = torch.where(any_lock[:, None], target - out.positions[:, ankle], torch.zeros_like(target))
         shortfall += miss * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
-        legs += any_lock.to(torch.float64)
-    return out, shortfall / legs.clamp_min(1.0)[:, None]
+        count += any_lock.to(torch.float64)
+    return out, shortfall / count.clamp_min(1.0)[:, None]

@@ -11,7 +11,7 @@ from kinema.geometry.rotations import quat_inverse, quat_mul
 from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
-from kinema.postprocess import PostTargets
+from kinema.postprocess.targets import PostTargets
 
 #: residuals above these are reported as unmet: a joint position (cm), a joint rotation (degrees) and a
 #: smoothed-root waypoint (cm; dense paths are fitted, not inverted: kinema.postprocess.waypoints)

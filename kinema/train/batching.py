@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import torch
 
-from kinema.motion.features import FeatureLayout
-from kinema.motion.stats import NormStats
-from kinema.motion.transform import canonicalize_start
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.stats import NormStats
+from kinema.representation.transform import canonicalize_start
 
 
 def step_generator(seed: int, rank: int, step: int) -> torch.Generator:

@@ -115,7 +115,7 @@ def load_init_weights(path: str | Path, model_config, layout, skeleton, fps: flo
     every field that differs.
     """
     from kinema.model.loading import weights_file
-    from kinema.motion.stats import NormStats
+    from kinema.representation.stats import NormStats
 
     ckpt = find_checkpoint(path)
     try:

@@ -1,4 +1,4 @@
-"""Constraint masks: public builders (one per constraint type) and phase-2 training-time sampling.
+"""Phase-2 training-time sampling of constraint masks (the builders live in kinema.representation.masks).
 
 Kimodo conditions on constraints by imputation (paper Sec. 4.2): a target motion ``x_tgt`` and a binary
 mask ``m`` over feature channels, ``x~_t = m * x_tgt + (1 - m) * x_t``. During training phase 2
@@ -38,96 +38,26 @@ from collections.abc import Mapping, Sequence
 import torch
 
 from kinema.errors import KinemaError
-from kinema.motion.features import FeatureLayout
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.masks import (
+    EFFECTORS,
+    contacts_mask,
+    effector_joints,
+    end_effector_mask,
+    fullbody_mask,
+    root2d_mask,
+    root_path_mask,
+)
 from kinema.skeleton import Skeleton
 
 PATTERNS = ("fullbody", "end_effector", "root2d", "root_path", "contacts")
-EFFECTORS = ("left_hand", "right_hand", "left_foot", "right_foot")
 P_NONE = 0.10
 P_PAIR = 0.25
 KEYFRAME_DECAY = 0.8
 
-Frames = Sequence[int] | torch.Tensor
-
-
-# ---------------------------------------------------------------------------- channel indices
-def _group(layout: FeatureLayout, name: str) -> list[int]:
-    return list(range(layout.slices[name].start, layout.slices[name].stop))
-
-
-def _joint_channels(layout: FeatureLayout, name: str, joints: Sequence[int]) -> list[int]:
-    """Channels of ``joints`` in a per-joint group (``joint_pos``: 3 each, ``joint_rot``: 6 each)."""
-    width = {"joint_pos": 3, "joint_vel": 3, "joint_rot": 6}[name]
-    s = layout.slices[name].start
-    return [s + width * j + c for j in joints for c in range(width)]
-
-
-def effector_joints(skeleton: Skeleton, effector: str) -> list[int]:
-    """Joint indices of an effector: ``left_hand`` -> [hand]; ``left_foot`` -> [ankle, toe] (those that
-    exist). Empty when the skeleton has none of them."""
-    if effector not in EFFECTORS:
-        raise KinemaError(f"unknown end effector {effector!r}; choose from {list(EFFECTORS)}")
-    side, part = effector.split("_")
-    roles = skeleton.roles
-    wanted = [f"{side}_hand"] if part == "hand" else [f"{side}_ankle", f"{side}_toe"]
-    return [roles[r] for r in wanted if r in roles]
-
-
-def _frames(frames: Frames, T: int) -> torch.Tensor:
-    f = torch.as_tensor(frames, dtype=torch.long).reshape(-1)
-    if f.numel() and (f.min() < 0 or f.max() >= T):
-        raise KinemaError(f"constraint frames {f.tolist()} fall outside a {T}-frame motion")
-    return f
-
-
-def _mask(T: int, layout: FeatureLayout, frames: Frames, channels: Sequence[int]) -> torch.Tensor:
-    m = torch.zeros(T, layout.dim)
-    f = _frames(frames, T)
-    if f.numel() and len(channels):
-        m[f[:, None], torch.as_tensor(channels, dtype=torch.long)[None, :]] = 1.0
-    return m
-
-
-# ---------------------------------------------------------------------------- public builders
-def fullbody_mask(T: int, frames: Frames, layout: FeatureLayout) -> torch.Tensor:
-    """(T, D): root_pos, heading, joint_pos and joint_rot of every joint at ``frames``."""
-    ch = _group(layout, "root_pos") + _group(layout, "heading") + _group(layout, "joint_pos")
-    return _mask(T, layout, frames, ch + _group(layout, "joint_rot"))
-
-
-def end_effector_mask(
-    T: int,
-    frames: Frames,
-    layout: FeatureLayout,
-    skeleton: Skeleton,
-    positions: Sequence[str] = (),
-    rotations: Sequence[str] = (),
-) -> torch.Tensor:
-    """(T, D): joint_pos of the ``positions`` effectors, joint_rot of the ``rotations`` effectors (names
-    from :data:`EFFECTORS`) and root_pos x/z, at ``frames``."""
-    pos_j = [j for e in positions for j in effector_joints(skeleton, e)]
-    rot_j = [j for e in rotations for j in effector_joints(skeleton, e)]
-    ch = layout.root_xz + _joint_channels(layout, "joint_pos", pos_j)
-    return _mask(T, layout, frames, ch + _joint_channels(layout, "joint_rot", rot_j))
-
-
-def root2d_mask(T: int, frames: Frames, layout: FeatureLayout, heading: bool = False) -> torch.Tensor:
-    """(T, D): root_pos x/z (and heading when ``heading``) at ``frames`` (2D waypoints)."""
-    return _mask(T, layout, frames, layout.root_xz + (_group(layout, "heading") if heading else []))
-
-
-def root_path_mask(
-    T: int, start: int, end: int, layout: FeatureLayout, heading: bool = False
-) -> torch.Tensor:
-    """(T, D): root_pos x/z (and heading) on every frame of ``[start, end)`` (a dense 2D path)."""
-    if not 0 <= start <= end <= T:
-        raise KinemaError(f"root path [{start}, {end}) does not fit a {T}-frame motion")
-    return root2d_mask(T, range(start, end), layout, heading)
-
-
-def contacts_mask(T: int, frames: Frames, layout: FeatureLayout) -> torch.Tensor:
-    """(T, D): the 4 foot contact channels at ``frames``."""
-    return _mask(T, layout, frames, _group(layout, "contacts"))
+__all__ = ["EFFECTORS", "PATTERNS", "contacts_mask", "effector_joints", "end_effector_mask", "fullbody_mask",
+           "max_keyframes_at", "root2d_mask", "root_path_mask", "sample_batch_masks", "sample_constraint_mask",
+           "sample_num_keyframes"]
 
 
 # ---------------------------------------------------------------------------- sampling

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.motion.features import FeatureLayout
+from kinema.representation.layout import FeatureLayout
 
 
 def _rotate_xz(v: torch.Tensor, c: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
@@ -45,9 +45,9 @@ def translate_features(features: torch.Tensor, offset_xz: torch.Tensor, layout: 
 
     Only the smoothed root moves: joint positions are stored relative to it."""
     out = features.clone()
-    sl = layout.slices["root_pos"]
-    out[..., sl.start] = out[..., sl.start] + offset_xz[..., 0:1]
-    out[..., sl.start + 2] = out[..., sl.start + 2] + offset_xz[..., 1:2]
+    x, z = layout.root_xz
+    out[..., x] = out[..., x] + offset_xz[..., 0:1]
+    out[..., z] = out[..., z] + offset_xz[..., 1:2]
     return out
 
 
@@ -57,7 +57,7 @@ def canonicalize_start(features: torch.Tensor, layout: FeatureLayout, angle=None
     This is the Kimodo training normalisation: first-frame root above the origin, random first-frame
     heading (the model learns to follow ``c_dir`` rather than a canonical facing)."""
     sl = layout.slices
-    start = features[..., 0, sl["root_pos"]][..., [0, 2]]
+    start = features[..., 0, layout.root_xz]
     out = translate_features(features, -start, layout)
     if angle is not None:
         hc, hs = features[..., 0, sl["heading"]].unbind(-1)

@@ -49,9 +49,10 @@ from kinema.constraints.types import (
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, quat_to_sixd
 from kinema.kinematics import forward_kinematics
-from kinema.motion.features import FeatureLayout, heading_from_positions
+from kinema.representation.kimodo import heading_from_positions
+from kinema.representation.layout import FeatureLayout
+from kinema.representation.masks import contacts_mask, fullbody_mask, root2d_mask, root_path_mask
 from kinema.skeleton import Skeleton
-from kinema.train.constraints import contacts_mask, fullbody_mask, root2d_mask, root_path_mask
 
 
 @dataclass
@@ -97,9 +98,7 @@ class _State:
         self.wxz = torch.zeros(T, J, 2, dtype=torch.float64)
         self.wm = torch.zeros(T, J, dtype=torch.bool)
         self.kinds: dict[str, set[int]] = {}
-        s = layout.slices
-        self.rp, self.hd = s["root_pos"].start, s["heading"].start
-        self.jp, self.jr = s["joint_pos"].start, s["joint_rot"].start
+        self.root_xz = layout.root_xz
 
     def put_rows(self, frames: Sequence[int], rows: torch.Tensor, mask: torch.Tensor) -> None:
         """Write feature rows ``(K, D)`` at ``frames`` on the channels of ``mask (T, D)`` (later wins)."""
@@ -128,12 +127,10 @@ class _State:
 
     def finish(self, dtype: torch.dtype) -> ConstraintTargets:
         """Turn world joint x/z into relative features where the root x/z is known."""
-        rp, jp = self.rp, self.jp
-        J = self.layout.num_joints
-        known = (self.m[:, rp] & self.m[:, rp + 2])[:, None] & self.wm  # (T, J)
+        known = self.m[:, self.root_xz].all(-1)[:, None] & self.wm  # (T, J)
         for axis, c in ((0, 0), (1, 2)):
-            ch = jp + 3 * torch.arange(J) + c  # (J,)
-            rel = self.wxz[..., axis] - self.x[:, rp + c][:, None]
+            ch = self.layout.joint_axis("joint_pos", c)  # (J,)
+            rel = self.wxz[..., axis] - self.x[:, self.root_xz[axis]][:, None]
             self.x[:, ch] = torch.where(known, rel, self.x[:, ch])
             self.m[:, ch] |= known
         wm = self.wm & ~known
@@ -159,7 +156,7 @@ def _fullbody(c: FullBodyConstraint, frames: list[int], st: _State, skeleton: Sk
     parts["joint_rot"][:] = quat_to_sixd(G)
     mask = fullbody_mask(T, frames, layout).bool()
     J = layout.num_joints
-    xz = torch.cat([st.jp + 3 * torch.arange(J), st.jp + 3 * torch.arange(J) + 2])
+    xz = layout.joint_channels("joint_pos", coords=[0, 2])
     mask[:, xz] = False  # joint x/z go through the world store, resolved against the final root
     st.put_rows(frames, rows, mask)
     st.put_world(frames, range(J), P[..., [0, 2]])
@@ -169,12 +166,12 @@ def _fullbody(c: FullBodyConstraint, frames: list[int], st: _State, skeleton: Sk
 def _end_effector(c: EndEffectorConstraint, frames: list[int], st: _State, skeleton: Skeleton) -> None:
     j = resolve_joint(skeleton, c.joint)
     if c.smooth_root_2d is not None:
-        st.put(frames, [st.rp, st.rp + 2], c.smooth_root_2d)
+        st.put(frames, st.root_xz, c.smooth_root_2d)
     if c.positions is not None:
-        st.put(frames, [st.jp + 3 * j + 1], c.positions[:, 1:2])
+        st.put(frames, st.layout.joint_channels("joint_pos", [j], [1]), c.positions[:, 1:2])
         st.put_world(frames, [j], c.positions[:, None, [0, 2]])
     if c.rotations is not None:
-        st.put(frames, range(st.jr + 6 * j, st.jr + 6 * j + 6), quat_to_sixd(axis_angle_to_quat(c.rotations)))
+        st.put(frames, st.layout.joint_channels("joint_rot", [j]), quat_to_sixd(axis_angle_to_quat(c.rotations)))
     st.touch(f"end-effector:{skeleton.names[j]}", frames)
 
 
@@ -201,9 +198,9 @@ def _root2d(c: Root2DConstraint, frames: list[int], st: _State, skeleton: Skelet
         heading = None if c.heading is None else c.heading / c.heading.norm(dim=-1, keepdim=True)
         mask = root2d_mask(T, frames, layout, heading=heading is not None)
     rows = torch.zeros(len(frames), layout.dim, dtype=torch.float64)
-    rows[:, [st.rp, st.rp + 2]] = pos.to(rows)
+    rows[:, st.root_xz] = pos.to(rows)
     if heading is not None:
-        rows[:, st.hd:st.hd + 2] = heading.to(rows)
+        rows[:, layout.slices["heading"]] = heading.to(rows)
     st.put_rows(frames, rows, mask)
     st.touch("root2d:dense" if c.dense else "root2d", frames)
 
@@ -248,15 +245,13 @@ def world_to_relative(targets: ConstraintTargets, root_xz: torch.Tensor,
     ``targets`` made relative to ``root_xz (..., T, 2)`` (the current clean estimate's root_pos x/z,
     unnormalised) and masked; other channels are ``targets.x_tgt``/``targets.mask``. Call it at every
     denoising step, after imputing the constrained root channels into the estimate."""
-    J = layout.num_joints
     x = targets.x_tgt.to(root_xz).expand(*root_xz.shape[:-1], layout.dim).clone()
     m = targets.mask.to(root_xz).expand_as(x).clone()
     if not targets.has_world:
         return x, m
     wm = targets.world_mask.to(root_xz).bool()  # (T, J)
-    jp = layout.slices["joint_pos"].start
     for axis, c in ((0, 0), (1, 2)):
-        ch = jp + 3 * torch.arange(J, device=x.device) + c
+        ch = layout.joint_axis("joint_pos", c, device=x.device)
         rel = targets.world_xz[..., axis].to(root_xz) - root_xz[..., axis:axis + 1]  # (..., T, J)
         x[..., ch] = torch.where(wm, rel, x[..., ch])
         m[..., ch] = torch.where(wm, torch.ones_like(rel), m[..., ch])

@@ -17,89 +17,15 @@ reproduces joint positions up to float precision. Shapes: features ``(..., T, D)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 
 from kinema.geometry.rotations import quat_to_sixd, sixd_to_quat
 from kinema.motion.contacts import ContactThresholds, foot_contacts
 from kinema.motion.core import Motion
+from kinema.motion.heading import heading_from_positions
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
+from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
-
-ROOT_DIM = 5
-LOCAL_ROOT_DIM = 4
-CONTACT_DIM = 4
-
-
-@dataclass(frozen=True)
-class FeatureLayout:
-    """Where each feature group lives in the per-frame vector, for a skeleton of ``num_joints``."""
-
-    num_joints: int
-
-    @property
-    def dim(self) -> int:
-        return ROOT_DIM + 12 * self.num_joints + CONTACT_DIM
-
-    @property
-    def body_dim(self) -> int:
-        return self.dim - ROOT_DIM
-
-    @property
-    def slices(self) -> dict[str, slice]:
-        J = self.num_joints
-        edges = {"root_pos": 3, "heading": 2, "joint_pos": 3 * J, "joint_vel": 3 * J, "joint_rot": 6 * J,
-                 "contacts": CONTACT_DIM}
-        out, start = {}, 0
-        for name, size in edges.items():
-            out[name] = slice(start, start + size)
-            start += size
-        return out
-
-    @property
-    def root_xz(self) -> list[int]:
-        """Channel indices of the smoothed root's ground-plane x and z (metres before normalisation)."""
-        start = self.slices["root_pos"].start
-        return [start, start + 2]
-
-    def split(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Named views of ``x (..., D)``; per-joint groups reshaped to ``(..., J, C)``."""
-        J = self.num_joints
-        s = self.slices
-        return {
-            "root_pos": x[..., s["root_pos"]],
-            "heading": x[..., s["heading"]],
-            "joint_pos": x[..., s["joint_pos"]].unflatten(-1, (J, 3)),
-            "joint_vel": x[..., s["joint_vel"]].unflatten(-1, (J, 3)),
-            "joint_rot": x[..., s["joint_rot"]].unflatten(-1, (J, 6)),
-            "contacts": x[..., s["contacts"]],
-        }
-
-    def xz_pairs(self) -> list[tuple[int, int]]:
-        """(x, z) channel index pairs of every ground-plane vector: root position, heading (cos, sin),
-        and per joint its position, velocity and both 6D rotation columns."""
-        s = self.slices
-        pairs = [(s["root_pos"].start, s["root_pos"].start + 2), (s["heading"].start, s["heading"].start + 1)]
-        for group, width in (("joint_pos", 3), ("joint_vel", 3), ("joint_rot", 3)):
-            start = s[group].start
-            n = (s[group].stop - start) // width
-            pairs += [(start + k * width, start + k * width + 2) for k in range(n)]
-        return pairs
-
-    def to_dict(self) -> dict:
-        return {"num_joints": self.num_joints, "dim": self.dim,
-                "slices": {k: [v.start, v.stop] for k, v in self.slices.items()}}
-
-
-def heading_from_positions(positions: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
-    """Heading ``(cos psi, sin psi)`` (..., T, 2) from global positions (..., T, J, 3)."""
-    roles = skeleton.require_roles(["left_hip", "right_hip"])
-    v = positions[..., roles["right_hip"], :] - positions[..., roles["left_hip"], :]
-    # e_y x v = (v_z, 0, -v_x); psi measured from +Z towards +X
-    fx, fz = v[..., 2], -v[..., 0]
-    norm = torch.sqrt(fx**2 + fz**2).clamp_min(1e-9)
-    return torch.stack([fz / norm, fx / norm], dim=-1)
 
 
 def motion_to_features(
