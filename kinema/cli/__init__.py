@@ -28,6 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
         render,
         serve,
         train,
+        train_anyrig,
     )
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
@@ -38,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
         inspect,
         data,
         train,
+        train_anyrig,
         export,
         bench,
         render,
