@@ -20,9 +20,11 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.generate.anyrig_api import AnyRigModel
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
+from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.motion.core import Motion
 from kinema.representation.flat import FlatRepresentation
@@ -168,8 +170,14 @@ class KinemaModel:
             residuals.append(report)
         warnings = [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
-            seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
-            guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
+            seconds=time.perf_counter() - t0,
+            segments=len(segments),
+            frames=plan.total_frames,
+            steps=steps,
+            guidance=(guide.w_text, guide.w_constr),
+            seed=seed,
+            residuals=residuals,
+            warnings=warnings,
         )
         return GenerationResult(motions, report)
 
@@ -181,8 +189,10 @@ class KinemaModel:
         if steps is None:
             steps = self.loaded.sampler.num_inference_steps
         if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= self.max_steps:
-            raise KinemaError(f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
-                              f"diffusion length), got {steps!r}")
+            raise KinemaError(
+                f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
+                f"diffusion length), got {steps!r}"
+            )
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**64:
             raise KinemaError(f"seed must be an integer in [0, 2**64), got {seed!r}")
         return samples, steps, seed
@@ -210,8 +220,10 @@ class KinemaModel:
             raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {guidance!r}") from None
         for name, w in (("w_text", w_text), ("w_constr", w_constr)):
             if not (math.isfinite(w) and w >= 0):
-                raise KinemaError(f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
-                                  f"conditional model alone, > 1 = stronger), got {w}")
+                raise KinemaError(
+                    f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
+                    f"conditional model alone, > 1 = stronger), got {w}"
+                )
         return Guidance(mode="separated", w_text=w_text, w_constr=w_constr)
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
@@ -234,20 +246,31 @@ class KinemaModel:
         motions: list[Motion] | None = None
         rep, L = self.representation, self.loaded
         for k, seg in enumerate(plan.segments):
-            rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
-                    else [plan.segment_targets(k, m, heading) for m in motions])
+            rows = (
+                [plan.segment_targets(k, None, heading)] * samples
+                if motions is None
+                else [plan.segment_targets(k, m, heading) for m in motions]
+            )
             targets, shift = stack_targets(rows)
-            settings = SampleSettings(seg.num_frames, guide, steps, root_displacement=self.root_displacement,
-                                      anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
-                                      joint_sigma=self.joint_sigma)
+            settings = SampleSettings(
+                seg.num_frames,
+                guide,
+                steps,
+                root_displacement=self.root_displacement,
+                anchor_start=self.root_displacement,
+                root_smoothing=self.root_smoothing,
+                joint_sigma=self.joint_sigma,
+            )
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
-            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
-                                    progress=progress)
+            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=progress)
             rep.shift_root_xz(feats, shift[:, None])
             parts = [rep.to_motion(f) for f in feats]
-            motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
-                                                                                                 strict=True)]
+            motions = (
+                parts
+                if motions is None
+                else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts, strict=True)]
+            )
         assert motions is not None
         return motions
 
@@ -263,20 +286,29 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
         return shipped
     path = Path(name_or_path)
     if not path.exists():
+        from importlib.resources import files
+
+        shipped = Path(str(files("kinema") / "assets" / "models")) / str(name_or_path)
+        if path.name == str(name_or_path) and (shipped / "checkpoint.json").exists():
+            return shipped  # another model shipped inside the package, e.g. "creatures"
         raise KinemaError(f"{path}: no such model folder")
     return path
 
 
-def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel:
+def load_model(
+    name_or_path: str | Path = "default", text_cache: Path | None = None, text_memory: int = TEXT_MEMORY_ENTRIES
+) -> KinemaModel | AnyRigModel:
     """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
     so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
     behind it that persists between processes (the CLI passes ``cache/text``).
     """
-    loaded = load_denoiser(resolve_model_path(name_or_path))
+    path = resolve_model_path(name_or_path)
+    loaded = load_anyrig(path) if is_anyrig_checkpoint(path) else load_denoiser(path)
     encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
     if text_memory:
         encoder = MemoryCachedEncoder(encoder, text_memory)
-    return KinemaModel(loaded, encoder)
+    if isinstance(loaded, LoadedModel):
+        return KinemaModel(loaded, encoder)
+    return AnyRigModel(loaded, encoder)
