@@ -170,14 +170,8 @@ class KinemaModel:
             residuals.append(report)
         warnings = [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
-            seconds=time.perf_counter() - t0,
-            segments=len(segments),
-            frames=plan.total_frames,
-            steps=steps,
-            guidance=(guide.w_text, guide.w_constr),
-            seed=seed,
-            residuals=residuals,
-            warnings=warnings,
+            seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
+            guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
         )
         return GenerationResult(motions, report)
 
@@ -189,10 +183,8 @@ class KinemaModel:
         if steps is None:
             steps = self.loaded.sampler.num_inference_steps
         if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= self.max_steps:
-            raise KinemaError(
-                f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
-                f"diffusion length), got {steps!r}"
-            )
+            raise KinemaError(f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
+                              f"diffusion length), got {steps!r}")
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**64:
             raise KinemaError(f"seed must be an integer in [0, 2**64), got {seed!r}")
         return samples, steps, seed
@@ -220,10 +212,8 @@ class KinemaModel:
             raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {guidance!r}") from None
         for name, w in (("w_text", w_text), ("w_constr", w_constr)):
             if not (math.isfinite(w) and w >= 0):
-                raise KinemaError(
-                    f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
-                    f"conditional model alone, > 1 = stronger), got {w}"
-                )
+                raise KinemaError(f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
+                                  f"conditional model alone, > 1 = stronger), got {w}")
         return Guidance(mode="separated", w_text=w_text, w_constr=w_constr)
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
@@ -246,31 +236,20 @@ class KinemaModel:
         motions: list[Motion] | None = None
         rep, L = self.representation, self.loaded
         for k, seg in enumerate(plan.segments):
-            rows = (
-                [plan.segment_targets(k, None, heading)] * samples
-                if motions is None
-                else [plan.segment_targets(k, m, heading) for m in motions]
-            )
+            rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
+                    else [plan.segment_targets(k, m, heading) for m in motions])
             targets, shift = stack_targets(rows)
-            settings = SampleSettings(
-                seg.num_frames,
-                guide,
-                steps,
-                root_displacement=self.root_displacement,
-                anchor_start=self.root_displacement,
-                root_smoothing=self.root_smoothing,
-                joint_sigma=self.joint_sigma,
-            )
+            settings = SampleSettings(seg.num_frames, guide, steps, root_displacement=self.root_displacement,
+                                      anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
+                                      joint_sigma=self.joint_sigma)
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
-            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=progress)
+            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
+                                    progress=progress)
             rep.shift_root_xz(feats, shift[:, None])
             parts = [rep.to_motion(f) for f in feats]
-            motions = (
-                parts
-                if motions is None
-                else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts, strict=True)]
-            )
+            motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
+                                                                                                 strict=True)]
         assert motions is not None
         return motions
 
@@ -295,9 +274,8 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     return path
 
 
-def load_model(
-    name_or_path: str | Path = "default", text_cache: Path | None = None, text_memory: int = TEXT_MEMORY_ENTRIES
-) -> KinemaModel | AnyRigModel:
+def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
+               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel | AnyRigModel:
     """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
@@ -311,4 +289,4 @@ def load_model(
         encoder = MemoryCachedEncoder(encoder, text_memory)
     if isinstance(loaded, LoadedModel):
         return KinemaModel(loaded, encoder)
-    return AnyRigModel(loaded, encoder)
+    return AnyRigModel(loaded, encoder)  # a model for any rig (kinema.generate.anyrig_api)
