@@ -25,7 +25,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_sampling import FeatureTargets
-from kinema.geometry.rotations import quat_rotate
+from kinema.geometry.rotations import quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation, yaw_quat
@@ -124,21 +124,27 @@ def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRe
     G, P = motion.global_transforms()
     psi = rep.heading(G)
     root = rep.rig.root
-    joints: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
+    positions: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
+    rotations: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
 
-    def add(j: int, f: int, local: torch.Tensor) -> None:
-        world = P[f, root] + quat_rotate(yaw_quat(psi[f]), local.to(P.dtype))
-        joints.setdefault(j, ([], []))[0].append(f)
-        joints[j][1].append(world)
+    def add(into: dict, j: int, f: int, value: torch.Tensor) -> None:
+        into.setdefault(j, ([], []))[0].append(f)
+        into[j][1].append(value)
 
     for c in constraints:
         if isinstance(c, JointTarget):
-            add(_joint(rep, c.joint), c.frame, torch.as_tensor(c.position, dtype=torch.float64))
-        elif isinstance(c, Keyframe):
+            local = torch.as_tensor(c.position, dtype=torch.float64)
+            add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
+        elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
             pose = c.pose.to(torch.float64)
             Gp, Pp = pose.global_transforms()
-            inv = yaw_quat(-rep.heading(Gp)[c.pose_frame])
+            turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
             for j in range(motion.num_joints):
-                if j != root:
-                    add(j, c.frame, quat_rotate(inv, Pp[c.pose_frame, j] - Pp[c.pose_frame, root]))
-    return PostTargets(joint_positions={j: (torch.tensor(fs), torch.stack(ps)) for j, (fs, ps) in joints.items()})
+                add(rotations, j, c.frame, quat_mul(turn, Gp[c.pose_frame, j]))
+                local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root])
+                add(positions, j, c.frame, P[c.frame, root] + local)  # the root itself stays where it was
+
+    def pack(d: dict) -> dict:
+        return {j: (torch.tensor(fs), torch.stack(vs)) for j, (fs, vs) in d.items()}
+
+    return PostTargets(joint_positions=pack(positions), joint_rotations=pack(rotations))

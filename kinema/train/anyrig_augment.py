@@ -7,8 +7,8 @@ joints named ``<child>_aug``):
   path is shifted vertically so the lowest point of the clip stays where it was;
 - `insert_joint`: one bone split in two at a random fraction by a new joint with an identity local
   rotation, so every existing joint keeps its world position exactly;
-- `remove_leaf`: one leaf joint that is not the root, a contact or the only child dropped; the others
-  keep their world positions exactly;
+- `remove_leaf`: one leaf joint (never the root or one of ``keep``, e.g. the contacts) dropped; the
+  others keep their world positions exactly;
 - `reset_rest`: new local frames for some joints (a random rotation ``Q_j`` per joint; global
   rotations become ``G_j Q_j``, children's offsets ``Q_p^-1 o``), so joint positions are unchanged
   while rotation features and the rest pose change -- the model must read rotations through RestPE.
@@ -92,7 +92,7 @@ def _fresh(names, name: str) -> str:
 def remove_leaf(m: Motion, gen: torch.Generator, keep=()) -> Motion:
     skel = m.skeleton
     kids = skel.children
-    leaves = [j for j in range(1, skel.num_joints) if not kids[j] and j not in keep and len(kids[skel.parents[j]]) > 1]
+    leaves = [j for j in range(1, skel.num_joints) if not kids[j] and j not in keep]
     if not leaves or skel.num_joints <= 3:
         return m
     d = leaves[int(torch.randint(len(leaves), (1,), generator=gen))]

@@ -85,6 +85,11 @@ class AnyRigTrainer:
         )
         self.schedule = NoiseSchedule()
         encoder = get_text_encoder(cfg.text_encoder, cache_dir=text_cache)
+        if encoder.dim != model_config.text_dim:
+            raise KinemaError(
+                f"text encoder {cfg.text_encoder} gives {encoder.dim}-d embeddings; the model "
+                f"config expects text_dim {model_config.text_dim}"
+            )
         captions = sorted({c for clip in self.clips.clips for c in clip.captions})
         self.text = dict(zip(captions, encoder.encode(captions), strict=True))
         self.text_dim = encoder.dim
