@@ -17,9 +17,11 @@ the motion (and so the root position and heading at each frame) is known.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
@@ -148,3 +150,51 @@ def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRe
         return {j: (torch.tensor(fs), torch.stack(vs)) for j, (fs, vs) in d.items()}
 
     return PostTargets(joint_positions=pack(positions), joint_rotations=pack(rotations))
+
+
+def _number_list(value, n: int | None, where: str) -> list[float]:
+    if (
+        not isinstance(value, list)
+        or (n is not None and len(value) != n)
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        raise KinemaError(f"{where}: expected a list of {n or 'some'} numbers, got {value!r}")
+    return [float(v) for v in value]
+
+
+def _from_json(i: int, obj, where: str) -> Constraint:
+    at = f"{where}[{i}]"
+    if not isinstance(obj, dict) or obj.get("type") not in ("joint", "root_path"):
+        raise KinemaError(f"{at}: expected an object with type 'joint' or 'root_path'")
+    if obj["type"] == "joint":
+        unknown = set(obj) - {"type", "joint", "frame", "position"}
+        if unknown or not isinstance(obj.get("joint"), (str, int)) or not isinstance(obj.get("frame"), int):
+            raise KinemaError(
+                f"{at}: a joint target is {{type, joint (name or index), frame (int), position [x, y, z]}}"
+            )
+        return JointTarget(
+            joint=obj["joint"], frame=obj["frame"], position=tuple(_number_list(obj.get("position"), 3, at))
+        )
+    unknown = set(obj) - {"type", "frames", "xz"}
+    frames, xz = obj.get("frames"), obj.get("xz")
+    if (
+        unknown
+        or not isinstance(frames, list)
+        or not all(isinstance(f, int) for f in frames)
+        or not isinstance(xz, list)
+    ):
+        raise KinemaError(f"{at}: a root path is {{type, frames [int, ...], xz [[x, z], ...]}}")
+    return RootPath(frames=frames, xz=[tuple(_number_list(p, 2, f"{at}.xz")) for p in xz])
+
+
+def read_constraints(path: str | Path) -> list[Constraint]:
+    """Constraints from a JSON list: ``{"type": "joint", "joint": "Head", "frame": 10, "position": [x, y, z]}``
+    (character frame, metres) and ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+        raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+    if not isinstance(data, list):
+        raise KinemaError(f"{path}: any-rig constraints are a JSON list of objects")
+    return [_from_json(i, obj, str(path)) for i, obj in enumerate(data)]
