@@ -28,14 +28,16 @@ from kinema.errors import KinemaError
 from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_sampling import sample_features, window_starts
+from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
 from kinema.model.anyrig_loading import LoadedAnyRig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
 from kinema.postprocess import postprocess as run_postprocess
-from kinema.representation.joint import JointRepresentation
+from kinema.representation.joint import JointRepresentation, yaw_quat
 from kinema.rig import Rig
+from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
 
 
@@ -177,8 +179,9 @@ class AnyRigModel:
         return Guidance(self.loaded.guidance.mode, w_text, w_constr)
 
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
-        m = rep_n.to_motion(f)
-        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts)
+        m = with_floor_translations(rep_n.to_motion(f), f, rep_n)
+        lt = None if m.local_translations is None else m.local_translations / scale
+        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if not postprocess:
             return motion
         rep_m = JointRepresentation(rig_m, self.fps)
@@ -191,6 +194,34 @@ class AnyRigModel:
             for j, (frames, pos) in targets.joint_positions.items():
                 report.residuals_cm += (100 * (P[frames, j] - pos).norm(dim=-1)).tolist()
         return motion
+
+
+def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
+    """Children of joint 0 when joint 0 is an armature helper on the floor (its rest height within
+    ``band`` of the lowest joint, relative to the rig's size) with several children: Quaternius rigs
+    move their body and IK-driven feet by animating these bones' translations, not rotations."""
+    P = rest_positions(skeleton)
+    extent = float((P.max(0).values - P.min(0).values).max())
+    kids = skeleton.children[0]
+    if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
+        return []
+    return list(kids)
+
+
+def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
+    """``m`` (posed from rotations) with the translations of `floor_root_children` taken from the predicted
+    joint positions ``feats (T, J, 13)``, so feet driven by IK bones follow the model (rig units)."""
+    joints = floor_root_children(m.skeleton)
+    if not joints or rep.rig.root != 0:
+        return m
+    G, P = m.global_transforms()
+    f = feats.to(P.dtype)
+    psi = torch.atan2(f[:, 0, 10], f[:, 0, 9])
+    T = m.num_frames
+    world = P[:, :1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
+    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - P[:, :1])
+    return Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, m.foot_contacts, lt)
 
 
 def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
