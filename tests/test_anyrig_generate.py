@@ -11,12 +11,14 @@ from rig_fixtures import fish, hexapod, quadruped, snake2, walking
 from kinema.data.multirig_build import Description, assemble, write_build
 from kinema.data.sources import SourceFile
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe
+from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
 from kinema.generate.anyrig_constraints import encode_constraints
+from kinema.generate.anyrig_feet import lock_translated_feet
 from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.model.anyrig_config import get_anyrig_config
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
+from kinema.motion.core import Motion
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
@@ -148,3 +150,38 @@ def test_window_weights_cover_every_frame() -> None:
         cover[s : s + 40] += w[k]
     assert cover.min() > 0 and w[0, 0] == 1 and w[-1, -1] == 1
     assert isinstance(FeatureTargets(torch.zeros(1), torch.zeros(1)).any(), bool)
+
+
+def _armature_motion(frames: int = 20) -> Motion:
+    """A game-style rig: a static armature joint on the floor, a body and two IK feet moved by translation."""
+    skel = Skeleton(
+        ["Armature", "Body", "Head", "Foot1", "Foot2"],
+        [-1, 0, 1, 0, 0],
+        [[0, 0, 0], [0, 0.5, 0], [0, 0, 0.3], [0.1, 0, 0.2], [-0.1, 0, -0.2]],
+        name="armature",
+    )
+    t = torch.arange(frames, dtype=torch.float64) / 20
+    lt = skel.offsets[None].repeat(frames, 1, 1)
+    lt[:, 1, 1] += 0.05 * torch.sin(2 * torch.pi * t)  # the body bobs
+    lt[:, 3, 2] += 0.01 * t  # foot 1 creeps forward on the floor (skates)
+    lt[:, 4, 1] += 0.1 + 0.05 * torch.sin(2 * torch.pi * t)  # foot 2 is in the air
+    rots = torch.zeros(frames, 5, 4, dtype=torch.float64)
+    rots[..., 0] = 1.0
+    return Motion(skel, 20.0, torch.zeros(frames, 3, dtype=torch.float64), rots, None, lt)
+
+
+def test_bones_under_a_floor_armature_take_predicted_translations_and_feet_lock() -> None:
+    m = _armature_motion()
+    rig = Rig.from_skeleton(m.skeleton)
+    assert floor_root_children(m.skeleton) == [1, 3, 4] and rig.root == 0
+    rep = JointRepresentation(rig, 20.0)
+    f = rep.from_motion(m)
+    posed = rep.to_motion(f)
+    assert (posed.positions - m.positions).abs().max() > 0.01  # rotations alone lose the translations
+    back = with_floor_translations(posed, f, rep)
+    assert torch.allclose(back.positions, m.positions, atol=1e-9)
+    locked, n = lock_translated_feet(back, [3, 4], size=1.0)
+    assert n == 1  # foot 1 only: foot 2 never touches the floor
+    P = locked.positions
+    assert float((P[1:, 3, [0, 2]] - P[:-1, 3, [0, 2]]).norm(dim=-1).max()) < 1e-9
+    assert torch.allclose(P[:, [1, 2, 4]], back.positions[:, [1, 2, 4]])

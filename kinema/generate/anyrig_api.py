@@ -27,6 +27,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
+from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
 from kinema.generate.anyrig_sampling import sample_features, window_starts
 from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.io.gltf import read_gltf
@@ -179,15 +180,23 @@ class AnyRigModel:
         return Guidance(self.loaded.guidance.mode, w_text, w_constr)
 
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
-        m = with_floor_translations(rep_n.to_motion(f), f, rep_n)
-        lt = None if m.local_translations is None else m.local_translations / scale
-        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
+        """Features (rig units) -> motion in metres, post-processed; bones under a floor-level armature
+        joint get their translations (after post-processing, which works on rotations) and their feet
+        are locked (kinema.generate.anyrig_feet)."""
+        m = rep_n.to_motion(f)
+        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts)
+        f_m = f.clone()
+        f_m[..., 0:3] = f_m[..., 0:3] / scale
         if not postprocess:
-            return motion
+            return with_floor_translations(motion, f_m, rep_n)
         rep_m = JointRepresentation(rig_m, self.fps)
         targets = make_post_targets(constraints, motion, rep_m) if constraints else None
         motion, post = run_postprocess(motion, targets, rig=rig_m)
-        report.foot_lock.append(post.get("foot_lock", {}))
+        motion = with_floor_translations(motion, f_m, rep_n)
+        size = rest_extent(rig_m.skeleton)
+        feet = [j for j in floor_root_children(rig_m.skeleton) if floor_height(rig_m.skeleton, j) < GROUND * size]
+        motion, locked = lock_translated_feet(motion, feet, size)
+        report.foot_lock.append({**post.get("foot_lock", {}), "translated_feet_segments": locked})
         report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
         if targets is not None:
             P = motion.positions
@@ -206,6 +215,12 @@ def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
     if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
         return []
     return list(kids)
+
+
+def floor_height(skeleton: Skeleton, joint: int) -> float:
+    """Rest height of ``joint`` above the skeleton's lowest joint (skeleton units)."""
+    P = rest_positions(skeleton)
+    return float(P[joint, 1] - P[:, 1].min())
 
 
 def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
