@@ -31,6 +31,7 @@ import numpy as np
 from kinema import naming
 from kinema.errors import KinemaError, SkeletonError
 from kinema.io.atomic import atomic_write_bytes
+from kinema.render_bones import drawn_bones, helper_root
 
 SIDE_COLOURS = {"L": "#1f6fd1", "R": "#e0452b", None: "#3c3c3c"}
 CONTACT_COLOUR, TARGET_COLOUR, WAYPOINT_COLOUR = "#14a05a", "#c0158c", "#b26b00"
@@ -76,44 +77,6 @@ def _smooth(x: np.ndarray, width: int) -> np.ndarray:
     return (c[width:] - c[:-width]) / width
 
 
-def _helper_root(sk, P: np.ndarray, pelvis: int) -> set[int]:
-    """{0} when joint 0 is a helper root that is neither drawn nor framed, else an empty set.
-
-    A helper root is away from the body (Bandai's joint_Root above the pelvis), or a control root on the
-    ground carrying several separate parts (glTF creatures: an armature node or ``root`` bone holding the
-    body and IK-driven feet): it never rises above the lowest other joint by more than 2 % of the pose size.
-    """
-    if sk.num_joints < 2:
-        return set()
-    if pelvis != 0:
-        return {0}
-    others = P[:, 1:]
-    size = float(np.linalg.norm(others.max(1) - others.min(1), axis=-1).max())
-    on_floor = (P[:, 0, 1] <= others[..., 1].min(1) + 0.02 * size).all()
-    return {0} if len(sk.children[0]) > 1 and on_floor else set()
-
-
-def _bones(sk, P: np.ndarray, hidden: set[int]) -> list[tuple[int, int]]:
-    """(parent, child) segments to draw: the hierarchy's bones below shown joints, plus, for parts hanging
-    from a hidden root (IK feet of a creature), a segment to the nearest joint of the main body (of the same
-    side when there is one) at frame 0."""
-    bones = [(p, j) for j, p in enumerate(sk.parents) if p >= 0 and p not in hidden]
-    if not hidden:
-        return bones
-    tops = list(sk.children[0])
-    below = {t: {j for j in range(sk.num_joints) if t in sk.path_from_root(j)} for t in tops}
-    body = max(tops, key=lambda t: len(below[t]))
-    main = sorted(below[body])
-    for t in tops:
-        if t == body:
-            continue
-        side = naming.split_side(sk.names[t])[0]
-        near = [j for j in main if naming.split_side(sk.names[j])[0] == side] or main  # a left foot to a left leg
-        d = np.linalg.norm(P[0, near] - P[0, t], axis=-1)
-        bones.append((near[int(d.argmin())], t))
-    return bones
-
-
 class _Scene:
     """Everything frame-independent: world joint positions, bones, camera, scale and frame windows."""
 
@@ -125,9 +88,9 @@ class _Scene:
         self.P = motion.positions.detach().cpu().double().numpy()  # (T, J, 3)
         roles = sk.roles
         pelvis = roles.get("pelvis", 0)
-        hidden = _helper_root(sk, self.P, pelvis)
+        hidden = helper_root(sk, self.P, pelvis)
         self.shown = [j for j in range(sk.num_joints) if j not in hidden]
-        self.bones = _bones(sk, self.P, hidden)
+        self.bones = drawn_bones(sk, self.P, hidden)
         self.bone_colours = [SIDE_COLOURS[naming.split_side(sk.names[j])[0]] for _, j in self.bones]
         shown = self.P[:, self.shown]
         self.floor = float(shown[..., 1].min())

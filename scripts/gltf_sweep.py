@@ -4,9 +4,11 @@ For each file: read every clip (kinema.io.gltf), write each clip as BVH (Motion.
 put the rig's skin back on (BVH has no mesh; the rest pose geometry is unchanged), write one GLB with
 all clips, then compare every joint's world position in the final GLB with the source GLB at every
 frame, using the independent pygltflib forward kinematics of tests/gltf_reference.py. Optionally runs
-the Khronos validator over every written GLB (``--validate``; needs node + npm gltf-validator).
+the Khronos validator over every written GLB (``--validate``; needs node + npm gltf-validator) and
+imports each written GLB in Blender (``--blender``: first clip, first/middle/last frame, every bone head
+against kinema's forward kinematics; needs ``blender`` with python3-numpy).
 
-    python scripts/gltf_sweep.py --root ../shared/datasets/quaternius --out /tmp/sweep [--validate]
+    python scripts/gltf_sweep.py --root ../shared/datasets/quaternius --out /tmp/sweep [--validate] [--blender]
 
 Prints one line per file and a summary (files, clips, worst error, failures with their reason); exit
 status 1 when any file fails.
@@ -50,13 +52,13 @@ def _with_mesh(skeleton: Skeleton, source: Skeleton) -> Skeleton:
     )
 
 
-def sweep_file(src: Path, out: Path) -> tuple[int, float, Path]:
-    """(clips, worst position error in metres, written GLB) for one source file."""
+def sweep_file(src: Path, out: Path) -> tuple[int, float, Path, tuple[str, ...]]:
+    """(clips, worst position error in metres, written GLB, reader warnings) for one source file."""
     asset = read_gltf(src)
     back = {}
     for k, (clip, motion) in enumerate(asset.motions.items()):
         bvh = motion.save(out / f"{src.stem}_{k}.bvh")
-        again = read_bvh(bvh)
+        again = read_bvh(bvh, root_follows_child=False)  # the root is a real bone here, not Bandai's dummy
         skeleton = _with_mesh(again.skeleton, asset.skeleton)
         back[clip] = type(again)(
             skeleton, again.fps, again.root_translation, again.local_rotations, None, again.local_translations
@@ -70,7 +72,37 @@ def sweep_file(src: Path, out: Path) -> tuple[int, float, Path]:
         times = np.arange(motion.num_frames) / motion.fps
         a, b = world_positions(source, clip, times + start), world_positions(written, clip, times)
         worst = max(worst, max(float(np.abs(a[n] - b[n]).max()) for n in motion.skeleton.names if n in a))
-    return len(asset.motions), worst, glb
+    return len(asset.motions), worst, glb, asset.warnings
+
+
+def blender_error(glb: Path, work: Path) -> float:
+    """Largest distance (metres) between Blender's bone heads and kinema's joints, first clip of ``glb``."""
+    clip, motion = next(iter(read_gltf(glb).motions.items()))
+    frames = sorted({0, motion.num_frames // 2, motion.num_frames - 1})
+    out = work / f"{glb.stem}.heads.json"
+    cmd = [
+        "blender",
+        "-b",
+        "--factory-startup",
+        "--python",
+        str(REPO / "scripts/blender_gltf_check.py"),
+        "--",
+        str(glb),
+        str(out),
+        clip,
+        ",".join(f"{f / motion.fps:.9f}" for f in frames),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    if proc.returncode != 0 or not out.exists():
+        raise RuntimeError(f"Blender import failed: {(proc.stdout + proc.stderr)[-300:]}")
+    report = json.loads(out.read_text())
+    P = motion.positions.double().numpy()
+    worst = 0.0
+    for k, f in enumerate(frames):
+        for name, (x, y, z) in report["heads"][k].items():
+            want = P[f, motion.skeleton.names.index(name)]
+            worst = max(worst, float(np.linalg.norm([x - want[0], z - want[1], -y - want[2]])))
+    return worst
 
 
 def main() -> int:
@@ -78,6 +110,7 @@ def main() -> int:
     ap.add_argument("--root", type=Path, default=REPO.parent / "shared/datasets/quaternius")
     ap.add_argument("--out", type=Path, required=True, help="folder for the BVH and GLB files")
     ap.add_argument("--validate", action="store_true", help="run the Khronos validator on every GLB")
+    ap.add_argument("--blender", action="store_true", help="import every written GLB in Blender and compare")
     ap.add_argument("--tolerance", type=float, default=1e-5, help="largest position error, metres (0.01 mm)")
     args = ap.parse_args()
     files = sorted(args.root.rglob("*.glb"))
@@ -88,14 +121,15 @@ def main() -> int:
         folder = args.out / rel.parent.name
         folder.mkdir(exist_ok=True)
         try:
-            n, err, glb = sweep_file(src, folder)
+            n, err, glb, warns = sweep_file(src, folder)
         except Exception as exc:  # report and go on: the summary lists every failure
             failures.append(f"{rel}: {type(exc).__name__}: {exc}")
             print(f"[{i + 1}/{len(files)}] {rel}: FAILED {exc}", flush=True)
             continue
         clips, worst, written = clips + n, max(worst, err), written + [glb]
         if err > args.tolerance:
-            failures.append(f"{rel}: joint positions differ by {err * 1000:.4f} mm")
+            why = f" (reader warnings: {'; '.join(warns)})" if warns else ""
+            failures.append(f"{rel}: joint positions differ by {err * 1000:.4f} mm{why}")
         print(f"[{i + 1}/{len(files)}] {rel}: {n} clips, max error {err * 1000:.5f} mm", flush=True)
     if args.validate and written:
         proc = subprocess.run(
@@ -107,6 +141,19 @@ def main() -> int:
         print(
             f"validator: {len(reports)} GLBs, {len(bad)} with errors, "
             f"{sum(r['warnings'] for r in reports)} warnings in all"
+        )
+    if args.blender and written:
+        errors = {}
+        for glb in written:
+            try:
+                errors[glb] = blender_error(glb, args.out)
+            except Exception as exc:  # report and go on
+                failures.append(f"{glb}: {exc}")
+        bad = {g: e for g, e in errors.items() if e > args.tolerance}
+        failures += [f"{g}: Blender bone heads off by {e * 1000:.4f} mm" for g, e in bad.items()]
+        print(
+            f"Blender: {len(errors)} GLBs imported, worst bone head error "
+            f"{max(errors.values(), default=0) * 1000:.5f} mm, {len(bad)} over tolerance"
         )
     print(
         f"{len(files)} files, {clips} clips, worst joint position error {worst * 1000:.5f} mm, "

@@ -403,3 +403,26 @@ def test_bench_bvh_cli(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "raw parse" in out and "to Motion" in out and "files/s" in out
     assert main(["bench", "bvh", "--root", str(tmp_path / "empty")]) == 2
+
+
+def test_root_follows_child_or_stays(tmp_path):
+    """A root with one child whose translation moves: by default (Bandai) the root follows that child;
+    root_follows_child=False keeps every joint, the root included, where the file puts it."""
+    import torch
+
+    from kinema.motion.core import Motion
+    from kinema.skeleton import Skeleton
+
+    sk = Skeleton(["Base", "Top"], [-1, 0], [[0, 0, 0], [0, 0.5, 0]])
+    T = 6
+    trans = sk.offsets.float().expand(T, -1, -1).clone()
+    trans[:, 1, 1] += torch.linspace(0, 1, T)  # the top slides up 1 m; the base stays
+    rots = torch.zeros(T, 2, 4)
+    rots[..., 0] = 1
+    motion = Motion(sk, 30, torch.zeros(T, 3), rots, None, trans)
+    path = write_bvh(motion, tmp_path / "slide.bvh")
+    bandai = read_bvh(path)
+    assert (bandai.positions[:, 1] - motion.positions[:, 1]).abs().max() < 1e-5  # the top is exact
+    assert (bandai.positions[:, 0] - motion.positions[:, 0]).abs().max() > 0.9  # the base follows it
+    exact = read_bvh(path, root_follows_child=False)
+    assert (exact.positions - motion.positions).abs().max() < 1e-5

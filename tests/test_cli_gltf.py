@@ -53,6 +53,7 @@ def test_inspect_shows_tree_rig_and_clips(rig, capsys):
     out = capsys.readouterr().out
     assert "armature scale 100 applied" in out and "helper joints dropped (no skin weight): Pole" in out
     assert "  Armature\n  ├─ Body\n  │  ├─ Neck\n  │  │  └─ Head\n  │  └─ Leg\n  └─ Foot" in out
+    assert "roles found by name: " in out and "head=Head" in out
     assert "contact joints" in out and "Rig|Move" in out and "5 frames @ 4 fps" in out  # keys every 0.25 s
 
 
@@ -66,3 +67,24 @@ def test_bench_gltf_reports_throughput(rig, capsys):
     assert main(["bench", "gltf", "--root", str(rig.parent)]) == 0
     out = capsys.readouterr().out
     assert "glTF benchmark: 1 files" in out and "to Motion" in out and "container" in out
+
+
+def test_glb_bvh_glb_through_the_cli_keeps_a_sliding_part(tmp_path):
+    """A root whose only child slides (a Quaternius bouncer, spike trap): --exact-root keeps the root."""
+    import torch
+
+    from kinema.io.gltf_writer import write_glb
+    from kinema.motion.core import Motion
+    from kinema.skeleton import Skeleton
+
+    sk = Skeleton(["Base", "Top"], [-1, 0], [[0, 0, 0], [0, 0.5, 0]])
+    trans = sk.offsets.float().expand(8, -1, -1).clone()
+    trans[:, 1, 1] += torch.linspace(0, 1.5, 8)
+    rots = torch.zeros(8, 2, 4)
+    rots[..., 0] = 1
+    motion = Motion(sk, 24, torch.zeros(8, 3), rots, None, trans)
+    src = write_glb(motion, tmp_path / "bouncer.glb", name="Bounce")
+    assert main(["convert", str(src), str(tmp_path / "b.bvh")]) == 0
+    assert main(["convert", str(tmp_path / "b.bvh"), str(tmp_path / "back.glb"), "--exact-root"]) == 0
+    back = read_gltf(tmp_path / "back.glb").motions
+    assert (next(iter(back.values())).positions - motion.positions).abs().max() < 1e-5

@@ -82,3 +82,14 @@ def test_blender_imports_the_bvh_human(walk_clip, tmp_path):
     human = read_bvh(walk_clip, scale=0.01).prune(["joint_Root"]).crop(0, 24).resample(24)
     glb = write_glb(human, tmp_path / "human.glb", name="walk")
     _check(glb, "walk", human, tmp_path)
+
+
+QUATERNIUS = Path(os.environ.get("KINEMA_QUATERNIUS", ROOT.parent / "shared/datasets/quaternius"))
+
+
+@pytest.mark.skipif(not QUATERNIUS.is_dir(), reason="shared Quaternius GLBs not found")
+def test_blender_imports_a_quaternius_fox(tmp_path):
+    asset = read_gltf(QUATERNIUS / "animals_pack/Fox.glb", animations=["Gallop"])
+    motion = asset.motions["AnimalArmature|Gallop"]
+    glb = write_glb(motion, tmp_path / "fox.glb", name="Gallop")
+    _check(glb, "Gallop", motion, tmp_path)

@@ -117,3 +117,29 @@ def test_quaternius_positions_match_independent_fk(rel, clip):
     asset = read_gltf(path, animations=[clip])
     assert asset.scale in (100.0, 300.0)
     assert _max_error(path, asset.motions[clip], clip) < 1e-5  # 0.01 mm
+
+
+@pytest.mark.parametrize("kind", ["datauri", "binfile"])
+def test_gltf_json_with_embedded_or_side_car_buffers(synthetic, tmp_path, kind):
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(synthetic))
+    g.convert_buffers(pygltflib.BufferFormat.DATAURI if kind == "datauri" else pygltflib.BufferFormat.BINFILE)
+    path = tmp_path / "rig.gltf"
+    if kind == "binfile":
+        g.buffers[0].uri = "rig.bin"
+        (tmp_path / "rig.bin").write_bytes(pygltflib.GLTF2().load(str(synthetic)).binary_blob())
+    g.save_json(str(path))
+    glb, gltf = read_gltf(synthetic, fps=10), read_gltf(path, fps=10)
+    assert (glb.motions["Rig|Move"].positions - gltf.motions["Rig|Move"].positions).abs().max() == 0
+    assert gltf.skeleton.mesh.num_vertices == glb.skeleton.mesh.num_vertices
+
+
+@needs_quaternius
+def test_draco_meshes_decode_or_fail_clearly(monkeypatch):
+    path = QUATERNIUS / "ultimate_space_pack/Enemy_Small-transformed.glb"
+    mesh = read_gltf(path, animations=[]).skeleton.mesh
+    assert mesh.num_vertices > 1000 and np.isfinite(mesh.vertices).all()
+    monkeypatch.setitem(__import__("sys").modules, "DracoPy", None)  # as if the wheel were missing
+    with pytest.raises(GltfError, match=r"Enemy_Small-transformed\.glb: .* is Draco-compressed .* install DracoPy"):
+        read_gltf(path)

@@ -106,7 +106,9 @@ def test_written_files_pass_the_khronos_validator(synthetic, tmp_path, walk_clip
 
 
 def test_bvh_rig_gets_a_generated_skin(walk_clip, tmp_path):
-    human = read_bvh(walk_clip, scale=0.01).prune(["joint_Root"]).crop(0, 12)
+    # 100 frames at 20 fps: the last key, 4.95 s, is 4.9499998 in float32 and must still give 100 frames
+    human = read_bvh(walk_clip, scale=0.01).prune(["joint_Root"]).crop(0, 150).resample(20)
+    assert human.num_frames == 100
     out = write_glb(human, tmp_path / "human.glb", name="walk")
     back = read_gltf(out)
     mesh = back.skeleton.mesh

@@ -10,6 +10,7 @@ from rig_fixtures import fish, hexapod, human, quadruped, snake2
 
 from kinema.errors import SkeletonError
 from kinema.motion.contacts import contact_joints
+from kinema.postprocess.footlock import leg_locks
 from kinema.rig import Rig
 from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
@@ -101,3 +102,37 @@ def test_two_joint_and_single_joint_skeletons() -> None:
     assert Rig.from_skeleton(two).contacts == () and Rig.from_skeleton(two).end_effectors == {"b": 1}
     one = Skeleton(["a"], [-1], torch.zeros(1, 3))
     assert Rig.from_skeleton(one).limbs == {}
+
+
+def test_ik_helper_rig_like_the_quaternius_animals() -> None:
+    """An armature at the origin, a low control bone, pole targets and IK-driven feet outside the legs:
+    the root is not the armature, pole targets are never contacts, the feet are, and foot locking
+    (tested in test_footlock_rigs) has no three-joint leg chain to bend there."""
+    rows = [
+        ("Armature", None, (0.0, 0.0, 0.0)),
+        ("Body", "Armature", (0.0, 0.07, 0.0)),
+        ("Back", "Body", (0.0, 0.24, 0.0)),
+        ("Head", "Back", (0.0, 0.05, 0.3)),
+        ("PoleTarget.L", "Body", (0.05, 0.06, 0.5)),
+        ("PoleTarget.R", "Body", (-0.05, 0.06, 0.5)),
+    ]
+    for k, (x, z) in enumerate(((0.05, 0.15), (-0.05, 0.15), (0.05, -0.15), (-0.05, -0.15))):
+        rows += [
+            (f"Upper{k}", "Back", (x, -0.05, z)),
+            (f"Lower{k}", f"Upper{k}", (0.0, -0.08, 0.0)),
+            (f"IKLeg{k}", "Armature", (x, 0.03, z)),
+            (f"Foot{k}", f"IKLeg{k}", (0.0, -0.02, 0.02)),
+        ]
+    names = [r[0] for r in rows]
+    skel = Skeleton(
+        names,
+        [-1 if r[1] is None else names.index(r[1]) for r in rows],
+        torch.tensor([r[2] for r in rows], dtype=torch.float64),
+    )
+    rig = Rig.from_skeleton(skel)
+    assert skel.names[rig.root] == "Body"
+    contacts = rig.joint_names(rig.contacts)
+    assert sorted(contacts) == sorted([f"IKLeg{k}" for k in range(4)] + [f"Foot{k}" for k in range(4)])
+    assert not any("Pole" in n for n in [*contacts, *rig.end_effectors])
+    assert len(rig.legs()) == 4
+    assert leg_locks(rig) == []  # IK would have to bend the armature: foot locking leaves these feet alone

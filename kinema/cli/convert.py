@@ -39,6 +39,12 @@ def register(sub) -> None:
         help="multiply BVH input lengths by this to get metres (0.01 for centimetres)",
     )
     p.add_argument(
+        "--exact-root",
+        action="store_true",
+        help="BVH input: keep the root where the file puts it even when its only child moves (BVH written from "
+        "a GLB creature); by default the root follows that child, as Bandai Namco's dummy root needs",
+    )
+    p.add_argument(
         "--out-scale",
         type=positive_float,
         default=1.0,
@@ -81,7 +87,8 @@ def _read_clips(args: argparse.Namespace) -> dict:
         return dict(asset.motions)
     if args.animation != "all":
         raise KinemaError("--animation applies to glTF input; BVH and npz files hold one motion")
-    motion = load_motion(args.input, scale=args.in_scale)
+    exact = {"root_follows_child": False} if args.exact_root and suffix.endswith((".bvh", ".bvh.gz")) else {}
+    motion = load_motion(args.input, scale=args.in_scale, **exact)
     if args.fps is not None:
         motion = motion.resample(args.fps)
     return {args.input.name.split(".")[0]: motion}

@@ -49,8 +49,8 @@ def register(sub) -> None:
     p.add_argument("--rig", help="any-rig models: a GLB/glTF or BVH file to animate, or a training rig id "
                                  "(leave out to list them); a .glb output keeps the rig's skinned mesh")
     p.add_argument("--out", type=Path, default=Path("out/motion.bvh"),
-                   help=".bvh, .bvh.gz or .npz (default out/motion.bvh); with --samples N > 1: OUT_00.bvh, "
-                        "OUT_01.bvh, ...")
+                   help=".bvh, .bvh.gz, .npz or .glb (with a generated bone mesh); default out/motion.bvh; "
+                        "with --samples N > 1: OUT_00.bvh, OUT_01.bvh, ...")
     p.add_argument("--fps", type=positive_float, help="resample the output, keeping its duration "
                    "(default: the model's fps)")
     p.add_argument("--no-postprocess", action="store_true", help="raw model output (no foot lock / IK)")
@@ -111,8 +111,8 @@ def _check_inputs(args: argparse.Namespace) -> None:
             raise KinemaError("--preview sets the DDIM steps (10): give either --preview or --steps")
         args.steps = PREVIEW_STEPS
     suffix = args.out.name.lower()
-    if not (suffix.endswith(".bvh") or suffix.endswith(".bvh.gz") or suffix.endswith(".npz")):
-        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz or .npz")
+    if not suffix.endswith((".bvh", ".bvh.gz", ".npz", ".glb")):
+        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb")
     if args.constraints is not None and not args.constraints.is_file():
         raise KinemaError(f"{args.constraints}: no such constraints file")
     if args.timeline is not None:

@@ -1,9 +1,9 @@
 """`kinema inspect FILE`: what kinema sees in a motion or rig file (.glb/.gltf, .bvh/.bvh.gz, .npz).
 
-Prints the joints as a tree, the rig parts kinema.rig.Rig finds (root, axes, contact joints, end
-effectors, limb chains; ``--rig overrides.json`` replaces them), the clips with their frames, rate and
-duration, and for glTF files the armature scale applied, the helper bones dropped, the skinned mesh and
-any warnings. Bad files give a one-line error and exit status 2.
+Prints the joints as a tree, the semantic roles found by name (kinema.naming), the rig parts
+kinema.rig.Rig finds (root, axes, contact joints, end effectors, limb chains; ``--rig overrides.json``
+replaces them), the clips with their frames, rate and duration, and for glTF files the armature scale
+applied, the helper bones dropped, the skinned mesh and any warnings. Bad files give a one-line error and exit status 2.
 """
 
 from __future__ import annotations
@@ -50,7 +50,9 @@ def _rig_lines(skeleton, overrides) -> list[str]:
     rig = Rig.from_skeleton(skeleton, overrides=overrides)
     names = skeleton.names
     limbs = ", ".join(f"{k} ({names[c[0]]}..{names[c[-1]]}, {len(c)} joints)" for k, c in rig.limbs.items())
+    roles = ", ".join(f"{r}={names[j]}" for r, j in sorted(skeleton.roles.items(), key=lambda kv: kv[1]))
     return [
+        f"roles found by name: {roles or 'none'}",
         f"rig: root {names[rig.root]}, up {list(rig.up)}, forward {list(rig.forward)}",
         f"contact joints ({rig.num_contacts}): {', '.join(rig.joint_names(rig.contacts)) or 'none'}",
         "end effectors: " + (", ".join(f"{k}={names[j]}" for k, j in rig.end_effectors.items()) or "none"),

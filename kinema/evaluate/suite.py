@@ -91,8 +91,9 @@ class _Extractor:
         self.m = motion
         self.G, self.P = motion.global_transforms()
         feats = motion_to_features(motion.to(torch.float64))
-        self.root_xz = feats[:, [0, 2]]
-        self.heading = feats[:, 3:5]
+        layout = FeatureLayout(motion.num_joints)
+        self.root_xz = feats[:, layout.root_xz]
+        self.heading = feats[:, layout.slices["heading"]]
         self.T = motion.num_frames
 
     @staticmethod

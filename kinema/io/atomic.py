@@ -14,6 +14,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from kinema.errors import KinemaError
+
 
 def check_output_path(path: str | Path) -> Path:
     """Check, before any long work, that a file can be written at ``path``; returns it as a Path.
@@ -22,8 +24,6 @@ def check_output_path(path: str | Path) -> Path:
     that is a file, or a folder that cannot be written to (tried with a temporary file, so it also
     holds for root on a read-only file system) raise a one-line `KinemaError`; nothing is left behind.
     """
-    from kinema.errors import KinemaError
-
     path = Path(path)
     if path.is_dir():
         raise KinemaError(f"{path}: is a folder; give a file name to write")

@@ -361,13 +361,13 @@ def _diagnose(block: str, line_before: int, frames: int, channels: int, name: st
 # ----------------------------------------------------------------------------- conversion to Motion
 
 
-def read_bvh(path: str | os.PathLike, *, scale: float = 1.0) -> Motion:
+def read_bvh(path: str | os.PathLike, *, scale: float = 1.0, root_follows_child: bool = True) -> Motion:
     """Read a ``.bvh``/``.bvh.gz`` file as a `Motion`; every length is multiplied by ``scale``
     (0.01 for centimetre files such as Bandai Namco). See `bvh_data_to_motion` for the rules."""
-    return bvh_data_to_motion(parse_bvh(path), scale=scale)
+    return bvh_data_to_motion(parse_bvh(path), scale=scale, root_follows_child=root_follows_child)
 
 
-def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
+def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0, root_follows_child: bool = True) -> Motion:
     """Convert raw BVH data to a `Motion` (float64, metres, full local rotations).
 
     - Rotation channels, in the order listed, are intrinsic Euler angles in degrees
@@ -381,7 +381,10 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
       ``joint_Root`` whose child ``Hips`` carries the translation), that child's movement is moved
       into ``root_translation``: every joint below the root keeps its exact file position, and only
       the root joint itself is displaced by the child's movement since frame 1 (Bandai's dummy root
-      then follows the hips). ``Motion.prune(["joint_Root"])`` removes it exactly.
+      then follows the hips). ``Motion.prune(["joint_Root"])`` removes it exactly. With
+      ``root_follows_child=False`` the root stays where the file puts it and the child's movement is
+      kept in ``local_translations`` (every joint exact: creatures whose root is a real bone, e.g.
+      BVH written from a GLB).
     - ``fps = 1 / frame_time``, snapped to the nearest integer when within 0.01 % (``0.0333333``
       is 30 fps).
     """
@@ -418,7 +421,7 @@ def bvh_data_to_motion(data: BVHData, *, scale: float = 1.0) -> Motion:
     root = torch.from_numpy(positions.get(0, np.repeat(offsets[:1], T, axis=0)).copy())
 
     children = [j for j in range(J) if data.parents[j] == 0]
-    carried = children[0] if len(children) == 1 and children[0] in positions else None
+    carried = children[0] if root_follows_child and len(children) == 1 and children[0] in positions else None
     if carried is not None:
         moved = torch.from_numpy(positions[carried] - positions[carried][:1])
         root = root + quat_rotate(quats[:, 0], moved)

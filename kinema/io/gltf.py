@@ -35,7 +35,7 @@ from kinema.skeleton import Skeleton
 
 __all__ = ["GltfAsset", "GltfError", "load_document", "load_gltf_motion", "read_gltf"]
 
-_SCALE_TOL = 1e-3
+_SCALE_TOL = 1e-5  # relative: float32 noise (1e-7) is quiet, a 1e-5 skew already moves a tail tip ~0.01 mm
 
 
 @dataclass(frozen=True)
@@ -172,7 +172,7 @@ class _Rig:
                 if n >= 0 and np.ptp(s) > _SCALE_TOL * abs(s).max():
                     warns.append(
                         f"{what or 'joint'} {_node_name(gltf, n)} has non-uniform scale "
-                        f"{np.round(s, 4).tolist()}; kinema uses its mean"
+                        f"[{', '.join(f'{x:.7g}' for x in s)}]; kinema uses its mean"
                     )
         self.base_scale = base_s.mean(axis=1)
         acc = np.ones(J)  # accumulated uniform scale of each joint's frame
@@ -235,7 +235,7 @@ def _clip(rig: _Rig, skeleton: Skeleton, chans: dict, fps: float, index: dict[in
     """Sample one animation's channels at ``fps`` into a Motion on ``skeleton``."""
     t0 = min(float(t[0]) for t, _, _ in chans.values()) if chans else 0.0
     t1 = max(float(t[-1]) for t, _, _ in chans.values()) if chans else 0.0
-    at = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-6)) + 1) / fps
+    at = t0 + np.arange(int(math.floor((t1 - t0) * fps + 1e-3)) + 1) / fps  # 1e-3: float32 key times
     T = len(at)
     t = np.repeat(rig.rest_t[None], T, axis=0)
     r = np.repeat(rig.rest_r[None], T, axis=0)
@@ -318,10 +318,10 @@ def read_gltf(
     skin_nodes = {j for s in gltf.skins for j in s.joints}
     if any(not 0 <= j < len(gltf.nodes) for j in skin_nodes):
         raise GltfError(f"{path}: a skin names a joint node that does not exist")
-    parts = read_parts(buffers, world, parent, skin_nodes)
+    warns: list[str] = []
+    parts = read_parts(buffers, world, parent, skin_nodes, warns)
     kept, helpers = _select_joints(gltf, parent, parts, keep_helpers)
     order, kparents = _order(gltf, parent, kept)
-    warns: list[str] = []
     rig = _Rig(gltf, parent, world, order, kparents, warns)
     names = _unique(["root" if n < 0 else _node_name(gltf, n) for n in order])
     index = {n: j for j, n in enumerate(order)}
@@ -341,7 +341,7 @@ def read_gltf(
     motions = {
         anim_names[i]: _clip(rig, skeleton, c, rate, index, scale_warn) for i, c in zip(chosen, chans, strict=True)
     }
-    warns += [f"scale animation of joint {n} (up to {100 * a:.1f} %) is ignored" for n, a in scaled.items()]
+    warns += [f"scale animation of joint {n} (up to {100 * a:.3g} %) is ignored" for n, a in scaled.items()]
     return GltfAsset(path, skeleton, motions, source_fps, rig.root_scale, helpers, tuple(warns))
 
 

@@ -43,14 +43,21 @@ def _attributes(buffers: GltfBuffers, prim, where: str) -> dict[str, np.ndarray]
     return out
 
 
-def _influences(attrs: dict[str, np.ndarray], skin_joints: list[int], where: str, path) -> tuple:
+def _influences(attrs: dict[str, np.ndarray], skin_joints: list[int], where: str, path, warns: list[str]) -> tuple:
     """(V, 4) indices into the skin's joint list and weights: the 4 largest of all JOINTS_n/WEIGHTS_n sets,
-    renormalised."""
+    renormalised. Vertices whose weights are all zero or not finite (some Quaternius files have NaN
+    weights) are bound to their first listed joint, with a warning."""
     sets = sorted(k[7:] for k in attrs if k.startswith("JOINTS_"))
     if not sets:
         raise GltfError(f"{path}: {where} is skinned but has no JOINTS_0/WEIGHTS_0 attributes")
     idx = np.concatenate([attrs[f"JOINTS_{s}"].astype(np.int64) for s in sets], axis=1)
     w = np.concatenate([attrs[f"WEIGHTS_{s}"].astype(np.float64) for s in sets], axis=1)
+    bad = ~np.isfinite(w).all(axis=1) | (np.nan_to_num(w).clip(min=0).sum(axis=1) <= 0)
+    w = np.nan_to_num(w, nan=0.0, posinf=0.0, neginf=0.0).clip(min=0)
+    if bad.any():
+        w[bad] = 0.0
+        w[bad, 0] = 1.0
+        warns.append(f"{where}: {int(bad.sum())} vertices have no valid skin weights; bound to their first joint")
     if w.max(initial=0) > 1.5:  # unnormalised integer weights stored as raw bytes
         w = w / w.sum(axis=1, keepdims=True).clip(min=1e-12)
     if idx.max(initial=0) >= len(skin_joints) or idx.min(initial=0) < 0:
@@ -79,7 +86,9 @@ def _inverse_binds(buffers: GltfBuffers, skin, path) -> np.ndarray:
     return ibm.reshape(n, 4, 4).transpose(0, 2, 1)  # column-major storage
 
 
-def read_parts(buffers: GltfBuffers, world: np.ndarray, parent: dict[int, int], joints: set[int]) -> list[RawPart]:
+def read_parts(
+    buffers: GltfBuffers, world: np.ndarray, parent: dict[int, int], joints: set[int], warns: list[str]
+) -> list[RawPart]:
     """Every triangle primitive of skinned nodes, and of mesh nodes under a joint, in world rest pose."""
     gltf, path = buffers.gltf, buffers.path
     parts = []
@@ -107,7 +116,7 @@ def read_parts(buffers: GltfBuffers, world: np.ndarray, parent: dict[int, int], 
             if len(faces) and (faces.max() >= len(v) or faces.min() < 0):
                 raise GltfError(f"{path}: {where} has triangle indices outside its {len(v)} vertices")
             if skin is not None:
-                local, w = _influences(attrs, list(skin.joints), where, path)
+                local, w = _influences(attrs, list(skin.joints), where, path, warns)
                 nodes = np.asarray(skin.joints, dtype=np.int64)[local]
                 m = np.einsum("vk,vkab->vab", w, binds[local])
             else:

@@ -132,7 +132,9 @@ def _skin_and_mesh(b: _Builder, skeleton: Skeleton, mesh: SkinnedMesh) -> None:
     attrs = {
         "POSITION": b.add(mesh.vertices, "VEC3", _FLOAT, _ARRAY, minmax=True),
         "JOINTS_0": b.add(mesh.joints, "VEC4", _USHORT, _ARRAY),
-        "WEIGHTS_0": b.add(mesh.weights / mesh.weights.sum(axis=1, keepdims=True), "VEC4", _FLOAT, _ARRAY),
+        "WEIGHTS_0": b.add(
+            mesh.weights / mesh.weights.sum(axis=1, keepdims=True).clip(min=1e-12), "VEC4", _FLOAT, _ARRAY
+        ),
     }
     if mesh.normals is not None:
         attrs["NORMAL"] = b.add(mesh.normals, "VEC3", _FLOAT, _ARRAY)
@@ -194,6 +196,8 @@ def glb_bytes(clips: Mapping[str, Motion], *, mesh: SkinnedMesh | None = None) -
     b = _Builder()
     _nodes(b, skeleton)
     mesh = mesh or skeleton.mesh or bone_mesh(skeleton, rest_world(skeleton))
+    if not (np.isfinite(mesh.vertices).all() and np.isfinite(mesh.weights).all()):
+        raise KinemaError("the rig's mesh holds NaN or infinite vertices or weights; nothing written")
     _skin_and_mesh(b, skeleton, mesh)
     b.doc["animations"] = [_animation(b, name, m, skeleton) for name, m in clips.items()]
     b.doc["scenes"] = [{"name": skeleton.name or "kinema", "nodes": [0, len(b.doc["nodes"]) - 1]}]

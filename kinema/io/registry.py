@@ -11,17 +11,17 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from kinema.errors import KinemaError
 
 Handler = Callable | str
 
 
-@dataclass(frozen=True)
-class MotionFormat:
-    """One registered format: its name, suffixes (lower case, with the dot) and handlers."""
+class MotionFormat(NamedTuple):
+    """One registered format: its name, suffixes (lower case, with the dot) and handlers (a named tuple,
+    not a dataclass: ``import kinema`` stays free of the dataclasses module)."""
 
     name: str
     suffixes: tuple[str, ...]

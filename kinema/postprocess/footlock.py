@@ -118,8 +118,8 @@ def leg_locks(rig: Rig) -> list[LegLock]:
         if toe is not None and end not in skel.path_from_root(rig.contacts[toe]):
             end = skel.parents[end]  # a heel beside the toe: the ankle is their common parent
         path = skel.path_from_root(end)
-        if len(path) < 3:
-            continue
+        if len(path) < 3 or not set(path[-3:]) <= set(limb):
+            continue  # IK only bends the leg's own joints (never a shared body joint above the leg)
         chain = (path[-3], path[-2], path[-1])
         check_chain(skel, chain)
         toe_joint = rig.contacts[heel] if toe is None else rig.contacts[toe]

@@ -69,14 +69,17 @@ class Rig:
         """Find the parts from names (else geometry), then apply ``overrides`` (a JSON path or mapping)."""
         over, source = ov.read_overrides(overrides)
         roles = skeleton.roles
-        root = ov.joint(skeleton, over["root"], source, "root") if "root" in over else roles.get("pelvis", 0)
+        if "root" in over:
+            root = ov.joint(skeleton, over["root"], source, "root")
+        else:
+            root = roles["pelvis"] if "pelvis" in roles else find.geometric_root(skeleton)
         contacts = find.named_contacts(skeleton)
         limbs = find.named_limbs(skeleton)
         effectors = find.named_effectors(skeleton)
         if contacts is None:
             feet = find.geometric_feet(skeleton, root)
             contacts = find.geometric_contacts(skeleton, feet, root)
-            limbs = limbs or find.geometric_limbs(skeleton, feet, root)
+            limbs = {**limbs, **find.geometric_limbs(skeleton, feet, root)}
             effectors = effectors or find.leaf_effectors(skeleton, root, set())
         return cls(
             skeleton=skeleton,

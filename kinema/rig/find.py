@@ -6,26 +6,41 @@ left toe, right heel, right toe], end effectors = head, hands and feet, limbs = 
 the toe and each arm from the shoulder (or upper arm) to the hand.
 
 By geometry (creatures whose joint names say nothing kinema knows): in the rest pose (Y up), a *foot*
-is a leaf joint in the lowest band of the skeleton, ``height < floor + FOOT_BAND * (root height -
-floor)``, on a skeleton that stands (its root clearly above its lowest joint: ``root height - floor >
+is a leaf joint in the lowest band of the skeleton, ``height < floor + FOOT_BAND * (top - floor)``, on a
+skeleton that stands (its height clearly more than a sliver of its size: ``top - floor >
 STANDING_RATIO * extent``, so a fish lying flat has no feet). Each foot contributes its parent too
 when that parent is also in the band (ankle, toe). Legs are the chains from just below the nearest
 branching ancestor down to each foot; every other leaf is an end effector.
+
+Helper bones (IK targets, pole targets, controllers: names matching `HELPER_NAME`, and everything
+below them) are never feet, end effectors or the root. Without a pelvis role, the root is found by
+walking down from joint 0 while the joint sits on the floor (an armature or ``Root`` bone at the
+origin) into its largest non-helper subtree.
+
+On the 35 distinct skeletons of the shared Quaternius GLBs (joints at their node rest positions): the
+five animals get 4 legs of two contacts each, bipeds their two ``Foot`` bones, 8 of 10 fish and
+flyers none; a few are wrong (a dinosaur's tail tips touch the floor and count, a crab's body). Many
+of those rigs drive the feet with IK bones parented outside the legs, so their feet lie on no leg
+chain of three joints and foot locking leaves them alone. A rig override JSON fixes any of this.
 
 Shapes and units: rest positions ``(J, 3)`` metres, Y up.
 """
 
 from __future__ import annotations
 
+import re
+
 import torch
 
 from kinema.kinematics import forward_kinematics
 from kinema.skeleton import Skeleton
 
-#: a foot lies in this fraction of the root's height above the lowest joint
+#: a foot lies in this fraction of the skeleton's height above its lowest joint
 FOOT_BAND = 0.15
-#: a skeleton stands when its root is this fraction of its largest extent above its lowest joint
+#: a skeleton stands when its height is more than this fraction of its largest extent
 STANDING_RATIO = 0.15
+#: names of helper bones that drive a rig but are not part of the body
+HELPER_NAME = re.compile(r"pole|target|ctrl|control", re.I)
 #: end effectors found by role name, in this order
 EFFECTOR_ROLES = ("head", "left_hand", "right_hand", "left_ankle", "right_ankle")
 
@@ -44,16 +59,47 @@ def rest_positions(skeleton: Skeleton) -> torch.Tensor:
 
 
 def named_contacts(skeleton: Skeleton) -> tuple[int, ...] | None:
-    """[L heel, L toe, R heel, R toe] (ankles standing in for heels) when names give all four, else None."""
+    """[L heel, L toe, R heel, R toe] (ankles standing in for heels) when names give all four; [L ankle,
+    R ankle] for a biped without toe joints; else None."""
     roles = skeleton.roles
     out = []
     for side in ("left", "right"):
         heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
         toe = roles.get(f"{side}_toe")
         if heel is None or toe is None:
-            return None
+            break
         out += [heel, toe]
-    return tuple(out)
+    else:
+        return tuple(out)
+    if "left_ankle" in roles and "right_ankle" in roles and not skeleton.children[roles["left_ankle"]]:
+        return (roles["left_ankle"], roles["right_ankle"])
+    return None
+
+
+def helpers(skeleton: Skeleton) -> set[int]:
+    """Helper bones (see `HELPER_NAME`) and all their descendants."""
+    out: set[int] = set()
+    for j, (name, p) in enumerate(zip(skeleton.names, skeleton.parents, strict=True)):
+        if HELPER_NAME.search(name) or p in out:
+            out.add(j)
+    return out
+
+
+def geometric_root(skeleton: Skeleton) -> int:
+    """From joint 0, step into the largest non-helper subtree while the joint sits on the floor."""
+    P, skip = rest_positions(skeleton), helpers(skeleton)
+    body = [j for j in range(skeleton.num_joints) if j not in skip] or [0]
+    floor, top = float(P[body, 1].min()), float(P[body, 1].max())
+    size = [1] * skeleton.num_joints
+    for j in range(skeleton.num_joints - 1, 0, -1):
+        size[skeleton.parents[j]] += size[j]
+    j = 0
+    while top > floor and float(P[j, 1]) <= floor + FOOT_BAND * (top - floor):
+        kids = [c for c in skeleton.children[j] if c not in skip]
+        if not kids:
+            break
+        j = max(kids, key=lambda c: size[c])
+    return j
 
 
 def named_limbs(skeleton: Skeleton) -> dict[str, tuple[int, ...]]:
@@ -91,23 +137,25 @@ def named_effectors(skeleton: Skeleton) -> dict[str, int]:
 def geometric_feet(skeleton: Skeleton, root: int) -> list[int]:
     """Leaf joints in the lowest band of a standing skeleton, ordered front to back, then left to right."""
     P = rest_positions(skeleton)
-    if skeleton.num_joints < 2:
+    skip = helpers(skeleton)
+    body = [j for j in range(skeleton.num_joints) if j not in skip]
+    if len(body) < 2:
         return []
-    floor = float(P[:, 1].min())
-    extent = float((P.max(0).values - P.min(0).values).max())
-    lift = float(P[root, 1]) - floor
-    if extent <= 0 or lift <= STANDING_RATIO * extent:
+    floor, top = float(P[body, 1].min()), float(P[body, 1].max())
+    extent = float((P[body].max(0).values - P[body].min(0).values).max())
+    if extent <= 0 or top - floor <= STANDING_RATIO * extent:
         return []
-    leaves = [j for j in range(skeleton.num_joints) if not skeleton.children[j] and j != root]
-    feet = [j for j in leaves if float(P[j, 1]) < floor + FOOT_BAND * lift]
+    leaves = [j for j in range(skeleton.num_joints) if not skeleton.children[j] and j != root and j not in skip]
+    feet = [j for j in leaves if float(P[j, 1]) < floor + FOOT_BAND * (top - floor)]
     return sorted(feet, key=lambda j: (-round(float(P[j, 2]), 4), -float(P[j, 0])))
 
 
 def geometric_contacts(skeleton: Skeleton, feet: list[int], root: int) -> tuple[int, ...]:
     """Each foot preceded by its parent when that parent also lies in the foot band (ankle, toe)."""
     P = rest_positions(skeleton)
-    floor = float(P[:, 1].min())
-    band = floor + FOOT_BAND * (float(P[root, 1]) - floor)
+    body = [j for j in range(skeleton.num_joints) if j not in helpers(skeleton)]
+    floor, top = float(P[body, 1].min()), float(P[body, 1].max())
+    band = floor + FOOT_BAND * (top - floor)
     out: list[int] = []
     for foot in feet:
         parent = skeleton.parents[foot]

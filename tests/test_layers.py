@@ -1,0 +1,63 @@
+"""The package's layering (docs/rig.md, ../shared/design/README.md), checked on the source.
+
+- inference (rig, representation, model, diffusion, generate, postprocess, constraints) never imports
+  training code (kinema.train, kinema.data);
+- the lower layers never import the layers above them;
+- no function-level imports of kinema modules in the layers this refactor owns (they used to hide
+  import circles: motion/core <-> io, constraints/types <-> constraints/io).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import kinema
+
+KINEMA = Path(kinema.__file__).parent
+INFERENCE = ("rig", "representation", "model", "diffusion", "generate", "postprocess", "constraints")
+#: package -> packages it must not import
+FORBIDDEN = {
+    "motion": ("kinema.io", "kinema.rig", "kinema.representation", "kinema.model", "kinema.generate"),
+    "rig": ("kinema.io", "kinema.representation", "kinema.model", "kinema.generate", "kinema.postprocess"),
+    "representation": ("kinema.model", "kinema.generate", "kinema.postprocess", "kinema.diffusion"),
+    **{pkg: ("kinema.train", "kinema.data") for pkg in INFERENCE if pkg not in ("rig", "representation")},
+}
+NO_LOCAL_IMPORTS = ("motion", "rig", "representation", "constraints", "postprocess", "io")
+
+
+def _imports(path: Path) -> list[tuple[str, bool]]:
+    """(module, inside a function) for every ``import`` / ``from ... import`` of a kinema module."""
+    tree = ast.parse(path.read_text())
+    local = set()
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            local.update(id(n) for n in ast.walk(fn) if isinstance(n, (ast.Import, ast.ImportFrom)))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("kinema"):
+            out.append((node.module, id(node) in local))
+        elif isinstance(node, ast.Import):
+            out += [(a.name, id(node) in local) for a in node.names if a.name.startswith("kinema")]
+    return out
+
+
+def _files(pkg: str) -> list[Path]:
+    return sorted((KINEMA / pkg).glob("*.py"))
+
+
+@pytest.mark.parametrize("pkg", sorted(FORBIDDEN))
+def test_layers_import_downwards_only(pkg) -> None:
+    for path in _files(pkg):
+        for module, _ in _imports(path):
+            bad = [f for f in FORBIDDEN[pkg] + ("kinema.train",) if module == f or module.startswith(f + ".")]
+            assert not bad, f"kinema/{pkg}/{path.name} imports {module}"
+
+
+@pytest.mark.parametrize("pkg", NO_LOCAL_IMPORTS)
+def test_no_function_level_imports(pkg) -> None:
+    for path in _files(pkg):
+        local = [m for m, inside in _imports(path) if inside]
+        assert not local, f"kinema/{pkg}/{path.name} imports {local} inside a function"
