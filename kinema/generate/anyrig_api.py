@@ -224,16 +224,19 @@ def floor_height(skeleton: Skeleton, joint: int) -> float:
 
 
 def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
-    """``m`` (posed from rotations) with the translations of `floor_root_children` taken from the predicted
-    joint positions ``feats (T, J, 13)``, so feet driven by IK bones follow the model (rig units)."""
-    joints = floor_root_children(m.skeleton)
-    if not joints or rep.rig.root != 0:
+    """``m`` (posed from rotations) with the translations of `floor_root_children` (except the root and
+    its ancestors, which the root row places) taken from the predicted joint positions ``feats (T, J, 13)``
+    (the motion's units), so feet driven by IK bones follow the model."""
+    root = rep.rig.root
+    above = set(m.skeleton.path_from_root(root))
+    joints = [j for j in floor_root_children(m.skeleton) if j not in above]
+    if not joints:
         return m
     G, P = m.global_transforms()
     f = feats.to(P.dtype)
-    psi = torch.atan2(f[:, 0, 10], f[:, 0, 9])
+    psi = torch.atan2(f[:, root, 10], f[:, root, 9])
     T = m.num_frames
-    world = P[:, :1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
     lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
     lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - P[:, :1])
     return Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, m.foot_contacts, lt)

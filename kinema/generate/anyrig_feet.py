@@ -29,7 +29,7 @@ def lock_translated_feet(motion: Motion, joints: list[int], size: float) -> tupl
     if not joints or motion.local_translations is None or motion.num_frames < 3:
         return motion, 0
     G, P = motion.global_transforms()
-    floor = float(P[..., 1].min())
+    floor = float(P[:, joints, 1].min())  # the feet themselves: joint 0 may ride along with the root
     speed = torch.zeros(P.shape[:2], dtype=P.dtype)
     speed[1:] = (P[1:, :, [0, 2]] - P[:-1, :, [0, 2]]).norm(dim=-1) * motion.fps
     new = P.clone()
