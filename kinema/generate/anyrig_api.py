@@ -22,7 +22,6 @@ from pathlib import Path
 
 import torch
 
-from kinema.data.motion_cache import rest_extent
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
@@ -215,6 +214,13 @@ def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
     if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
         return []
     return list(kids)
+
+
+def rest_extent(skeleton: Skeleton) -> float:
+    """Largest side of the rest pose's bounding box (skeleton units): the unit the model works in, as
+    the data builds normalise every rig to it (kinema.data.motion_cache.rest_extent)."""
+    P = rest_positions(skeleton)
+    return float((P.max(0).values - P.min(0).values).max())
 
 
 def floor_height(skeleton: Skeleton, joint: int) -> float:
