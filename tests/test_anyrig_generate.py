@@ -186,3 +186,35 @@ def test_bones_under_a_floor_armature_take_predicted_translations_and_feet_lock(
     P = locked.positions
     assert float((P[1:, 3, [0, 2]] - P[:-1, 3, [0, 2]]).norm(dim=-1).max()) < 1e-9
     assert torch.allclose(P[:, [1, 2, 4]], back.positions[:, [1, 2, 4]])
+
+
+def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:
+    from kinema.cli import main
+
+    assert main(["generate", "--model", str(trained)]) == 0
+    listing = capsys.readouterr().out
+    rig_id = listing.splitlines()[1].split()[0]
+    assert "joints" in listing.splitlines()[0]
+    assert main(["generate", "A thing moves.", "--model", str(trained)]) == 2
+    assert "needs --rig" in capsys.readouterr().err
+    out = tmp_path / "m.bvh"
+    args = ["generate", "A thing moves.", "--model", str(trained), "--rig", rig_id, "--seconds", "0.5", "--steps", "2"]
+    assert main([*args, "--out", str(out)]) == 0 and out.exists()
+    assert main([*args, "--out", str(tmp_path / "m.txt")]) == 2
+    assert main(["generate", "x", "--rig", rig_id, "--out", str(tmp_path / "h.bvh")]) == 2  # the human model
+    assert "one skeleton" in capsys.readouterr().err
+
+
+def test_per_rig_evaluation_rows(trained, creature_cache) -> None:
+    from kinema.bench.anyrig import pick_rigs
+    from kinema.evaluate.anyrig import evaluate_split
+
+    model = _model(trained)
+    rows = evaluate_split(model, creature_cache, "train", clips=1, steps=2, log=lambda s: None)
+    assert rows and {r["split"] for r in rows} == {"train"}
+    for r in rows:
+        assert r["motions"] == 1 and r["stretch"] < 1e-6  # FK of rotations: bones never stretch
+        assert r["jerk"] > 0 and r["jerk_ref"] >= 0 and 0 <= r["coverage"] <= 1 and 0 <= r["novelty"] <= 1
+        assert r["constraint_cm"] is not None and r["constraint_cm"] < 10.0  # untrained: post-processing does it
+    picks = pick_rigs([("a", 3, []), ("b", 40, []), ("c", 10, []), ("d", 2, [])])
+    assert picks == [("a", 3), ("c", 10), ("b", 40)]
