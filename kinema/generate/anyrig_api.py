@@ -230,22 +230,30 @@ def floor_height(skeleton: Skeleton, joint: int) -> float:
 
 
 def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
-    """``m`` (posed from rotations) with the translations of `floor_root_children` (except the root and
-    its ancestors, which the root row places) taken from the predicted joint positions ``feats (T, J, 13)``
-    (the motion's units), so feet driven by IK bones follow the model."""
+    """``m`` (posed from rotations) with the bones under a floor-level armature joint (`floor_root_children`)
+    moved as in the data: the armature stays on the floor (y = 0) below the root, the root keeps the
+    position the root row gave it, and every other such bone takes its translation from the predicted
+    joint positions ``feats (T, J, 13)`` (the motion's units), so feet driven by IK bones follow the model."""
     root = rep.rig.root
-    above = set(m.skeleton.path_from_root(root))
-    joints = [j for j in floor_root_children(m.skeleton) if j not in above]
-    if not joints:
+    path = m.skeleton.path_from_root(root)
+    kids = floor_root_children(m.skeleton)
+    joints = [j for j in kids if j not in path]
+    move_root = len(path) == 2 and root in kids  # the root hangs directly from the armature
+    if not joints and not move_root:
         return m
     G, P = m.global_transforms()
     f = feats.to(P.dtype)
     psi = torch.atan2(f[:, root, 10], f[:, root, 9])
     T = m.num_frames
     world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    trans = m.root_translation.to(P.dtype).clone()
+    if move_root:
+        trans[:, 1] -= P[:, 0, 1]  # joint 0 back on the floor; the root's own translation carries the height
+        joints, world = [*joints, root], torch.cat([world, P[:, root : root + 1]], dim=1)
+    base = P[:, :1] - (m.root_translation.to(P.dtype) - trans)[:, None]
     lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
-    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - P[:, :1])
-    return Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, m.foot_contacts, lt)
+    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - base)
+    return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
 
 
 def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
