@@ -27,12 +27,13 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from kinema.diffusion.guidance import Guidance
+    from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
     from kinema.model.export import export_model
     from kinema.model.loading import load_denoiser
 
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps)
-    loaded = load_denoiser(out)  # prove the folder loads before reporting success
+    loaded = (load_anyrig if is_anyrig_checkpoint(out) else load_denoiser)(out)  # prove the folder loads
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "

@@ -20,10 +20,12 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.generate.anyrig_api import AnyRigModel
 from kinema.generate.progress import ProgressFn, StepProgress, split_progress
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
+from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.motion.core import Motion
 from kinema.representation.flat import FlatRepresentation
@@ -269,20 +271,28 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
         return shipped
     path = Path(name_or_path)
     if not path.exists():
+        from importlib.resources import files
+
+        shipped = Path(str(files("kinema") / "assets" / "models")) / str(name_or_path)
+        if path.name == str(name_or_path) and (shipped / "checkpoint.json").exists():
+            return shipped  # another model shipped inside the package, e.g. "creatures"
         raise KinemaError(f"{path}: no such model folder")
     return path
 
 
 def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel:
+               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel | AnyRigModel:
     """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
     so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
     behind it that persists between processes (the CLI passes ``cache/text``).
     """
-    loaded = load_denoiser(resolve_model_path(name_or_path))
+    path = resolve_model_path(name_or_path)
+    loaded = load_anyrig(path) if is_anyrig_checkpoint(path) else load_denoiser(path)
     encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
     if text_memory:
         encoder = MemoryCachedEncoder(encoder, text_memory)
-    return KinemaModel(loaded, encoder)
+    if isinstance(loaded, LoadedModel):
+        return KinemaModel(loaded, encoder)
+    return AnyRigModel(loaded, encoder)  # a model for any rig (kinema.generate.anyrig_api)
