@@ -2,7 +2,12 @@
 node per material colour (viser's skinned mesh has one colour), each moved by only the joints that
 weigh on it. Vertices are the mesh's rest pose in world metres (kinema.mesh), so the bones start at
 the rest pose's global transforms (kinema.io.gltf_writer.rest_world) and are then set to each frame's
-global rotations (wxyz) and positions. Same three methods as SkeletonView (kinema.app.views)."""
+global rotations (wxyz) and positions. Same three methods as SkeletonView (kinema.app.views).
+
+viser 1.1.1's browser client crashes (a blank page, "Cannot read properties of null (reading 'remove')")
+when a skinned mesh node is removed or replaced, so a view never removes one: ``remove()`` hides its
+meshes and they wait in the tab's `SkinPool` for the next view of the same mesh in the same slot.
+"""
 
 from __future__ import annotations
 
@@ -47,14 +52,36 @@ def skin_parts(mesh: SkinnedMesh) -> list[SkinPart]:
     return parts
 
 
+class SkinPool:
+    """A tab's skinned-mesh nodes, kept for reuse (hidden when unused; see the module docstring):
+    one per (slot, mesh, part)."""
+
+    def __init__(self, scene):
+        self.scene, self.handles = scene, {}
+
+    def get(self, key: tuple, make):
+        """The node for ``key``, made by ``make(name)`` the first time (under /skins)."""
+        if key not in self.handles:
+            self.handles[key] = make(f"/skins/skin{len(self.handles)}")
+        return self.handles[key]
+
+
 class MeshView:
     """The skin of ``skeleton`` posed frame by frame; ``own_colors`` keeps the file's colours while
-    ``color`` is the selected colour (other samples are drawn in ``color``)."""
+    ``color`` is the selected colour (other samples are drawn in ``color``). ``slot`` (a sample's
+    number) picks the pooled nodes, so that samples shown side by side have their own."""
 
     def __init__(
-        self, scene, name: str, skeleton: Skeleton, mesh: SkinnedMesh, *, color=SELECTED_COLOR, own_colors: bool = False
+        self,
+        pool: SkinPool,
+        slot: int,
+        skeleton: Skeleton,
+        mesh: SkinnedMesh,
+        *,
+        color=SELECTED_COLOR,
+        own_colors=False,
     ):
-        self.scene, self.name, self.color, self.own_colors = scene, name, color, own_colors
+        self.pool, self.slot, self.mesh, self.color, self.own_colors = pool, slot, mesh, color, own_colors
         self.parts = skin_parts(mesh)
         self.rest = tuple(a.astype(np.float32) for a in rest_world(skeleton))
         self.rotations: np.ndarray | None = None  # (T, J, 4) wxyz
@@ -69,9 +96,10 @@ class MeshView:
         G, P = self.rest
         for i, part in enumerate(self.parts):
             rgb = part.rgb if self.own_colors and self.color == SELECTED_COLOR else self.color
-            self.handles.append(
-                self.scene.add_mesh_skinned(
-                    f"{self.name}/skin{i}",
+
+            def make(name, part=part, rgb=rgb):
+                return self.pool.scene.add_mesh_skinned(
+                    name,
                     part.vertices,
                     part.faces,
                     bone_wxyzs=G[part.bones],
@@ -81,7 +109,10 @@ class MeshView:
                     flat_shading=True,
                     side="double",
                 )
-            )
+
+            handle = self.pool.get((self.slot, self.mesh, i), make)
+            handle.color, handle.visible = rgb, True
+            self.handles.append(handle)
 
     def show(self, frame: int) -> None:
         if self.positions is None or self.rotations is None:
@@ -96,6 +127,7 @@ class MeshView:
                 bone.position = P[j]
 
     def remove(self) -> None:
+        """Hide the meshes (never removed: see the module docstring)."""
         for h in self.handles:
-            h.remove()
+            h.visible = False
         self.handles = []
