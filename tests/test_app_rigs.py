@@ -9,10 +9,12 @@ import torch
 
 pytest.importorskip("viser", reason="pip install 'kinema[app]'")
 
-from kinema.app.generation import cannot_generate  # noqa: E402
+from kinema.app.generation import cannot_generate, outcome  # noqa: E402
 from kinema.app.mesh_view import MeshView, SkinPool, skin_parts  # noqa: E402
 from kinema.app.rigs import load_rig, load_rig_bytes, model_rig  # noqa: E402
+from kinema.cli import build_parser, main  # noqa: E402
 from kinema.errors import KinemaError  # noqa: E402
+from kinema.generate.anyrig_api import AnyRigModel, AnyRigReport, AnyRigResult  # noqa: E402
 from kinema.io.gltf_writer import rest_world  # noqa: E402
 from kinema.skeleton import Skeleton  # noqa: E402
 from tests.app_rig_data import NAMES, quad_motion, synthetic_rig_glb  # noqa: E402
@@ -96,3 +98,35 @@ def test_human_model_cannot_generate_for_another_rig(tmp_path):
     other = model_rig(chain, name="chain")
     why = cannot_generate(Model(), other, "default")
     assert why is not None and "'default' model generates for its own 11-joint skeleton" in why and "chain" in why
+
+
+def test_cli_rig_arguments(capsys, tmp_path):
+    args = build_parser().parse_args(["app", "--rig", "Fox.glb", "--rig-units", "metres"])
+    assert str(args.rig) == "Fox.glb" and args.rig_units == "metres"
+    assert main(["app", "--rig", str(tmp_path / "missing.glb")]) == 2
+    assert capsys.readouterr().err.strip().endswith("missing.glb: no such file")
+
+
+class _FakeAnyRig(AnyRigModel):
+    """Stands in for a trained any-rig model: records the call, returns the rig's clip."""
+
+    def __init__(self, clip):
+        self.clip, self.calls = clip, []
+
+    def generate(self, prompt, *, rig, seconds, samples, steps, seed, **_):
+        self.calls.append((prompt, rig, seconds, samples, steps, seed))
+        return AnyRigResult([self.clip] * samples, AnyRigReport(seconds=0.1, steps=steps))
+
+
+def test_any_rig_model_gets_one_prompt_the_total_time_and_the_shown_rig(tmp_path):
+    rig = load_rig(synthetic_rig_glb(tmp_path / "quad.glb"), fps=20.0)
+    clip = rig.clips["Walk"]
+    bare = type(clip)(clip.skeleton, clip.fps, clip.root_translation, clip.local_rotations)
+    model = _FakeAnyRig(bare)
+    timeline = [{"prompt": "A dog walks.", "seconds": 2.0}, {"prompt": "A dog sits.", "seconds": 1.5}]
+    out = outcome(model, rig, timeline, constraints=[{"type": "root2d"}], samples=2, steps=3, seed=4, progress=None)
+    assert model.calls == [("A dog walks.", rig.skeleton, 3.5, 2, 3, 4)]
+    assert len(out.motions) == 2 and out.motions[0].foot_contacts.shape == (clip.num_frames, 4)
+    assert "one prompt" in out.notes[0] and "constraints" in out.notes[1]
+    assert out.text.startswith("2 sample(s) on quad.glb")
+    assert cannot_generate(model, rig, "creatures") is None

@@ -61,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
     from kinema.generate.api import load_model
     from kinema.runtime import configure_threads
 
+    if args.rig is not None and not args.rig.is_file():
+        raise KinemaError(f"--rig {args.rig}: no such file")
     configure_threads(args.threads)
     model = load_model(args.model)
     rig = None if args.rig is None else load_rig(args.rig, fps=model.fps, scale=UNITS[args.rig_units])
