@@ -83,7 +83,8 @@ def show_rig(page, session, clip: str | None) -> None:
     size = float((P.max(0).values - P.min(0).values).norm())
     centre = (P.max(0).values + P.min(0).values) / 2
     look = centre.tolist()
-    set_camera(session.client.camera, (look[0] + 1.1 * size, look[1] + 0.5 * size, look[2] + 0.9 * size), look)
+    set_camera(session.client.camera, (look[0] + 0.9 * size, look[1] + 0.4 * size, look[2] + 0.7 * size), look)
+    page.get_by_text("Show skin").scroll_into_view_if_needed()
 
 
 def main() -> int:

@@ -46,6 +46,12 @@ class RigPanel:
             f"{len(rig.contacts)} contact joints, {len(rig.clips)} clip(s)"
         )
 
+    def select(self, name: str) -> None:
+        """Show ``name`` in the Clip dropdown (the session shows the clip itself)."""
+        self._updating = True
+        self.clip.value = name
+        self._updating = False
+
     def _clip(self) -> None:
         if not self._updating and self.clip.value in self.host.rig.clips:
             self.host.show_clip(self.clip.value)

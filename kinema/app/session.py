@@ -215,12 +215,15 @@ class Session:
         return list(self.rig.clips.values())[:1] or [rest_motion(self.rig.skeleton, self.model.fps)]
 
     def _views(self, i: int, skeleton) -> list[CharacterView]:
-        """Sample ``i``'s views: the skeleton (with contacts), and the skin when shown."""
+        """Sample ``i``'s views: the skin when shown, else the bones; planted contacts and the trail always."""
         color = SELECTED_COLOR if i == 0 else OTHER_COLOR
         scene, rig = self.client.scene, self.rig
         contacts = rig.contacts if skeleton.same_topology(rig.skeleton) else None
-        views: list[CharacterView] = [SkeletonView(scene, f"/sample{i}", skeleton, color=color, contacts=contacts)]
-        if self.skin and skeleton.same_topology(rig.skeleton):
+        skin = self.skin and skeleton.same_topology(rig.skeleton)
+        views: list[CharacterView] = [
+            SkeletonView(scene, f"/sample{i}", skeleton, color=color, contacts=contacts, bones=not skin)
+        ]
+        if skin:
             views.append(MeshView(self.skins, i, skeleton, rig.mesh, color=color, own_colors=rig.own_colors))
         return views
 
@@ -247,6 +250,7 @@ class Session:
             self.notify(f"{self.rig.name}: playback only", why, error=True)
 
     def show_clip(self, name: str) -> None:
+        self.rig_panel.select(name)
         self.show_motions([self.rig.clips[name]], report=None, source=f"clip {name} of {self.rig.name}")
 
     # ------------------------------------------------------------------ files

@@ -59,7 +59,8 @@ def bone_pairs(skeleton: Skeleton) -> np.ndarray:
 
 class SkeletonView:
     """Bones as lines, joints as dots, planted contact joints as green dots (``motion.foot_contacts``,
-    one column per joint of ``contacts``: a rig's contact joints, default the human four)."""
+    one column per joint of ``contacts``: a rig's contact joints, default the human four); with
+    ``bones=False`` (a skin drawn over it) only the planted joints and the trail."""
 
     def __init__(
         self,
@@ -71,8 +72,10 @@ class SkeletonView:
         thickness: float = 0.025,
         trail: bool = False,
         contacts: Sequence[int] | None = None,
+        bones: bool = True,
     ):
         self.scene, self.name, self.color, self.thickness, self.trail = scene, name, color, thickness, trail
+        self.draw_bones = bones  # False under a skin: only the trail and the planted contact joints
         self.pairs = bone_pairs(skeleton)
         self.contact_idx = list(contacts) if contacts is not None else _human_contacts(skeleton)
         self.positions: np.ndarray | None = None  # (T, J, 3)
@@ -99,6 +102,9 @@ class SkeletonView:
         segs = P[self.pairs]
         if self.trail and self.path is None and len(self.positions) > 1:
             self._add_trail()
+        if not self.draw_bones:
+            self._show_contacts(planted)
+            return
         if self.bones is None:
             self.bones = self.scene.add_line_segments(f"{self.name}/bones", segs, self.color, thickness=self.thickness)
             self.joints = self.scene.add_point_cloud(
