@@ -23,7 +23,11 @@ def register(sub) -> None:
         help="web authoring UI: timeline, constraints in the scene, playback, export (docs/app.md)",
         description=__doc__,
     )
-    p.add_argument("--model", default="default", help="'default' (shipped) or a run/checkpoint folder")
+    p.add_argument(
+        "--model",
+        default="default",
+        help="'default' (human), 'creatures' (any rig: needs --rig) or a checkpoint folder",
+    )
     p.add_argument(
         "--rig",
         type=Path,
