@@ -7,15 +7,20 @@ Skipped when Playwright or the browser is missing; .ci/run installs both."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import socket
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 import kinema
+from tests.app_rig_data import synthetic_rig_glb
 from tests.browser import button, chromium_path, launch, row_input, set_camera, world_to_screen
 
 if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
@@ -29,9 +34,11 @@ else:
     if chromium_path() is None:
         pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
 
+from kinema.app.mesh_view import MeshView  # noqa: E402
 from kinema.app.residuals import residual  # noqa: E402
 from kinema.app.server import AppServer  # noqa: E402
 from kinema.io.bvh import read_bvh  # noqa: E402
+from kinema.io.gltf import read_gltf  # noqa: E402
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time  # noqa: E402
 
 STEPS = 4  # DDIM steps: a draft is enough to test the UI
@@ -320,3 +327,54 @@ def test_path_mode_clicks_make_a_dense_path(tab):
     assert c["frame_indices"][0] == lo and c["frame_indices"][-1] == hi
     for (x, z), (cx, cz) in zip(aimed, c["smooth_root_2d"], strict=True):
         assert abs(cx - x) < 0.05 and abs(cz - z) < 0.05
+
+
+FOX = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets" / "quaternius" / "animals_pack" / "Fox.glb"
+
+
+def test_glb_rig_shows_its_skin_and_downloads_as_glb(tab, tmp_path, default_model):
+    page, session, log = tab
+    with page.expect_download() as dl:  # the human: GLB with kinema's generated bone mesh
+        button(page, "Download GLB").click()
+    dl.value.save_as(tmp_path / "human.glb")
+    human = read_gltf(tmp_path / "human.glb")
+    assert human.skeleton.names == default_model.skeleton.names and human.skeleton.mesh is not None
+    rig_file = FOX if FOX.is_file() else synthetic_rig_glb(tmp_path / "quad.glb")
+    page.get_by_text("Rig", exact=True).click()
+    with page.expect_file_chooser() as fc:
+        button(page, "Upload rig").click()
+    fc.value.set_files(rig_file)
+    wait_for(lambda: session.rig.name == rig_file.name and session.views, what="the rig to show")
+    page.get_by_text("playback only").first.wait_for(timeout=20000)  # the human model cannot generate for it
+    expected = read_gltf(rig_file, fps=default_model.fps)
+    shown = session.shown_motion()
+    assert shown.skeleton.names == expected.skeleton.names
+    assert shown.num_frames == next(iter(expected.motions.values())).num_frames
+    meshes = [v for v in session.views[0] if isinstance(v, MeshView)]
+    assert meshes and meshes[0].handles, "the skin is not drawn"
+    # the skin really renders: the canvas around the character changes when it is switched off
+    set_camera(session.client.camera, (2.0, 1.2, 2.0), (0.0, 0.4, 0.0))
+    box = page.locator("canvas").first.bounding_box()
+    time.sleep(1.0)
+    with_skin = np.asarray(Image.open(io.BytesIO(page.screenshot(clip=box))).convert("RGB"), dtype=np.int16)
+    page.get_by_label("Show skin").click()
+    wait_for(lambda: not any(isinstance(v, MeshView) for v in session.views[0]), what="the skin to go")
+    time.sleep(1.0)
+    bones = np.asarray(Image.open(io.BytesIO(page.screenshot(clip=box))).convert("RGB"), dtype=np.int16)
+    changed = float((np.abs(with_skin - bones).sum(-1) > 40).mean())
+    assert changed > 0.01, f"only {100 * changed:.2f} % of the canvas changed without the skin"
+    page.get_by_label("Show skin").click()
+    button(page, "Generate").click()
+    page.get_by_text("Cannot generate for this rig").first.wait_for(timeout=10000)
+    with page.expect_download() as dl:
+        button(page, "Download GLB").click()
+    dl.value.save_as(tmp_path / "rig.glb")
+    back = read_gltf(tmp_path / "rig.glb")
+    assert back.skeleton.names == expected.skeleton.names and back.skeleton.mesh is not None
+    assert back.skeleton.mesh.num_vertices == expected.skeleton.mesh.num_vertices
+    clip = next(iter(back.motions.values()))
+    assert clip.num_frames == shown.num_frames
+    assert float((clip.positions - shown.positions.double()).abs().max()) < 1e-3
+    assert log["errors"] == []
+    button(page, "Use the model's skeleton").click()
+    wait_for(lambda: session.rig.skeleton is default_model.skeleton, what="the model's skeleton")

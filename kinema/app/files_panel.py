@@ -1,13 +1,14 @@
-"""The files panel: download the shown motion (BVH, npz) and the session (timeline + constraints JSON),
-load a session again, and upload a BVH clip to in-between from (it becomes the shown motion: scrub
-it and "Keyframe pose" the frames to keep). Uploads are parsed from a private temporary folder and
-never written anywhere else; errors become notifications."""
+"""The files panel: download the shown motion (BVH, npz, GLB with the rig's skin) and the session
+(timeline + constraints JSON), load a session again, and upload a BVH clip to in-between from (it
+becomes the shown motion: scrub it and "Keyframe pose" the frames to keep). Uploads are parsed from a
+private temporary folder and never written anywhere else; errors become notifications."""
 
 from __future__ import annotations
 
 import tempfile
 from pathlib import Path
 
+from kinema.app.rigs import model_rig
 from kinema.constraints.io import poses_from_bvh
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat
@@ -53,6 +54,7 @@ class FilesPanel:
         with gui.add_folder("Files", expand_by_default=False):
             bvh = gui.add_button("Download BVH", icon="download")
             npz = gui.add_button("Download npz", icon="download")
+            glb = gui.add_button("Download GLB", icon="download", hint="the shown motion with the rig's skin")
             session = gui.add_button(
                 "Download session", icon="download", hint="timeline + constraints + settings as JSON"
             )
@@ -63,6 +65,7 @@ class FilesPanel:
             )
         bvh.on_click(lambda e: self._download(e.client, ".bvh"))
         npz.on_click(lambda e: self._download(e.client, ".npz"))
+        glb.on_click(lambda e: self._download(e.client, ".glb"))
         session.on_click(
             lambda e: e.client.send_file_download(
                 "kinema_session.json", host.doc.to_json(host.model.fps).encode("utf-8"), save_immediately=True
@@ -82,7 +85,13 @@ class FilesPanel:
         if motion is None:
             self.host.notify("Nothing to download", "generate a motion first", error=True)
             return
-        client.send_file_download(f"kinema_motion{suffix}", motion_bytes(motion, suffix), save_immediately=True)
+        rig = self.host.rig
+        if suffix == ".glb":  # the rig's skin (a GLB file's own, else kinema's bone mesh) travels with it
+            mesh_rig = rig if motion.skeleton.same_topology(rig.skeleton) else model_rig(motion.skeleton)
+            data = mesh_rig.glb(motion)
+        else:
+            data = motion_bytes(motion, suffix)
+        client.send_file_download(f"kinema_motion{suffix}", data, save_immediately=True)
 
     def _clip(self, name: str, content: bytes) -> None:
         m = self.host.model

@@ -8,7 +8,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import viser
 
+from kinema.app.generation import is_any_rig
+from kinema.app.rigs import AppRig, model_rig
 from kinema.app.session import Session
+from kinema.errors import KinemaError
 
 #: generations that may run at once (across tabs); more wait in the pool's queue
 WORKERS = 2
@@ -20,15 +23,26 @@ CAMERA_LOOK_AT = (0.0, 0.2, 3.4)
 
 class AppServer:
     """``kinema app``: serve the authoring UI for ``model`` on ``host:port`` (``steps``: DDIM steps
-    a new tab starts with, None = the model's setting)."""
+    a new tab starts with, None = the model's setting; ``rig``: the character new tabs show, default
+    the model's own skeleton; ``model_name`` names the model in messages)."""
 
     def __init__(
-        self, model, *, host: str = "127.0.0.1", port: int = 8080, steps: int | None = None, verbose: bool = False
+        self,
+        model,
+        *,
+        rig: AppRig | None = None,
+        model_name: str = "default",
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        steps: int | None = None,
+        verbose: bool = False,
     ):
-        self.model, self.steps = model, steps
+        if rig is None and is_any_rig(model):
+            raise KinemaError("an any-rig model needs a rig to start with: kinema app --model creatures --rig FILE")
+        self.model, self.steps, self.model_name = model, steps, model_name
+        self.rig = rig or model_rig(model.skeleton, name=model_name)
         self.pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="kinema-app-generate")
         self.sessions: dict[int, Session] = {}
-        self.seconds_per_work = 2e-4  # refined by learn_rate after each generation
         self._lock = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="kinema", verbose=verbose)
         self.server.scene.set_up_direction("+y")
@@ -40,11 +54,6 @@ class AppServer:
     @property
     def url(self) -> str:
         return f"http://{self.server.get_host()}:{self.server.get_port()}"
-
-    def learn_rate(self, work: float, seconds: float) -> None:
-        """Running estimate of seconds per unit of work (frames x steps x samples), for progress bars."""
-        with self._lock:
-            self.seconds_per_work = 0.5 * self.seconds_per_work + 0.5 * seconds / max(work, 1.0)
 
     def _connect(self, client) -> None:
         session = Session(self, client)

@@ -1,21 +1,24 @@
 """One browser tab: its document, motions, scene and panels. Generation runs on the app's worker pool
-(never on viser's callback threads), with an estimated progress bar; results and errors come back as
-scene updates and notifications. Tabs share the loaded model (``generate`` is thread-safe) and
+(never on viser's callback threads), with a progress bar fed by ``generate``'s step callback; results
+and errors come back as scene updates and notifications. Tabs share the loaded model (``generate`` is thread-safe) and
 nothing else."""
 
 from __future__ import annotations
 
 import threading
-import time
 import traceback
 
+from kinema.app import generation as gen
 from kinema.app.constraint_panel import ConstraintPanel
 from kinema.app.document import Document, Settings, check_timeline, load_document
 from kinema.app.files_panel import FilesPanel
 from kinema.app.markers import Markers, contact_flags_at
+from kinema.app.mesh_view import MeshView, SkinPool
 from kinema.app.playback import Player
+from kinema.app.rig_panel import RigPanel
+from kinema.app.rigs import AppRig
 from kinema.app.timeline_panel import TimelinePanel
-from kinema.app.views import OTHER_COLOR, SELECTED_COLOR, SkeletonView, rest_motion
+from kinema.app.views import OTHER_COLOR, SELECTED_COLOR, CharacterView, SkeletonView, rest_motion
 from kinema.errors import KinemaError
 
 #: spacing (metres, towards -X, away from the camera) of the samples not selected, drawn beside the selected one
@@ -25,9 +28,12 @@ SAMPLE_NAMES = ("1", "2", "3", "4")
 
 class Session:
     def __init__(self, app, client):
-        self.app, self.client, self.model = app, client, app.model
+        self.app, self.client, self.model, self.rig = app, client, app.model, app.rig
+        #: the skeleton constraints are written for (the human model's own; any-rig: the starting rig)
+        self.skeleton = self.rig.skeleton if gen.is_any_rig(self.model) else self.model.skeleton
         self.doc = Document(settings=Settings(steps=app.steps))
-        self.motions = [rest_motion(self.model.skeleton, self.model.fps)]
+        self.motions = self.rig_motions()
+        self.skin = self.rig.own_colors
         self.generated = False
         self.selected = 0
         self.job = None
@@ -46,15 +52,18 @@ class Session:
         )
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()
-        self.views: list[SkeletonView] = []
-        self.markers = Markers(scene, self.model.skeleton, self.model.fps)
+        self.views: list[list[CharacterView]] = []
+        self.skins = SkinPool(scene)
+        self.markers = Markers(scene, self.skeleton, self.model.fps)
         self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True))
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
-        self.show_motions(self.motions, report=None, source=None)
+        self.rig_panel = RigPanel(gui, self)
+        self.show_motions(self.motions, report=None, source=f"rig {self.rig.name}" if self.rig.clips else None)
         self._length_changed()
+        self._say_if_playback_only()
 
     # ------------------------------------------------------------------ panels
     def _build_generate(self, gui) -> None:
@@ -72,9 +81,9 @@ class Session:
             self.seed = gui.add_number("Seed", s.seed, min=0, step=1)
             self.steps = gui.add_number(
                 "Steps",
-                s.steps or self.model.loaded.sampler.num_inference_steps,
+                s.steps or gen.default_steps(self.model),
                 min=1,
-                max=self.model.max_steps,
+                max=gen.max_steps(self.model),
                 step=1,
                 hint="DDIM steps: fewer is faster",
             )
@@ -97,17 +106,10 @@ class Session:
         """Replace the motions (samples) drawn; the first is selected."""
         with self.lock:
             self.motions, self.generated, self.selected = list(motions), source is not None, 0
-            for v in self.views:
-                v.remove()
-            self.views = [
-                SkeletonView(
-                    self.client.scene,
-                    f"/sample{i}",
-                    self.model.skeleton,
-                    color=SELECTED_COLOR if i == 0 else OTHER_COLOR,
-                )
-                for i in range(len(motions))
-            ]
+            for group in self.views:
+                for v in group:
+                    v.remove()
+            self.views = [self._views(i, m.skeleton) for i, m in enumerate(self.motions)]
         self.pick.options = SAMPLE_NAMES[: len(motions)]
         self.pick.visible = len(motions) > 1
         self.select_sample(0)
@@ -119,12 +121,13 @@ class Session:
         with self.lock:
             self.selected = min(max(i, 0), len(self.motions) - 1)
             others = [k for k in range(len(self.motions)) if k != self.selected]
-            for k, view in enumerate(self.views):
+            for k, group in enumerate(self.views):
                 lane = 0 if k == self.selected else others.index(k) + 1
-                view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
-                view.trail = k == self.selected
-                view.remove()
-                view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
+                for view in group:
+                    view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
+                    view.trail = k == self.selected
+                    view.remove()
+                    view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
         self.show_frame(self.player.frame)
         self.constraints.show_residuals()
         if len(self.motions) > 1:
@@ -132,9 +135,11 @@ class Session:
 
     def show_frame(self, frame: int) -> None:
         with self.lock:
-            for view in self.views:
-                view.show(frame)
-        flags = contact_flags_at(self.doc.constraints, frame)
+            for group in self.views:
+                for view in group:
+                    view.show(frame)
+        ours = self.shown_motion().skeleton.same_topology(self.skeleton)  # constraints are on this skeleton
+        flags = contact_flags_at(self.doc.constraints, frame) if ours else None
         self.markers.draw_contacts(self.shown_motion(), frame, flags)
 
     def _length_changed(self) -> None:
@@ -157,26 +162,29 @@ class Session:
         except (KinemaError, ValueError) as err:
             self.notify("Cannot generate", str(err), error=True)
             return
+        why = gen.cannot_generate(self.model, self.rig, self.app.model_name)
+        if why is not None:
+            self.notify("Cannot generate for this rig", why, error=True)
+            self.status.content = f"Cannot generate: {why}"
+            return
         args = dict(
             constraints=[dict(c) for c in self.doc.constraints] or None,
             samples=self.doc.settings.samples,
             steps=self.doc.settings.steps,
             seed=self.doc.settings.seed,
         )
-        work = sum(round(s["seconds"] * self.model.fps) for s in timeline) * args["steps"] * (1 + args["samples"]) / 2
         self.gen_btn.disabled = True
-        self.progress.value, self.progress.visible = 0.0, True
+        self.progress.value, self.progress.visible = (100.0 if gen.is_any_rig(self.model) else 0.0), True
         self.status.content = "Generating..."
-        self.job = self.app.pool.submit(self._run, timeline, args, work)
-        threading.Thread(target=self._tick, args=(self.job, work), daemon=True).start()
+        self.job = self.app.pool.submit(self._run, timeline, args)
 
-    def _run(self, timeline, args, work) -> None:
-        t0 = time.perf_counter()
+    def _run(self, timeline, args) -> None:
         try:
-            result = self.model.generate(timeline, **args)
-            self.app.learn_rate(work, time.perf_counter() - t0)
-            self.show_motions(result.motions, report=result.report, source="generated")
-            self._report(result.report)
+            result = gen.outcome(self.model, self.rig, timeline, progress=self._progress, **args)
+            for note in result.notes:
+                self.notify("Note", note)
+            self.show_motions(result.motions, report=result, source="generated")
+            self._report(result)
         except KinemaError as err:
             self.notify("Generation failed", str(err), error=True)
             self.status.content = f"Failed: {err}"
@@ -189,27 +197,65 @@ class Session:
             self.gen_btn.disabled = False
             self.progress.visible = False
 
-    def _tick(self, job, work: float) -> None:
-        """Progress estimated from the measured speed of earlier generations (generate has no callback)."""
-        t0, expected = time.perf_counter(), max(0.3, work * self.app.seconds_per_work)
-        while not job.done():
-            frac = min(0.95, (time.perf_counter() - t0) / expected)
-            self.progress.value = 100.0 * frac
-            time.sleep(0.1)
+    def _progress(self, done: int, total: int) -> None:
+        """The denoiser steps done so far (``generate``'s progress callback, on the worker thread)."""
+        self.progress.value = 100.0 * done / total
+        self.status.content = f"Generating... step {done} of {total}"
 
-    def _report(self, report) -> None:
-        text = (
-            f"{len(self.motions)} sample(s), {report.frames} frames, {report.segments} segment(s), "
-            f"{report.steps} steps, seed {report.seed}: **{report.seconds:.1f} s**"
-        )
+    def _report(self, report: gen.Outcome) -> None:
+        text = report.text
         if report.warnings:
             text += "\n\n" + "\n".join(f"- {w}" for w in dict.fromkeys(report.warnings))
             self.notify("Constraints not all met", "; ".join(dict.fromkeys(report.warnings)), error=True)
         self.status.content = text
 
+    # ------------------------------------------------------------------ rigs
+    def rig_motions(self) -> list:
+        """What a rig shows before anything is generated: its first clip, else its rest pose."""
+        return list(self.rig.clips.values())[:1] or [rest_motion(self.rig.skeleton, self.model.fps)]
+
+    def _views(self, i: int, skeleton) -> list[CharacterView]:
+        """Sample ``i``'s views: the skin when shown, else the bones; planted contacts and the trail always."""
+        color = SELECTED_COLOR if i == 0 else OTHER_COLOR
+        scene, rig = self.client.scene, self.rig
+        contacts = rig.contacts if skeleton.same_topology(rig.skeleton) else None
+        skin = self.skin and skeleton.same_topology(rig.skeleton)
+        views: list[CharacterView] = [
+            SkeletonView(scene, f"/sample{i}", skeleton, color=color, contacts=contacts, bones=not skin)
+        ]
+        if skin:
+            views.append(MeshView(self.skins, i, skeleton, rig.mesh, color=color, own_colors=rig.own_colors))
+        return views
+
+    def redraw(self) -> None:
+        """Rebuild the views of the motions shown (after the skin was switched on or off)."""
+        with self.lock:
+            for group in self.views:
+                for v in group:
+                    v.remove()
+            self.views = [self._views(i, m.skeleton) for i, m in enumerate(self.motions)]
+        self.select_sample(self.selected)
+
+    def set_rig(self, rig: AppRig) -> None:
+        """Show ``rig`` (and its first clip); say when the model cannot generate for it."""
+        self.rig = rig
+        self.skin = rig.own_colors
+        self.rig_panel.refresh()
+        self.show_motions(self.rig_motions(), report=None, source=f"rig {rig.name}")
+        self._say_if_playback_only()
+
+    def _say_if_playback_only(self) -> None:
+        why = gen.cannot_generate(self.model, self.rig, self.app.model_name)
+        if why is not None:
+            self.notify(f"{self.rig.name}: playback only", why, error=True)
+
+    def show_clip(self, name: str) -> None:
+        self.rig_panel.select(name)
+        self.show_motions([self.rig.clips[name]], report=None, source=f"clip {name} of {self.rig.name}")
+
     # ------------------------------------------------------------------ files
     def load_session(self, name: str, content: bytes) -> None:
-        doc = load_document(content, skeleton=self.model.skeleton, fps=self.model.fps, source=name)
+        doc = load_document(content, skeleton=self.skeleton, fps=self.model.fps, source=name)
         self.doc = doc
         self.timeline.set_document(doc)
         s = doc.settings

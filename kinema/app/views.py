@@ -1,18 +1,20 @@
 """Drawing motions in the viser scene: a skeleton (bones + joints) with its foot contacts.
 
 A view owns a few scene nodes under one name prefix and redraws them for a frame. Every view has
-``set_motion(motion, offset)``, ``show(frame)`` and ``remove()``, so a skinned-mesh view for GLB rigs
-(viser's ``scene.add_mesh_skinned``) can stand beside ``SkeletonView`` without touching the app.
+``set_motion(motion, offset)``, ``show(frame)`` and ``remove()``; the skinned-mesh view of a rig's skin
+(kinema.app.mesh_view, viser's ``scene.add_mesh_skinned``) stands beside ``SkeletonView``.
 Positions are world metres, Y up; ``offset`` shifts a whole motion (samples shown side by side).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
 import torch
 
+from kinema.errors import KinemaError
 from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
@@ -42,13 +44,23 @@ def rest_motion(skeleton: Skeleton, fps: float) -> Motion:
     return Motion(skeleton, fps, torch.tensor([[0.0, lift, 0.0]]), local[None].clone())
 
 
+def _human_contacts(skeleton: Skeleton) -> list[int]:
+    """The human four contact joints, or none for a skeleton without them."""
+    try:
+        return contact_joints(skeleton)
+    except KinemaError:
+        return []
+
+
 def bone_pairs(skeleton: Skeleton) -> np.ndarray:
     """(B, 2) joint indices (parent, child) of every bone."""
     return np.array([(p, j) for j, p in enumerate(skeleton.parents) if p >= 0], dtype=np.int64)
 
 
 class SkeletonView:
-    """Bones as lines, joints as dots, planted contact joints as green dots (``motion.foot_contacts``)."""
+    """Bones as lines, joints as dots, planted contact joints as green dots (``motion.foot_contacts``,
+    one column per joint of ``contacts``: a rig's contact joints, default the human four); with
+    ``bones=False`` (a skin drawn over it) only the planted joints and the trail."""
 
     def __init__(
         self,
@@ -59,17 +71,22 @@ class SkeletonView:
         color=SELECTED_COLOR,
         thickness: float = 0.025,
         trail: bool = False,
+        contacts: Sequence[int] | None = None,
+        bones: bool = True,
     ):
         self.scene, self.name, self.color, self.thickness, self.trail = scene, name, color, thickness, trail
+        self.draw_bones = bones  # False under a skin: only the trail and the planted contact joints
         self.pairs = bone_pairs(skeleton)
-        self.contact_idx = contact_joints(skeleton)
+        self.contact_idx = list(contacts) if contacts is not None else _human_contacts(skeleton)
         self.positions: np.ndarray | None = None  # (T, J, 3)
         self.contacts: np.ndarray | None = None  # (T, 4)
         self.bones = self.joints = self.planted = self.path = None
 
     def set_motion(self, motion: Motion, offset=(0.0, 0.0, 0.0)) -> None:
         self.positions = motion.positions.detach().double().numpy() + np.asarray(offset, dtype=np.float64)
-        self.contacts = None if motion.foot_contacts is None else motion.foot_contacts.detach().numpy() > 0.5
+        flags = motion.foot_contacts
+        fits = flags is not None and flags.shape[-1] == len(self.contact_idx)
+        self.contacts = flags.detach().numpy() > 0.5 if fits else None
 
     def _frame_points(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
         assert self.positions is not None
@@ -85,6 +102,9 @@ class SkeletonView:
         segs = P[self.pairs]
         if self.trail and self.path is None and len(self.positions) > 1:
             self._add_trail()
+        if not self.draw_bones:
+            self._show_contacts(planted)
+            return
         if self.bones is None:
             self.bones = self.scene.add_line_segments(f"{self.name}/bones", segs, self.color, thickness=self.thickness)
             self.joints = self.scene.add_point_cloud(

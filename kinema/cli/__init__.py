@@ -22,6 +22,7 @@ def build_parser() -> argparse.ArgumentParser:
         convert,
         data,
         evaluate,
+        evaluate_anyrig,
         evaluate_retrieval,
         export,
         generate,
@@ -29,6 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
         render,
         serve,
         train,
+        train_anyrig,
     )
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
@@ -40,10 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
         inspect,
         data,
         train,
+        train_anyrig,
         export,
         bench,
         render,
         evaluate,
+        evaluate_anyrig,
         evaluate_retrieval,
         *faces,
     ):

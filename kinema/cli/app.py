@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 from kinema.cli._args import positive_int
 from kinema.cli.serve import _port
@@ -22,7 +23,22 @@ def register(sub) -> None:
         help="web authoring UI: timeline, constraints in the scene, playback, export (docs/app.md)",
         description=__doc__,
     )
-    p.add_argument("--model", default="default", help="'default' (shipped) or a run/checkpoint folder")
+    p.add_argument(
+        "--model",
+        default="default",
+        help="'default' (human), 'creatures' (any rig: needs --rig) or a checkpoint folder",
+    )
+    p.add_argument(
+        "--rig",
+        type=Path,
+        help="a .glb/.gltf (skin + clips) or .bvh rig new tabs show (default: the model's skeleton)",
+    )
+    p.add_argument(
+        "--rig-units",
+        choices=("centimetres", "metres", "inches"),
+        default="centimetres",
+        help="length unit of a .bvh --rig (default centimetres)",
+    )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
     p.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; the next free one if taken)")
     p.add_argument(
@@ -38,19 +54,25 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        from kinema.app.generation import max_steps
         from kinema.app.server import AppServer
     except ImportError as err:
         if "viser" not in str(err):
             raise
         raise KinemaError(MISSING_EXTRA) from None
+    from kinema.app.files_panel import UNITS
+    from kinema.app.rigs import load_rig
     from kinema.generate.api import load_model
     from kinema.runtime import configure_threads
 
+    if args.rig is not None and not args.rig.is_file():
+        raise KinemaError(f"--rig {args.rig}: no such file")
     configure_threads(args.threads)
     model = load_model(args.model)
-    if args.steps is not None and args.steps > model.max_steps:
-        raise KinemaError(f"--steps: at most {model.max_steps} for this model, got {args.steps}")
-    app = AppServer(model, host=args.host, port=args.port, steps=args.steps)
+    rig = None if args.rig is None else load_rig(args.rig, fps=model.fps, scale=UNITS[args.rig_units])
+    if args.steps is not None and args.steps > max_steps(model):
+        raise KinemaError(f"--steps: at most {max_steps(model)} for this model, got {args.steps}")
+    app = AppServer(model, rig=rig, model_name=str(args.model), host=args.host, port=args.port, steps=args.steps)
     print(f"kinema app: open {app.url} (Ctrl+C to stop)", flush=True)
     try:
         while True:

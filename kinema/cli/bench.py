@@ -314,6 +314,8 @@ def _run_generate(args: argparse.Namespace) -> int:
     from kinema.runtime import configure_threads
 
     threads = configure_threads(args.threads)
+    if _is_anyrig(args.model):  # a model for any rig: its own table (kinema.bench.anyrig)
+        return _run_anyrig(args, threads)
     opts = _suite_options(args, SECTIONS)
     opts.seconds = args.seconds
     if args.no_cold_start:
@@ -321,6 +323,31 @@ def _run_generate(args: argparse.Namespace) -> int:
     result = run_generate_suite(opts)
     print(f"torch {torch.__version__}, {threads} threads, model {args.model}")
     print(format_generate_suite(result))
+    return 0
+
+
+def _is_anyrig(model: str | None) -> bool:
+    from kinema.errors import KinemaError
+    from kinema.generate.api import resolve_model_path
+    from kinema.model.anyrig_loading import is_anyrig_checkpoint
+
+    try:
+        return model is not None and is_anyrig_checkpoint(resolve_model_path(model))
+    except KinemaError:
+        return False
+
+
+def _run_anyrig(args: argparse.Namespace, threads: int) -> int:
+    import torch
+
+    from kinema.bench.anyrig import bench_anyrig, format_anyrig_bench
+    from kinema.generate.api import load_model
+
+    model = load_model(args.model)
+    steps = tuple(args.steps) if args.steps else ((20,) if args.quick else (10, 20, 30))
+    rows = bench_anyrig(model, seconds=args.seconds, steps_list=steps, repeats=args.repeats or (1 if args.quick else 2))
+    print(f"torch {torch.__version__}, {threads} threads, model {args.model}")
+    print(format_anyrig_bench(rows))
     return 0
 
 

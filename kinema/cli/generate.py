@@ -51,7 +51,10 @@ def register(sub) -> None:
                    help="separated guidance weights, finite and >= 0 (default: the model's setting)")
     p.add_argument("--heading", type=finite_float, default=0.0,
                    help="first-frame facing in degrees about +Y (0 = +Z)")
-    p.add_argument("--model", default="default", help="'default' (shipped) or a run/checkpoint folder")
+    p.add_argument("--model", default="default", help="'default' (shipped), 'creatures' (any rig; shipped) or a "
+                                                      "run/checkpoint folder")
+    p.add_argument("--rig", help="any-rig models: a GLB/glTF or BVH file to animate, or a training rig id "
+                                 "(leave out to list them); a .glb output keeps the rig's skinned mesh")
     p.add_argument("--out", type=Path, default=Path("out/motion.bvh"),
                    help=".bvh, .bvh.gz, .npz or .glb (with a generated bone mesh); default out/motion.bvh; "
                         "with --samples N > 1: OUT_00.bvh, OUT_01.bvh, ...")
@@ -136,15 +139,22 @@ def _check_inputs(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     import math
 
+    from kinema.cli.generate_anyrig import run_anyrig
     from kinema.cli.objective_table import objective_table
     from kinema.cli.report import print_warnings, residual_table, use_plain_warnings
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
-    from kinema.generate.api import load_model
+    from kinema.generate.api import load_model, resolve_model_path
     from kinema.io.atomic import check_output_path
+    from kinema.model.anyrig_loading import is_anyrig_checkpoint
     from kinema.runtime import configure_threads
 
     use_plain_warnings()
+    model_path = resolve_model_path(args.model)
+    if is_anyrig_checkpoint(model_path):  # a model for any rig: its own options (kinema.cli.generate_anyrig)
+        return run_anyrig(args, model_path)
+    if args.rig is not None:
+        raise KinemaError(f"--rig: the model {args.model!r} is for one skeleton; use --model creatures for any rig")
     _check_inputs(args)
     configure_threads(args.threads)
     meta_path, filled = _from_kimodo_meta(args)

@@ -158,6 +158,7 @@ class DDIMSampler:
         dtype: torch.dtype = torch.float32,
         init_noise: torch.Tensor | None = None,
         num_inference_steps: int | None = None,
+        on_step: Callable[[int, int], None] | None = None,
     ) -> torch.Tensor:
         """Run the whole reverse process and return the final x0 (shape ``shape``).
 
@@ -168,7 +169,7 @@ class DDIMSampler:
         ``device``, so a seed gives the same result whatever device the model runs on) unless
         ``init_noise`` is given, then calls ``denoise_fn(x_t, t_batch)`` once per inference step.
         The same ``generator`` also feeds the per-step noise when ``eta > 0``.
-        ``progress=True`` shows a tqdm bar.
+        ``progress=True`` shows a tqdm bar; ``on_step(done, total)`` is called after each step.
         """
         if init_noise is not None:
             if tuple(init_noise.shape) != tuple(shape):
@@ -188,10 +189,12 @@ class DDIMSampler:
 
             pairs = tqdm(pairs, desc="DDIM", leave=False)
         batch = x.shape[0]
-        for t, prev in pairs:
+        for i, (t, prev) in enumerate(pairs):
             t_batch = torch.full((batch,), t, dtype=torch.long, device=x.device)
             x0_pred = denoise_fn(x, t_batch)
             x = self.step_to(x0_pred, t, prev, x, generator=generator)
+            if on_step is not None:
+                on_step(i + 1, len(pairs))
         return x
 
     # ------------------------------------------------------------------ config

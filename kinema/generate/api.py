@@ -20,9 +20,12 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.generate.anyrig_api import AnyRigModel
+from kinema.generate.progress import ProgressFn, StepProgress, split_progress
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
+from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
@@ -138,7 +141,7 @@ class KinemaModel:
         seed: int = 0,
         postprocess: bool = True,
         heading: float = 0.0,
-        progress: bool = False,
+        progress: bool | ProgressFn = False,
         objectives=None,
         objective_steps: int | None = None,
     ) -> GenerationResult:
@@ -165,6 +168,9 @@ class KinemaModel:
                 docs/objectives.md): JSON-style dicts or Objective objects, added to a constraints file's
                 ``"objectives"``; the chain then runs ``steps`` (default 5) DDIM steps.
             objective_steps: Adam iterations on the noise (default 12 when there are objectives).
+            progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
+                steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
+                changes the result.
         """
         t0 = time.perf_counter()
         steps_given = steps
@@ -183,7 +189,7 @@ class KinemaModel:
             opt = NoiseOptSettings(DEFAULT_ITERATIONS if objective_steps is None else objective_steps)
             text = self.encode_text(plan.segments[0].prompt)
             raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
-                                                            opt, progress)
+                                                            opt, split_progress(progress)[0])
         else:
             raw, plans = self._sample_batch(plan, guide, steps, g, heading, samples, progress), [plan] * samples
         motions, residuals = [], []
@@ -274,6 +280,8 @@ class KinemaModel:
         """
         motions: list[Motion] | None = None
         rep, L = self.representation, self.loaded
+        bar, callback = split_progress(progress)
+        counter = None if callback is None else StepProgress(callback, segments=len(plan.segments), steps=steps)
         for k, seg in enumerate(plan.segments):
             rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
                     else [plan.segment_targets(k, m, heading) for m in motions])
@@ -282,7 +290,7 @@ class KinemaModel:
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
             feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
-                                    progress=progress)
+                                    progress=bar, on_step=None if counter is None else counter.segment(k))
             rep.shift_root_xz(feats, shift[:, None])
             parts = [rep.to_motion(f) for f in feats]
             motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
@@ -302,12 +310,17 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
         return shipped
     path = Path(name_or_path)
     if not path.exists():
+        from importlib.resources import files
+
+        shipped = Path(str(files("kinema") / "assets" / "models")) / str(name_or_path)
+        if path.name == str(name_or_path) and (shipped / "checkpoint.json").exists():
+            return shipped  # another model shipped inside the package, e.g. "creatures"
         raise KinemaError(f"{path}: no such model folder")
     return path
 
 
 def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel:
+               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel | AnyRigModel:
     """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
@@ -315,10 +328,12 @@ def load_model(name_or_path: str | Path = "default", text_cache: Path | None = N
     behind it that persists between processes (the CLI passes ``cache/text``).
     """
     path = resolve_model_path(name_or_path)
-    loaded = load_denoiser(path)
+    loaded = load_anyrig(path) if is_anyrig_checkpoint(path) else load_denoiser(path)
     encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
     if text_memory:
         encoder = MemoryCachedEncoder(encoder, text_memory)
+    if not isinstance(loaded, LoadedModel):
+        return AnyRigModel(loaded, encoder)  # a model for any rig (kinema.generate.anyrig_api)
     known = KnownPrompts.load(loaded.path)
     if known is not None and known.encoder_id != loaded.text_encoder_id:
         raise KinemaError(f"{path}: its known prompts were embedded with {known.encoder_id!r}, the model uses "

@@ -44,7 +44,7 @@ The first step runs without these channels; by the last step root and target agr
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import torch
@@ -205,6 +205,7 @@ def sample_features(
     denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresentation, text_emb: torch.Tensor | None,
     targets: SampleTargets, settings: SampleSettings, *, generator: torch.Generator | None = None,
     progress: bool = False, init_noise: torch.Tensor | None = None, max_batch_frames: int = MAX_BATCH_FRAMES,
+    on_step: Callable[[int, int], None] | None = None,
 ) -> torch.Tensor:
     """Run the reverse process for ``targets.batch_size`` motions of ``settings.num_frames`` frames;
     returns unnormalised features ``(B, T, D)``.
@@ -219,6 +220,8 @@ def sample_features(
     separated-guidance constraint branch sees exactly the unconditional branch's input, so
     ``(1 - w_t - w_c) D0 + w_t D_text + w_c D_constr`` equals the two-branch ``(1 - w_t) D0 + w_t D_text``
     up to float rounding, and every step runs 2 branches instead of 3 (docs/speed.md).
+
+    ``on_step(done, total)`` counts denoiser steps over all chunks of this call.
     """
     B, T, D = targets.batch_size, settings.num_frames, rep.dim
     targets = targets.pruned()
@@ -228,12 +231,13 @@ def sample_features(
     constrained = targets.mask is not None or targets.has_world
     branches = _branch_count(settings.guidance, text_emb is not None, constrained)
     chunk = max(1, max_batch_frames // (branches * T))
-    out = []
-    for lo in range(0, B, chunk):
+    out, starts = [], range(0, B, chunk)
+    for c, lo in enumerate(starts):
         text = None if text_emb is None else text_emb[lo : lo + chunk]
         step = _StepCorrections(denoiser, rep, text, targets.rows(lo, lo + chunk), settings)
+        count = None if on_step is None else (lambda d, n, c=c: on_step(c * n + d, len(starts) * n))
         x = sampler.sample(step, (step.batch, T, D), generator=generator, progress=progress,
-                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk])
+                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk], on_step=count)
         out.append(rep.denormalize(x))
     return torch.cat(out)
 

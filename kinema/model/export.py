@@ -19,6 +19,7 @@ from safetensors.torch import save_file
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
+from kinema.model.anyrig_loading import load_anyrig
 from kinema.model.loading import find_checkpoint, load_denoiser, read_checkpoint_info, read_weights, weights_file
 
 #: checkpoint.json keys that only matter for resuming training.
@@ -57,6 +58,8 @@ def export_model(
             raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")
         info["sampler"] = dict(info["sampler"], num_inference_steps=int(sampling_steps))
     info["export"] = {"source": str(ckpt), "weights": weights.name, "dtype": dtype, **(extra_info or {})}
+    if info.get("kind") == "anyrig":
+        info["rig_files"] = rig_files(info)
     state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
     return _write_folder(Path(out), info, state)
 
@@ -68,5 +71,20 @@ def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor]) -> Path
         (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
         for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
             (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)
-        load_denoiser(tmp)  # a folder that would not load never replaces ``out``
+        (load_anyrig if info.get("kind") == "anyrig" else load_denoiser)(tmp)  # a folder that would not load
+        # never replaces ``out``
     return out
+
+
+def rig_files(info: dict) -> dict[str, list[str]]:
+    """Any-rig models: rig id -> the source files of that training rig, read from the build the run
+    trained on (``rigs.json`` of the motion cache named by ``info["data"]``), so ``--model creatures``
+    can list them; {} when the build is not at hand."""
+    path = Path(str(info.get("data", ""))) / "rigs.json"
+    try:
+        rigs = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    rows = rigs.values() if isinstance(rigs, dict) else rigs
+    train = info.get("train_rigs", {})
+    return {r["rig"]: list(r.get("files", [])) for r in rows if isinstance(r, dict) and r.get("rig") in train}

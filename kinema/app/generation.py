@@ -1,0 +1,79 @@
+"""What the app asks of a model, for both kinds kinema has: the human model (`KinemaModel`: its own
+skeleton, timelines, the constraints of docs/constraints.md, step progress) and the any-rig model
+(`AnyRigModel`, ``--model creatures``: any rig, one prompt, no constraints from the app yet).
+
+`outcome` runs one generation and returns the motions with the status text and warnings, so that the
+session does not care which kind generated them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from kinema.app.rigs import AppRig
+from kinema.generate.anyrig_api import AnyRigModel
+from kinema.generate.progress import ProgressFn
+from kinema.motion.core import Motion
+
+
+@dataclass
+class Outcome:
+    motions: list[Motion]
+    text: str
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # what the app left out (said in a notification)
+
+
+def is_any_rig(model) -> bool:
+    return isinstance(model, AnyRigModel)
+
+
+def default_steps(model) -> int:
+    return model.loaded.sampler.num_inference_steps
+
+
+def max_steps(model) -> int:
+    return model.loaded.sampler.num_train_steps if is_any_rig(model) else model.max_steps
+
+
+def cannot_generate(model, rig: AppRig, model_name: str) -> str | None:
+    """Why ``model`` cannot generate for ``rig`` (None when it can)."""
+    if is_any_rig(model) or rig.skeleton.same_topology(model.skeleton):
+        return None
+    return (
+        f"the {model_name!r} model generates for its own {model.skeleton.num_joints}-joint skeleton, not "
+        f"{rig.name} ({rig.skeleton.num_joints} joints). Press 'Use the model's skeleton' (Rig panel), or run "
+        "kinema app --model creatures --rig FILE for any rig."
+    )
+
+
+def outcome(
+    model, rig: AppRig, timeline: list[dict], *, constraints, samples: int, steps: int, seed: int, progress: ProgressFn
+) -> Outcome:
+    """Generate ``samples`` motions for ``timeline`` (and ``constraints`` with the human model)."""
+    if not is_any_rig(model):
+        res = model.generate(
+            timeline, constraints=constraints, samples=samples, steps=steps, seed=seed, progress=progress
+        )
+        r = res.report
+        text = (
+            f"{len(res.motions)} sample(s), {r.frames} frames, {r.segments} segment(s), {r.steps} steps, "
+            f"seed {r.seed}: **{r.seconds:.1f} s**"
+        )
+        return Outcome(list(res.motions), text, list(r.warnings))
+    seconds = sum(float(s["seconds"]) for s in timeline)
+    notes = []
+    if len(timeline) > 1:
+        notes.append(f"the any-rig model takes one prompt: {timeline[0]['prompt']!r} for {seconds:g} s")
+    if constraints:
+        notes.append("the app does not pass constraints to the any-rig model yet; they were left out")
+    res = model.generate(
+        timeline[0]["prompt"], rig=rig.skeleton, seconds=seconds, samples=samples, steps=steps, seed=seed
+    )
+    r = res.report
+    motions = [rig.with_contacts(m) for m in res.motions]
+    text = (
+        f"{len(motions)} sample(s) on {rig.name}, {motions[0].num_frames} frames, {r.steps} steps, seed {seed}: "
+        f"**{r.seconds:.1f} s**"
+    )
+    return Outcome(motions, text, list(r.warnings), notes)

@@ -1,0 +1,170 @@
+"""Per-rig evaluation of an any-rig model against each rig's own clips (train and held-out rigs).
+
+For every rig of a split of a multi-rig build, up to ``clips`` of its clips give a caption and a
+length; the model generates one motion per caption on that rig (in the build's normalised units:
+rest pose 1 across, so numbers compare across rigs) and each is compared with the rig's own clips:
+
+- ``skate``: mean horizontal speed (units/s x 100, i.e. cm/s for a 1-m creature) of the rig's
+  contact joints (`ground_joints`) over consecutive frames where they are within ``GROUND`` of the
+  floor, for generated and reference clips alike; ``skate_ratio`` = generated / reference;
+- ``jerk``: mean third difference of joint positions (units/s^3), generated and reference;
+- ``stretch``: largest relative change of any bone length (positions are FK of rotations, so this
+  checks the pipeline, post-processing included);
+- ``constraint_cm``: error (cm at 1-m scale) of one joint target per motion after post-processing: the
+  first end effector's position at the middle frame, taken from a reference clip (character frame);
+- ``coverage`` / ``novelty``: Dragon App. C AUCs (kinema.evaluate.distribution) of 10-frame windows
+  of root-relative joint positions in the heading frame, against the rig's own clips.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import torch
+
+from kinema.data.multirig import MultiRigData
+from kinema.evaluate.distribution import coverage_novelty_auc
+from kinema.evaluate.metrics import position_jerk
+from kinema.generate.anyrig_api import AnyRigModel, JointTarget
+from kinema.motion.core import Motion
+from kinema.postprocess.footlock import foot_skate
+from kinema.representation.joint import JointRepresentation
+from kinema.rig import Rig
+
+WINDOW = 10
+#: a joint this close to the floor (rig units: rest pose 1 across) counts as planted
+GROUND = 0.03
+
+
+def ground_joints(rig: Rig, motions: list[Motion]) -> list[int]:
+    """The rig's contact joints, else (the rig layer finds none on many Quaternius rigs, whose root is a
+    static armature joint on the floor) the leaf joints that come within ``GROUND`` of the floor in its
+    own clips."""
+    if rig.contacts:
+        return list(rig.contacts)
+    low = torch.stack([m.positions[..., 1].double().amin(0) for m in motions]).amin(0)  # (J,)
+    kids = rig.skeleton.children
+    return [j for j in range(rig.num_joints) if not kids[j] and j != rig.root and float(low[j]) < GROUND]
+
+
+def _skate(m: Motion, joints: list[int]) -> float | None:
+    """Skate (units/s x 100) of ``joints`` over frames where both ends are within ``GROUND`` of the floor."""
+    if not joints:
+        return None
+    planted = m.positions[:, joints, 1] < GROUND
+    return foot_skate(m, planted, joints)
+
+
+def _stretch(m: Motion) -> float:
+    P = m.positions.double()
+    parents = torch.tensor(m.skeleton.parents[1:])
+    lengths = (P[:, 1:] - P[:, parents]).norm(dim=-1)
+    rest = lengths[0].clamp_min(1e-6)
+    return float(((lengths - lengths[0]).abs() / rest).max()) if lengths.numel() else 0.0
+
+
+def _local_positions(m: Motion, rep: JointRepresentation) -> torch.Tensor:
+    f = rep.from_motion(m.to(torch.float64))
+    keep = [j for j in range(m.num_joints) if j != rep.rig.root]
+    return f[:, keep, 0:3].reshape(f.shape[0], -1)
+
+
+def _target(rig: Rig, ref: Motion, rep: JointRepresentation, frames: int) -> JointTarget | None:
+    effectors = [j for j in rig.end_effectors.values() if j != rig.root] or [rig.num_joints - 1]
+    j = effectors[0]
+    if j == rig.root:
+        return None
+    f = min(frames, ref.num_frames) // 2
+    pos = rep.from_motion(ref.to(torch.float64))[f, j, 0:3]
+    return JointTarget(joint=j, frame=f, position=tuple(float(v) for v in pos))
+
+
+def _mean(xs: list[float | None]) -> float | None:
+    xs = [x for x in xs if x is not None]
+    return sum(xs) / len(xs) if xs else None
+
+
+def evaluate_rig(
+    model: AnyRigModel, rig_id: str, motions: list[Motion], captions: list[str], *, steps: int, seed: int = 0
+) -> dict:
+    """Metrics of one rig (see the module docstring); ``motions`` are its clips, ``captions`` one per clip."""
+    rig = Rig.from_skeleton(motions[0].skeleton)
+    rep = JointRepresentation(rig, model.fps)
+    gen, cons, t0 = [], [], time.perf_counter()
+    for i, (ref, caption) in enumerate(zip(motions, captions, strict=True)):
+        seconds = max(ref.duration, 2 * WINDOW / model.fps)
+        target = _target(rig, ref, rep, round(seconds * model.fps))
+        res = model.generate(
+            caption, rig=rig, seconds=seconds, steps=steps, seed=seed + i, constraints=[target] if target else []
+        )
+        gen.append(res[0])
+        cons += res.report.residuals_cm
+    ref_windows = [_local_positions(m, rep) for m in motions if m.num_frames >= WINDOW]
+    gen_windows = [_local_positions(m, rep) for m in gen]
+    cn = coverage_novelty_auc(gen_windows, ref_windows, ref_windows, window=WINDOW) if ref_windows else None
+    feet = ground_joints(rig, motions)
+    skate_gen, skate_ref = _mean([_skate(m, feet) for m in gen]), _mean([_skate(m, feet) for m in motions])
+    return {
+        "rig": rig_id,
+        "joints": rig.num_joints,
+        "contacts": len(feet),
+        "motions": len(gen),
+        "skate": skate_gen,
+        "skate_ref": skate_ref,
+        "skate_ratio": None if not skate_ref or skate_gen is None else skate_gen / skate_ref,
+        "jerk": _mean([position_jerk(m.positions, m.fps) for m in gen]),
+        "jerk_ref": _mean([position_jerk(m.positions, m.fps) for m in motions]),
+        "stretch": max(_stretch(m) for m in gen),
+        "constraint_cm": max(cons) if cons else None,
+        "coverage": None if cn is None else cn.coverage_auc,
+        "novelty": None if cn is None else cn.novelty_auc,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def evaluate_split(
+    model: AnyRigModel,
+    data: str | Path,
+    split: str,
+    *,
+    clips: int = 3,
+    steps: int = 20,
+    rigs: list[str] | None = None,
+    log=print,
+) -> list[dict]:
+    """`evaluate_rig` for every rig of ``split`` (or the named ``rigs``), up to ``clips`` clips each."""
+    d = MultiRigData(data, split=split)
+    by_rig: dict[str, list[int]] = {}
+    for i, rec in enumerate(d.clips):
+        by_rig.setdefault(rec["rig"], []).append(i)
+    rows = []
+    for rid, idx in sorted(by_rig.items()):
+        if rigs and rid not in rigs:
+            continue
+        pick = idx[:: max(1, len(idx) // clips)][:clips]
+        motions = [d.motion(i).to(torch.float32) for i in pick]
+        caps = [d.clips[i]["captions"][0] for i in pick]
+        row = evaluate_rig(model, rid, motions, caps, steps=steps)
+        row["split"] = split
+        rows.append(row)
+        log(format_row(row))
+    return rows
+
+
+def _f(x, digits: int = 2) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def format_row(r: dict) -> str:
+    return (
+        f"| {r['rig']} | {r['split']} | {r['joints']} | {r['contacts']} | {_f(r['skate'])} | {_f(r['skate_ref'])} "
+        f"| {_f(r['skate_ratio'])} | {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} | {r['stretch']:.1e} "
+        f"| {_f(r['constraint_cm'])} | {_f(r['coverage'])} | {_f(r['novelty'])} |"
+    )
+
+
+TABLE_HEADER = (
+    "| rig | split | joints | contacts | skate | skate (own clips) | ratio | jerk | jerk (own clips) | stretch "
+    "| constraint cm | coverage AUC | novelty AUC |\n|" + "---|" * 13
+)

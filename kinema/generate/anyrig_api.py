@@ -1,0 +1,270 @@
+"""Generation with an any-rig model: text + constraints -> motion on any skeleton.
+
+``kinema.load_model("creatures").generate("A fox gallops.", rig="Fox.glb", seconds=4)`` returns an
+`AnyRigResult` (a list of `Motion` in metres on the given rig, plus a report). The rig is a GLB/glTF
+or BVH file (the skin of a GLB is carried on the skeleton, so saving the motion as .glb keeps the
+mesh), a `Skeleton`, a `Rig` (its contact joints and limbs are used), or the id of a training rig
+(``model.known_rigs()``).
+
+The rig is scaled to the model's units (rest pose 1 across, as in training), sampled with DDIM in
+overlapping windows (kinema.generate.anyrig_sampling), turned to face ``heading``, converted to a
+motion (kinema.representation.joint), scaled back to metres and post-processed: de-jittering, foot
+locking on the rig's contact joints (any number of legs) and the exact pass on joint targets.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from kinema.diffusion.guidance import Guidance
+from kinema.errors import KinemaError
+from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
+from kinema.generate.anyrig_constraints import post_targets as make_post_targets
+from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
+from kinema.generate.anyrig_sampling import sample_features, window_starts
+from kinema.geometry.rotations import quat_inverse, quat_rotate
+from kinema.io.gltf import read_gltf
+from kinema.io.registry import load_motion
+from kinema.model.anyrig_loading import LoadedAnyRig
+from kinema.model.skeleton_codes import batch_codes, skeleton_codes
+from kinema.motion.core import Motion
+from kinema.postprocess import postprocess as run_postprocess
+from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.rig import Rig
+from kinema.rig.find import rest_positions
+from kinema.skeleton import Skeleton
+
+
+@dataclass
+class AnyRigReport:
+    """What one ``generate`` call did: wall time, steps, windows, constraint errors (cm), warnings."""
+
+    seconds: float = 0.0
+    steps: int = 0
+    windows: int = 1
+    joints: int = 0
+    residuals_cm: list[float] = field(default_factory=list)
+    foot_lock: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+class AnyRigResult(Sequence):
+    """The motions of one call (indexable like a list) and its report."""
+
+    def __init__(self, motions: list[Motion], report: AnyRigReport) -> None:
+        self.motions, self.report = list(motions), report
+
+    def __getitem__(self, index):
+        return self.motions[index]
+
+    def __len__(self) -> int:
+        return len(self.motions)
+
+    def __repr__(self) -> str:
+        return f"AnyRigResult({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
+
+
+class AnyRigModel:
+    """A trained any-rig model ready to generate; build it with ``kinema.load_model``."""
+
+    def __init__(self, loaded: LoadedAnyRig, text_encoder) -> None:
+        self.loaded = loaded
+        self.text_encoder = text_encoder
+
+    @property
+    def fps(self) -> float:
+        return self.loaded.fps
+
+    def __repr__(self) -> str:
+        return f"AnyRigModel({self.loaded.path}, {len(self.loaded.train_rigs)} training rigs)"
+
+    def known_rigs(self) -> list[tuple[str, int, list[str]]]:
+        """(rig id, joints, source files) of every training rig."""
+        files = self.loaded.rig_files
+        out = []
+        for rid, d in sorted(self.loaded.train_rigs.items()):
+            out.append((rid, len(d["skeleton"]["names"]), list(files.get(rid, []))))
+        return out
+
+    # ------------------------------------------------------------------ rigs
+    def resolve_rig(self, rig: str | Path | Skeleton | Rig) -> Rig:
+        """The rig in metres (see the module docstring for what ``rig`` may be)."""
+        if isinstance(rig, Rig):
+            return rig
+        if isinstance(rig, Skeleton):
+            return Rig.from_skeleton(rig)
+        path = Path(rig)
+        if path.is_file():
+            if path.suffix.lower() in (".glb", ".gltf"):
+                return Rig.from_skeleton(read_gltf(path, fps=self.fps).skeleton)
+            return Rig.from_skeleton(load_motion(path).skeleton)
+        known = self.loaded.train_rigs
+        if str(rig) in known:
+            return Rig.from_dict(known[str(rig)])
+        ids = ", ".join(sorted(known)) or "none"
+        raise KinemaError(f"rig {str(rig)!r}: no such file and not a training rig id (known: {ids})")
+
+    # ------------------------------------------------------------------ generation
+    def generate(
+        self,
+        prompt: str,
+        *,
+        rig: str | Path | Skeleton | Rig,
+        seconds: float = 4.0,
+        constraints: Sequence[Constraint] = (),
+        samples: int = 1,
+        steps: int | None = None,
+        seed: int = 0,
+        guidance: Guidance | tuple[float, float] | None = None,
+        heading: float = 0.0,
+        postprocess: bool = True,
+    ) -> AnyRigResult:
+        """``samples`` motions of ``seconds`` on ``rig`` for ``prompt`` ("" = no text) and ``constraints``
+        (kinema.generate.anyrig_constraints; frames at the model's fps). ``heading`` (radians, from +Z
+        towards +X) is the facing at frame 0 when no root path or keyframe fixes it."""
+        t0 = time.perf_counter()
+        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+            raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
+        if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
+            raise KinemaError(f"samples must be a positive integer, got {samples!r}")
+        steps = self.loaded.sampler.num_inference_steps if steps is None else steps
+        if (
+            isinstance(steps, bool)
+            or not isinstance(steps, int)
+            or not 1 <= steps <= self.loaded.sampler.num_train_steps
+        ):
+            raise KinemaError(f"steps must be an integer in 1..{self.loaded.sampler.num_train_steps}, got {steps!r}")
+        rig_m = self.resolve_rig(rig)
+        scale = 1.0 / rest_extent(rig_m.skeleton)
+        rig_n = Rig.from_dict(
+            {k: v for k, v in rig_m.to_dict().items() if k != "skeleton"}, skeleton=rig_m.skeleton.scaled(scale)
+        )
+        rep_n = JointRepresentation(rig_n, self.fps)
+        T = max(2, round(seconds * self.fps))
+        constraints = list(constraints)
+        targets = encode_constraints(constraints, rep_n, scale, T) if constraints else None
+        feats = sample_features(
+            self.loaded.denoiser,
+            batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),
+            frames=T,
+            text_emb=self.text_encoder.encode([prompt]) if prompt else None,
+            targets=targets,
+            sampler=self.loaded.sampler,
+            guidance=self._guidance(guidance),
+            steps=steps,
+            samples=samples,
+            generator=torch.Generator().manual_seed(seed),
+        )
+        if not any(isinstance(c, (RootPath, Keyframe)) for c in constraints):
+            feats = _face(feats, rig_n.root, heading)
+        report = AnyRigReport(
+            steps=steps, windows=len(window_starts(T, self.loaded.config.window)), joints=rig_m.num_joints
+        )
+        motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
+        report.seconds = time.perf_counter() - t0
+        return AnyRigResult(motions, report)
+
+    def _guidance(self, guidance) -> Guidance:
+        if guidance is None:
+            return self.loaded.guidance
+        if isinstance(guidance, Guidance):
+            return guidance
+        w_text, w_constr = guidance
+        return Guidance(self.loaded.guidance.mode, w_text, w_constr)
+
+    def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
+        """Features (rig units) -> motion in metres, post-processed; bones under a floor-level armature
+        joint get their translations (after post-processing, which works on rotations) and their feet
+        are locked (kinema.generate.anyrig_feet)."""
+        m = rep_n.to_motion(f)
+        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts)
+        f_m = f.clone()
+        f_m[..., 0:3] = f_m[..., 0:3] / scale
+        if not postprocess:
+            return with_floor_translations(motion, f_m, rep_n)
+        rep_m = JointRepresentation(rig_m, self.fps)
+        targets = make_post_targets(constraints, motion, rep_m) if constraints else None
+        motion, post = run_postprocess(motion, targets, rig=rig_m)
+        motion = with_floor_translations(motion, f_m, rep_n)
+        size = rest_extent(rig_m.skeleton)
+        feet = [j for j in floor_root_children(rig_m.skeleton) if floor_height(rig_m.skeleton, j) < GROUND * size]
+        motion, locked = lock_translated_feet(motion, feet, size)
+        report.foot_lock.append({**post.get("foot_lock", {}), "translated_feet_segments": locked})
+        report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
+        if targets is not None:
+            P = motion.positions
+            for j, (frames, pos) in targets.joint_positions.items():
+                report.residuals_cm += (100 * (P[frames, j] - pos).norm(dim=-1)).tolist()
+        return motion
+
+
+def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
+    """Children of joint 0 when joint 0 is an armature helper on the floor (its rest height within
+    ``band`` of the lowest joint, relative to the rig's size) with several children: Quaternius rigs
+    move their body and IK-driven feet by animating these bones' translations, not rotations."""
+    P = rest_positions(skeleton)
+    extent = float((P.max(0).values - P.min(0).values).max())
+    kids = skeleton.children[0]
+    if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
+        return []
+    return list(kids)
+
+
+def rest_extent(skeleton: Skeleton) -> float:
+    """Largest side of the rest pose's bounding box (skeleton units): the unit the model works in, as
+    the data builds normalise every rig to it (kinema.data.motion_cache.rest_extent)."""
+    P = rest_positions(skeleton)
+    return float((P.max(0).values - P.min(0).values).max())
+
+
+def floor_height(skeleton: Skeleton, joint: int) -> float:
+    """Rest height of ``joint`` above the skeleton's lowest joint (skeleton units)."""
+    P = rest_positions(skeleton)
+    return float(P[joint, 1] - P[:, 1].min())
+
+
+def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
+    """``m`` (posed from rotations) with the bones under a floor-level armature joint (`floor_root_children`)
+    moved as in the data: the armature stays on the floor (y = 0) below the root, the root keeps the
+    position the root row gave it, and every other such bone takes its translation from the predicted
+    joint positions ``feats (T, J, 13)`` (the motion's units), so feet driven by IK bones follow the model."""
+    root = rep.rig.root
+    path = m.skeleton.path_from_root(root)
+    kids = floor_root_children(m.skeleton)
+    joints = [j for j in kids if j not in path]
+    move_root = len(path) == 2 and root in kids  # the root hangs directly from the armature
+    if not joints and not move_root:
+        return m
+    G, P = m.global_transforms()
+    f = feats.to(P.dtype)
+    psi = torch.atan2(f[:, root, 10], f[:, root, 9])
+    T = m.num_frames
+    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    trans = m.root_translation.to(P.dtype).clone()
+    if move_root:
+        trans[:, 1] -= P[:, 0, 1]  # joint 0 back on the floor; the root's own translation carries the height
+        joints, world = [*joints, root], torch.cat([world, P[:, root : root + 1]], dim=1)
+    base = P[:, :1] - (m.root_translation.to(P.dtype) - trans)[:, None]
+    lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
+    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - base)
+    return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
+
+
+def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
+    """Turn every sample so that its heading at frame 0 is ``heading`` (features are heading-invariant
+    except the root's cos/sin of the heading)."""
+    out = feats.clone()
+    cs = out[:, :, root, 9:11]
+    psi = torch.atan2(cs[..., 1], cs[..., 0])
+    psi = psi - psi[:, :1] + heading
+    out[:, :, root, 9], out[:, :, root, 10] = torch.cos(psi), torch.sin(psi)
+    return out
+
+
+__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootPath"]

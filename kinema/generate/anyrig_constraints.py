@@ -1,0 +1,200 @@
+"""Kinematic constraints for the any-rig model, and their encoding as per-joint feature targets.
+
+Three kinds (frames at the model's fps; lengths in metres; Y up, +Z forward):
+
+- `JointTarget(joint=, frame=, position=)`: any joint's position at a frame, in the *character frame*
+  (relative to the rig's root joint, turned so the character faces +Z at that frame) -- the frame the
+  per-joint features use, so the model is told it exactly;
+- `Keyframe(frame=, pose=, pose_frame=0)`: a full-body pose (a `Motion` on the same skeleton, e.g. a
+  frame of one of the rig's clips): every joint's position and rotation and the root height;
+- `RootPath(frames=, xz=)`: world ground waypoints of the root, starting from the origin at frame 0;
+  between waypoints the root moves straight at constant speed, facing where it goes.
+
+`encode_constraints` turns them into `FeatureTargets` on a rig in its normalised units (``scale`` =
+units per metre). `post_targets` turns them into world-frame `PostTargets` for the exact pass, once
+the motion (and so the root position and heading at each frame) is known.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.generate.anyrig_sampling import FeatureTargets
+from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.motion.core import Motion
+from kinema.postprocess.targets import PostTargets
+from kinema.representation.joint import JointRepresentation, yaw_quat
+
+
+@dataclass(frozen=True, kw_only=True)
+class JointTarget:
+    joint: str | int
+    frame: int
+    position: tuple[float, float, float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Keyframe:
+    frame: int
+    pose: Motion
+    pose_frame: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class RootPath:
+    frames: Sequence[int]
+    xz: Sequence[tuple[float, float]]
+
+
+Constraint = JointTarget | Keyframe | RootPath
+
+
+def _joint(rep: JointRepresentation, joint: str | int) -> int:
+    skel = rep.rig.skeleton
+    if isinstance(joint, str):
+        if joint not in skel.names:
+            raise KinemaError(f"constraint joint {joint!r} is not in rig {skel.name or ''} ({skel.num_joints} joints)")
+        return skel.index(joint)
+    if not 0 <= int(joint) < skel.num_joints:
+        raise KinemaError(f"constraint joint {joint} outside 0..{skel.num_joints - 1}")
+    return int(joint)
+
+
+def _frame(f: int, T: int, what: str) -> int:
+    if isinstance(f, bool) or not isinstance(f, int) or not 0 <= f < T:
+        raise KinemaError(f"{what}: frame {f!r} outside 0..{T - 1}")
+    return f
+
+
+def encode_constraints(
+    constraints: Sequence[Constraint], rep: JointRepresentation, scale: float, frames: int
+) -> FeatureTargets:
+    """Feature targets ``(T, J, 13)`` (rig units) and their mask for ``constraints`` (see module)."""
+    J = rep.num_joints
+    x = torch.zeros(frames, J, 13)
+    m = torch.zeros(frames, J, 13)
+    root = rep.rig.root
+    for c in constraints:
+        if isinstance(c, JointTarget):
+            j, f = _joint(rep, c.joint), _frame(c.frame, frames, "joint target")
+            if j == root:
+                raise KinemaError("a joint target on the root joint: use RootPath for where the root goes")
+            x[f, j, 0:3] = torch.as_tensor(c.position, dtype=torch.float32) * scale
+            m[f, j, 0:3] = 1.0
+        elif isinstance(c, Keyframe):
+            f = _frame(c.frame, frames, "keyframe")
+            if c.pose.num_joints != J:
+                raise KinemaError(f"keyframe pose has {c.pose.num_joints} joints, the rig has {J}")
+            pose = Motion(rep.rig.skeleton, rep.fps, c.pose.root_translation * scale, c.pose.local_rotations)
+            feats = rep.from_motion(pose.crop(c.pose_frame, c.pose_frame + 1))[0]
+            x[f], m[f, :, 0:9] = feats, 1.0
+            m[f, root] = 0.0
+            m[f, root, 1] = 1.0  # the root row: height only (its rotation is the root joint's)
+            m[f, root, 3:9] = 1.0
+        elif isinstance(c, RootPath):
+            _root_path(c, x, m, root, scale, frames, rep.fps)
+        else:
+            raise KinemaError(f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe or RootPath")
+    return FeatureTargets(x, m)
+
+
+def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -> None:
+    frames = [0, *(_frame(f, T, "root waypoint") for f in c.frames)]
+    pts = [(0.0, 0.0), *((float(a), float(b)) for a, b in c.xz)]
+    if len(frames) != len(pts) or any(b <= a for a, b in zip(frames, frames[1:], strict=False)):
+        raise KinemaError("root path: one (x, z) per frame, frames increasing after 0")
+    for (fa, pa), (fb, pb) in zip(zip(frames, pts, strict=True), zip(frames[1:], pts[1:], strict=True), strict=False):
+        dx, dz = pb[0] - pa[0], pb[1] - pa[1]
+        speed = math.hypot(dx, dz) * fps / (fb - fa) * scale
+        psi = math.atan2(dx, dz)
+        span = slice(fa, fb)
+        x[span, root, 0], x[span, root, 2] = 0.0, speed
+        x[span, root, 9], x[span, root, 10] = math.cos(psi), math.sin(psi)
+        m[span, root, 0] = m[span, root, 2] = m[span, root, 9] = m[span, root, 10] = 1.0
+
+
+def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRepresentation) -> PostTargets:
+    """World-frame targets (metres) of the joint and keyframe constraints on a generated ``motion`` in
+    metres on the same skeleton: the character frame is placed at the motion's own root and heading."""
+    G, P = motion.global_transforms()
+    psi = rep.heading(G)
+    root = rep.rig.root
+    positions: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
+    rotations: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
+
+    def add(into: dict, j: int, f: int, value: torch.Tensor) -> None:
+        into.setdefault(j, ([], []))[0].append(f)
+        into[j][1].append(value)
+
+    for c in constraints:
+        if isinstance(c, JointTarget):
+            local = torch.as_tensor(c.position, dtype=torch.float64)
+            add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
+        elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
+            pose = c.pose.to(torch.float64)
+            Gp, Pp = pose.global_transforms()
+            turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
+            for j in range(motion.num_joints):
+                add(rotations, j, c.frame, quat_mul(turn, Gp[c.pose_frame, j]))
+                local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root])
+                add(positions, j, c.frame, P[c.frame, root] + local)  # the root itself stays where it was
+
+    def pack(d: dict) -> dict:
+        return {j: (torch.tensor(fs), torch.stack(vs)) for j, (fs, vs) in d.items()}
+
+    return PostTargets(joint_positions=pack(positions), joint_rotations=pack(rotations))
+
+
+def _number_list(value, n: int | None, where: str) -> list[float]:
+    if (
+        not isinstance(value, list)
+        or (n is not None and len(value) != n)
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
+        raise KinemaError(f"{where}: expected a list of {n or 'some'} numbers, got {value!r}")
+    return [float(v) for v in value]
+
+
+def _from_json(i: int, obj, where: str) -> Constraint:
+    at = f"{where}[{i}]"
+    if not isinstance(obj, dict) or obj.get("type") not in ("joint", "root_path"):
+        raise KinemaError(f"{at}: expected an object with type 'joint' or 'root_path'")
+    if obj["type"] == "joint":
+        unknown = set(obj) - {"type", "joint", "frame", "position"}
+        if unknown or not isinstance(obj.get("joint"), (str, int)) or not isinstance(obj.get("frame"), int):
+            raise KinemaError(
+                f"{at}: a joint target is {{type, joint (name or index), frame (int), position [x, y, z]}}"
+            )
+        return JointTarget(
+            joint=obj["joint"], frame=obj["frame"], position=tuple(_number_list(obj.get("position"), 3, at))
+        )
+    unknown = set(obj) - {"type", "frames", "xz"}
+    frames, xz = obj.get("frames"), obj.get("xz")
+    if (
+        unknown
+        or not isinstance(frames, list)
+        or not all(isinstance(f, int) for f in frames)
+        or not isinstance(xz, list)
+    ):
+        raise KinemaError(f"{at}: a root path is {{type, frames [int, ...], xz [[x, z], ...]}}")
+    return RootPath(frames=frames, xz=[tuple(_number_list(p, 2, f"{at}.xz")) for p in xz])
+
+
+def read_constraints(path: str | Path) -> list[Constraint]:
+    """Constraints from a JSON list: ``{"type": "joint", "joint": "Head", "frame": 10, "position": [x, y, z]}``
+    (character frame, metres) and ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres)."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+        raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+    if not isinstance(data, list):
+        raise KinemaError(f"{path}: any-rig constraints are a JSON list of objects")
+    return [_from_json(i, obj, str(path)) for i, obj in enumerate(data)]

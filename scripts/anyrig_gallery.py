@@ -1,0 +1,59 @@
+"""Gallery of the any-rig ("creatures") model: one motion per (rig, prompt), saved as GLB (the rig's
+skinned mesh kept) and drawn as a filmstrip PNG with `kinema render`.
+
+    python scripts/anyrig_gallery.py --model runs/creatures --quaternius ../shared/datasets/quaternius \
+        --out out/gallery [--seconds 3] [--steps 30]
+
+Prints one line per motion (file, joints, wall time). Look at the PNGs before shipping them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+from kinema.generate.api import load_model
+
+#: (file under the Quaternius root, prompt, picture name); the T-rex and the alpaca are held-out rigs
+CASES = [
+    ("cute_fish_pack/Anglerfish.glb", "An anglerfish swims.", "anglerfish_swims"),
+    ("fish_pack/Shark.glb", "A shark swims.", "shark_swims"),
+    ("animals_pack/Fox.glb", "A fox gallops.", "fox_gallops"),
+    ("animals_pack/Fox.glb", "A fox attacks.", "fox_attacks"),
+    ("animals_pack/Husky.glb", "A husky dies.", "husky_dies"),
+    ("dinosaurs_pack/Trex.glb", "A T-rex attacks.", "trex_attacks_heldout"),
+    ("mech_pack/George.glb", "A robot walks.", "robot_walks"),
+    ("single_knight_pack/KnightCharacter.glb", "A knight runs.", "knight_runs"),
+    ("cyberpunk_pack/Character.glb", "A person punches with the right hand.", "person_punches"),
+    ("animals_pack/Alpaca.glb", "An alpaca walks.", "alpaca_walks_heldout"),
+]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", default="creatures")
+    ap.add_argument("--quaternius", type=Path, default=Path("../shared/datasets/quaternius"))
+    ap.add_argument("--out", type=Path, default=Path("out/gallery"))
+    ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--steps", type=int)
+    ap.add_argument("--only", nargs="+", help="picture names to make")
+    args = ap.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    model = load_model(args.model, text_cache=Path("cache/text"))
+    for file, prompt, name in CASES:
+        if args.only and name not in args.only:
+            continue
+        res = model.generate(prompt, rig=args.quaternius / file, seconds=args.seconds, steps=args.steps, seed=0)
+        glb = args.out / f"{name}.glb"
+        res[0].save(glb)
+        png = args.out / f"{name}.png"
+        subprocess.run([sys.executable, "-m", "kinema", "render", str(glb), "--out", str(png), "--frames", "8",
+                        "--title", f"{prompt} ({file.split('/')[-1]}, generated)"], check=True)
+        print(f"{png}: {res[0].num_joints} joints, {res.report.seconds:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
