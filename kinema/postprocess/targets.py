@@ -36,8 +36,9 @@ class PostTargets:
     root_sigma: float = DEFAULT_ROOT_SIGMA_SECONDS
 
     def is_empty(self) -> bool:
-        return not (self.joint_positions or self.joint_rotations or self.root_xz is not None
-                    or self.contacts is not None)
+        return not (
+            self.joint_positions or self.joint_rotations or self.root_xz is not None or self.contacts is not None
+        )
 
     def validate(self, motion: Motion) -> PostTargets:
         """A copy with frames as LongTensors and values as float64, checked against ``motion``."""
@@ -64,8 +65,9 @@ class PostTargets:
             joints(self.joint_positions, 3, "joint_positions"),
             joints(self.joint_rotations, 4, "joint_rotations"),
             None if self.root_xz is None else check(self.root_xz, 2, "root_xz"),
-            None if self.contacts is None else check(self.contacts, torch.as_tensor(self.contacts[1]).shape[-1],
-                                                     "contacts"),
+            None
+            if self.contacts is None
+            else check(self.contacts, torch.as_tensor(self.contacts[1]).shape[-1], "contacts"),
             self.root_sigma,
         )
 
