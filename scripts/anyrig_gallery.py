@@ -49,8 +49,22 @@ def main() -> int:
         glb = args.out / f"{name}.glb"
         res[0].save(glb)
         png = args.out / f"{name}.png"
-        subprocess.run([sys.executable, "-m", "kinema", "render", str(glb), "--out", str(png), "--frames", "8",
-                        "--title", f"{prompt} ({file.split('/')[-1]}, generated)"], check=True)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "kinema",
+                "render",
+                str(glb),
+                "--out",
+                str(png),
+                "--frames",
+                "8",
+                "--title",
+                f"{prompt} ({file.split('/')[-1]}, generated)",
+            ],
+            check=True,
+        )
         print(f"{png}: {res[0].num_joints} joints, {res.report.seconds:.1f} s")
     return 0
 

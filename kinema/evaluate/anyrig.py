@@ -8,7 +8,8 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
   contact joints (`ground_joints`) over consecutive frames where they are within ``GROUND`` of the
   floor, for generated and reference clips alike; ``skate_ratio`` = generated / reference;
 - ``jerk``: mean third difference of joint positions (units/s^3), generated and reference;
-- ``stretch``: largest relative change of any bone length (positions are FK of rotations, so this
+- ``stretch``: largest relative change of any bone length (bones moved by translation under a floor
+  armature excepted: they are IK handles, not body bones; the others are FK of rotations, so this
   checks the pipeline, post-processing included);
 - ``constraint_cm``: error (cm at 1-m scale) of one joint target per motion after post-processing: the
   first end effector's position at the middle frame, taken from a reference clip (character frame);
@@ -26,7 +27,7 @@ import torch
 from kinema.data.multirig import MultiRigData
 from kinema.evaluate.distribution import coverage_novelty_auc
 from kinema.evaluate.metrics import position_jerk
-from kinema.generate.anyrig_api import AnyRigModel, JointTarget
+from kinema.generate.anyrig_api import AnyRigModel, JointTarget, floor_root_children
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
 from kinema.representation.joint import JointRepresentation
@@ -57,11 +58,17 @@ def _skate(m: Motion, joints: list[int]) -> float | None:
 
 
 def _stretch(m: Motion) -> float:
+    """Largest relative change of a bone's length over the clip; bones moved by translation under a
+    floor-level armature (IK feet, the body) are not bones of the body and are left out."""
     P = m.positions.double()
-    parents = torch.tensor(m.skeleton.parents[1:])
-    lengths = (P[:, 1:] - P[:, parents]).norm(dim=-1)
+    moved = set(floor_root_children(m.skeleton))
+    joints = [j for j in range(1, m.num_joints) if j not in moved]
+    if not joints:
+        return 0.0
+    parents = torch.tensor([m.skeleton.parents[j] for j in joints])
+    lengths = (P[:, joints] - P[:, parents]).norm(dim=-1)
     rest = lengths[0].clamp_min(1e-6)
-    return float(((lengths - lengths[0]).abs() / rest).max()) if lengths.numel() else 0.0
+    return float(((lengths - lengths[0]).abs() / rest).max())
 
 
 def _local_positions(m: Motion, rep: JointRepresentation) -> torch.Tensor:

@@ -179,28 +179,28 @@ class AnyRigModel:
         return Guidance(self.loaded.guidance.mode, w_text, w_constr)
 
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
-        """Features (rig units) -> motion in metres, post-processed; bones under a floor-level armature
-        joint get their translations (after post-processing, which works on rotations) and their feet
-        are locked (kinema.generate.anyrig_feet)."""
+        """Features -> motion, post-processed in rig units (rest pose 1 across, so the human-tuned
+        thresholds of kinema.postprocess mean the same on a fish and a T-rex), then scaled to metres.
+        Bones under a floor-level armature get their translations after post-processing (which works on
+        rotations) and their feet are locked directly (kinema.generate.anyrig_feet)."""
         m = rep_n.to_motion(f)
-        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts)
-        f_m = f.clone()
-        f_m[..., 0:3] = f_m[..., 0:3] / scale
-        if not postprocess:
-            return with_floor_translations(motion, f_m, rep_n)
-        rep_m = JointRepresentation(rig_m, self.fps)
-        targets = make_post_targets(constraints, motion, rep_m) if constraints else None
-        motion, post = run_postprocess(motion, targets, rig=rig_m)
-        motion = with_floor_translations(motion, f_m, rep_n)
-        size = rest_extent(rig_m.skeleton)
-        feet = [j for j in floor_root_children(rig_m.skeleton) if floor_height(rig_m.skeleton, j) < GROUND * size]
-        motion, locked = lock_translated_feet(motion, feet, size)
-        report.foot_lock.append({**post.get("foot_lock", {}), "translated_feet_segments": locked})
-        report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
+        targets = None
+        if postprocess:
+            targets = make_post_targets(constraints, m, rep_n, scale) if constraints else None
+            m, post = run_postprocess(m, targets, rig=rep_n.rig)
+            report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
+        m = with_floor_translations(m, f, rep_n)
+        if postprocess:
+            skel = rep_n.rig.skeleton
+            feet = [j for j in floor_root_children(skel) if floor_height(skel, j) < GROUND * rest_extent(skel)]
+            m, locked = lock_translated_feet(m, feet, rest_extent(skel))
+            report.foot_lock.append({**post.get("foot_lock", {}), "translated_feet_segments": locked})
+        lt = None if m.local_translations is None else m.local_translations / scale
+        motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if targets is not None:
             P = motion.positions
             for j, (frames, pos) in targets.joint_positions.items():
-                report.residuals_cm += (100 * (P[frames, j] - pos).norm(dim=-1)).tolist()
+                report.residuals_cm += (100 * (P[frames, j] - pos / scale).norm(dim=-1)).tolist()
         return motion
 
 

@@ -120,9 +120,12 @@ def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -
         m[span, root, 0] = m[span, root, 2] = m[span, root, 9] = m[span, root, 10] = 1.0
 
 
-def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRepresentation) -> PostTargets:
-    """World-frame targets (metres) of the joint and keyframe constraints on a generated ``motion`` in
-    metres on the same skeleton: the character frame is placed at the motion's own root and heading."""
+def post_targets(
+    constraints: Sequence[Constraint], motion: Motion, rep: JointRepresentation, scale: float = 1.0
+) -> PostTargets:
+    """World-frame targets of the joint and keyframe constraints (given in metres) on a generated
+    ``motion`` in units of ``scale`` per metre on the same skeleton: the character frame is placed at
+    the motion's own root and heading."""
     G, P = motion.global_transforms()
     psi = rep.heading(G)
     root = rep.rig.root
@@ -135,7 +138,7 @@ def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRe
 
     for c in constraints:
         if isinstance(c, JointTarget):
-            local = torch.as_tensor(c.position, dtype=torch.float64)
+            local = torch.as_tensor(c.position, dtype=torch.float64) * scale
             add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
         elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
             pose = c.pose.to(torch.float64)
@@ -143,7 +146,7 @@ def post_targets(constraints: Sequence[Constraint], motion: Motion, rep: JointRe
             turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
             for j in range(motion.num_joints):
                 add(rotations, j, c.frame, quat_mul(turn, Gp[c.pose_frame, j]))
-                local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root])
+                local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root]) * scale
                 add(positions, j, c.frame, P[c.frame, root] + local)  # the root itself stays where it was
 
     def pack(d: dict) -> dict:
