@@ -22,7 +22,7 @@ def model():
 
 def test_shipped_files_size_and_licence() -> None:
     names = sorted(p.name for p in SHIPPED.iterdir())
-    assert names == ["MODEL_CARD.md", "checkpoint.json", "ema.safetensors", "walk.png"]
+    assert names == ["MODEL_CARD.md", "checkpoint.json", "ema.safetensors", "known_prompts.safetensors", "walk.png"]
     assert sum(p.stat().st_size for p in SHIPPED.iterdir()) <= 25e6
     card = (SHIPPED / "MODEL_CARD.md").read_text()
     for needed in (
