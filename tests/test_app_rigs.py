@@ -110,6 +110,8 @@ def test_cli_rig_arguments(capsys, tmp_path):
 class _FakeAnyRig(AnyRigModel):
     """Stands in for a trained any-rig model: records the call, returns the rig's clip."""
 
+    fps = 20.0
+
     def __init__(self, clip):
         self.clip, self.calls = clip, []
 
@@ -124,9 +126,11 @@ def test_any_rig_model_gets_one_prompt_the_total_time_and_the_shown_rig(tmp_path
     bare = type(clip)(clip.skeleton, clip.fps, clip.root_translation, clip.local_rotations)
     model = _FakeAnyRig(bare)
     timeline = [{"prompt": "A dog walks.", "seconds": 2.0}, {"prompt": "A dog sits.", "seconds": 1.5}]
-    out = outcome(model, rig, timeline, constraints=[{"type": "root2d"}], samples=2, steps=3, seed=4, progress=None)
+    contacts = {"type": "foot-contact", "frame_indices": [0, 1], "contacts": [[1, 1, 0, 0]] * 2}
+    out = outcome(model, rig, timeline, constraints=[contacts], samples=2, steps=3, seed=4, progress=None)
     assert model.calls == [("A dog walks.", rig.skeleton, 3.5, 2, 3, 4)]
     assert len(out.motions) == 2 and out.motions[0].foot_contacts.shape == (clip.num_frames, 4)
-    assert "one prompt" in out.notes[0] and "constraints" in out.notes[1]
+    assert "one prompt" in out.notes[0]
+    assert out.notes[1] == "the any-rig model cannot take foot-contact constraints; they were left out"
     assert out.text.startswith("2 sample(s) on quad.glb")
     assert cannot_generate(model, rig, "creatures") is None

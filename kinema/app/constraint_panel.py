@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 from kinema.app import edits
+from kinema.app import generation as gen
 from kinema.app.residuals import residual
 from kinema.errors import KinemaError
 
@@ -27,7 +28,6 @@ class ConstraintPanel:
         self.gui, self.scene, self.host = gui, scene, host
         self.path_points: list[tuple[float, float]] = []
         self.gizmo = None
-        names = tuple(host.model.skeleton.names)
         with gui.add_folder("Constraints"):
             self.mode = gui.add_dropdown(
                 "Click ground", CLICK_MODES, initial_value="waypoint", hint="what a click on the ground adds"
@@ -43,7 +43,8 @@ class ConstraintPanel:
             self.keyframe_btn = gui.add_button(
                 "Keyframe pose", icon="camera", hint="keep the whole pose shown at this frame"
             )
-            self.joint = gui.add_dropdown("Joint", names, initial_value=_default_joint(host.model.skeleton))
+            self.joint = gui.add_dropdown("Joint", ("(none)",), initial_value="(none)")
+            self.set_skeleton(host.skeleton)
             self.target_mode = gui.add_dropdown("Target", tuple(TARGET_MODES), initial_value="position")
             self.target_btn = gui.add_button(
                 "Add target", icon="target", hint="pin the joint where it is at this frame; drag the gizmo to move it"
@@ -134,8 +135,27 @@ class ConstraintPanel:
         if motion is None or not self.constraints:
             self.residual_md.content = "" if self.constraints else "No constraints yet."
             return
-        lines = [f"- {lab}: {residual(c, motion)}" for lab, c in zip(self._labels(), self.constraints, strict=True)]
+        lines = [
+            f"- {lab}: {self._residual(c, motion)}" for lab, c in zip(self._labels(), self.constraints, strict=True)
+        ]
         self.residual_md.content = "**Residuals** (shown motion)\n" + "\n".join(lines)
+
+    def _residual(self, c: dict, motion) -> str:
+        """Measured in the world as for the human model; the any-rig model takes no rotations or foot
+        contacts (kinema.app.anyrig_bridge), which is said instead."""
+        if not gen.is_any_rig(self.host.model) or c["type"] not in ("end-effector", "foot-contact"):
+            return residual(c, motion)
+        if c["type"] == "foot-contact" or "positions" not in c:
+            return "not used by this model"
+        return residual({k: v for k, v in c.items() if k != "rotations"}, motion) + (
+            ", rotation not used" if "rotations" in c else ""
+        )
+
+    def set_skeleton(self, skeleton) -> None:
+        """The joints targets can pin: those of the skeleton constraints are written for."""
+        names = tuple(skeleton.names)
+        self.joint.options = names
+        self.joint.value = _default_joint(skeleton)
 
     def _place_gizmo(self, i: int | None) -> None:
         if self.gizmo is not None:

@@ -1,6 +1,7 @@
 """What the app asks of a model, for both kinds kinema has: the human model (`KinemaModel`: its own
 skeleton, timelines, the constraints of docs/constraints.md, step progress) and the any-rig model
-(`AnyRigModel`, ``--model creatures``: any rig, one prompt, no constraints from the app yet).
+(`AnyRigModel`, ``--model creatures``: any rig, one prompt, the constraints kinema.app.anyrig_bridge
+translates; the rest are named in a note).
 
 `outcome` runs one generation and returns the motions with the status text and warnings, so that the
 session does not care which kind generated them.
@@ -10,8 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from kinema.app.anyrig_bridge import to_anyrig
 from kinema.app.rigs import AppRig
 from kinema.generate.anyrig_api import AnyRigModel
+from kinema.generate.anyrig_constraints import JointTarget
 from kinema.generate.progress import ProgressFn
 from kinema.motion.core import Motion
 
@@ -65,15 +68,30 @@ def outcome(
     notes = []
     if len(timeline) > 1:
         notes.append(f"the any-rig model takes one prompt: {timeline[0]['prompt']!r} for {seconds:g} s")
-    if constraints:
-        notes.append("the app does not pass constraints to the any-rig model yet; they were left out")
-    res = model.generate(
-        timeline[0]["prompt"], rig=rig.skeleton, seconds=seconds, samples=samples, steps=steps, seed=seed
-    )
+    constraints = list(constraints or [])
+    cons, left = to_anyrig(constraints, rig.skeleton, model.fps)
+    notes += left
+    prompt, args = timeline[0]["prompt"], dict(rig=rig.skeleton, seconds=seconds, steps=steps, seed=seed)
+    took = 0.0
+    if any(isinstance(c, JointTarget) for c in cons):
+        # joint targets are taken in the character frame: read the world targets in that of a first, raw
+        # pass without them (the same seed puts the body there again), then generate with them
+        first = model.generate(
+            prompt,
+            constraints=[c for c in cons if not isinstance(c, JointTarget)],
+            samples=1,
+            postprocess=False,
+            **args,
+        )
+        cons, _ = to_anyrig(constraints, rig.skeleton, model.fps, reference=first.motions[0])
+        took = first.report.seconds
+    res = model.generate(prompt, constraints=cons, samples=samples, **args)
     r = res.report
     motions = [rig.with_contacts(m) for m in res.motions]
     text = (
         f"{len(motions)} sample(s) on {rig.name}, {motions[0].num_frames} frames, {r.steps} steps, seed {seed}: "
-        f"**{r.seconds:.1f} s**"
+        f"**{took + r.seconds:.1f} s**"
     )
+    if r.residuals_cm:
+        text += f"; joint targets met within {max(r.residuals_cm):.1f} cm"
     return Outcome(motions, text, list(r.warnings), notes)

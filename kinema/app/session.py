@@ -240,9 +240,23 @@ class Session:
         """Show ``rig`` (and its first clip); say when the model cannot generate for it."""
         self.rig = rig
         self.skin = rig.own_colors
+        if gen.is_any_rig(self.model) and not rig.skeleton.same_topology(self.skeleton):
+            self._constraints_on(rig.skeleton)
         self.rig_panel.refresh()
         self.show_motions(self.rig_motions(), report=None, source=f"rig {rig.name}")
         self._say_if_playback_only()
+
+    def _constraints_on(self, skeleton) -> None:
+        """Any-rig model, new rig: constraints are now written for ``skeleton`` (the old ones, made for
+        another skeleton, are cleared and the joint list is the new rig's)."""
+        dropped = len(self.doc.constraints)
+        self.skeleton = skeleton
+        self.doc.constraints.clear()
+        self.constraints.refresh(select=None)  # the old markers go
+        self.markers = Markers(self.client.scene, skeleton, self.model.fps)
+        self.constraints.set_skeleton(skeleton)
+        if dropped:
+            self.notify("Constraints cleared", f"{dropped} constraint(s) were made for the previous rig")
 
     def _say_if_playback_only(self) -> None:
         why = gen.cannot_generate(self.model, self.rig, self.app.model_name)

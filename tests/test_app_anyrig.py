@@ -1,0 +1,122 @@
+"""The app with the any-rig model (``kinema app --model creatures``), without a browser: the constraint
+panel lists the shown rig's joints, and constraints laid in the scene reach the shipped creatures
+model and are met on the motion it returns (a synthetic quadruped GLB, no dataset needed)."""
+
+from __future__ import annotations
+
+import contextlib
+
+import pytest
+import torch
+
+pytest.importorskip("viser", reason="pip install 'kinema[app]'")
+
+import kinema  # noqa: E402
+from kinema.app import edits  # noqa: E402
+from kinema.app.anyrig_bridge import planned_root, to_anyrig  # noqa: E402
+from kinema.app.constraint_panel import ConstraintPanel  # noqa: E402
+from kinema.app.document import Document, check_timeline  # noqa: E402
+from kinema.app.generation import outcome  # noqa: E402
+from kinema.app.rigs import load_rig  # noqa: E402
+from kinema.app.views import rest_motion  # noqa: E402
+from kinema.generate.anyrig_constraints import JointTarget, Keyframe, RootPath  # noqa: E402
+from kinema.rig import Rig  # noqa: E402
+from tests.app_rig_data import NAMES, synthetic_rig_glb  # noqa: E402
+
+
+class _Handle:
+    def __init__(self, value=None, options=()):
+        self.value, self.options, self.visible, self.disabled = value, options, True, False
+
+    def on_update(self, fn):
+        return fn
+
+    on_click = on_update
+
+
+class _Gui:
+    """Just what ConstraintPanel builds (records nothing but the values)."""
+
+    def add_folder(self, _label):
+        return contextlib.nullcontext()
+
+    def add_dropdown(self, _label, options, initial_value=None, **_):
+        return _Handle(initial_value, tuple(options))
+
+    def add_button_group(self, _label, options, **_):
+        return _Handle(None, tuple(options))
+
+    def __getattr__(self, name):  # add_checkbox, add_button, add_slider, add_multi_slider, add_markdown
+        return lambda *a, **k: _Handle(k.get("initial_value"))
+
+
+class _Scene:
+    def on_click(self):
+        return lambda fn: fn
+
+
+class _Host:
+    def __init__(self, model, skeleton):
+        self.model, self.skeleton, self.doc = model, skeleton, Document(constraints=[])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return kinema.load_model("creatures")
+
+
+@pytest.fixture(scope="module")
+def rig(model, tmp_path_factory):
+    return load_rig(synthetic_rig_glb(tmp_path_factory.mktemp("quad") / "quad.glb"), fps=model.fps)
+
+
+def test_joint_list_is_the_rigs(model, rig):
+    panel = ConstraintPanel(_Gui(), _Scene(), _Host(model, rig.skeleton))
+    assert list(panel.joint.options) == NAMES and panel.joint.value == NAMES[-1]
+    other, _ = rig.skeleton.prune(NAMES[5:])  # another rig: the list follows it
+    panel.set_skeleton(other)
+    assert list(panel.joint.options) == NAMES[:5] and panel.joint.value == "fl_foot"
+    contact = edits.contacts(0, 3, "left foot planted")
+    assert panel._residual(contact, rest_motion(rig.skeleton, model.fps)) == "not used by this model"
+
+
+def test_what_the_model_cannot_take_is_named(model, rig):
+    rest = rest_motion(rig.skeleton, model.fps)
+    rotated = edits.target(rest, 0, "fl_foot", position=True, rotation=True)
+    root_only = edits.target(rest, 0, "root", position=True, rotation=False)
+    scene = [
+        edits.waypoint(0, 0.0, 0.0, heading=0.5),
+        edits.waypoint(30, 0.0, 1.0),
+        rotated,
+        root_only,
+        edits.keyframe(rest, 0) | {"frame_indices": [10]},
+        edits.contacts(0, 4, "both feet planted"),
+    ]
+    cons, notes = to_anyrig(scene, rig.skeleton, model.fps)
+    assert [type(c) for c in cons] == [RootPath, JointTarget, Keyframe]
+    assert list(cons[0].frames) == [30] and list(cons[0].xz) == [(0.0, 1.0)] and cons[2].frame == 10
+    assert notes == [
+        "the any-rig model cannot take a waypoint on frame 0 (the root starts at the origin), waypoint headings "
+        "(the root faces where it goes), rotation targets, targets on the root joint (use waypoints), "
+        "foot-contact constraints; they were left out"
+    ]
+    assert planned_root([(20, 1.0, 0.0)], 10) == pytest.approx((0.5, 0.0, torch.pi / 2))
+
+
+def test_waypoint_and_target_from_the_scene_are_met(model, rig):
+    doc = Document(timeline=[{"prompt": "A dog walks.", "seconds": 3.0}], constraints=[])
+    doc.constraints.append(edits.waypoint(40, 0.3, 1.2))
+    first = outcome(model, rig, check_timeline(doc.timeline), constraints=doc.constraints, samples=1, steps=10,
+                    seed=0, progress=None).motions[0]  # fmt: skip
+    foot = rig.skeleton.index("fl_foot")
+    target = edits.target(first, 30, "fl_foot", position=True, rotation=False)
+    target = edits.moved(target, [v + d for v, d in zip(target["positions"][0], (0.0, 0.05, 0.0), strict=True)])
+    doc.constraints.append(target)
+    out = outcome(model, rig, check_timeline(doc.timeline), constraints=doc.constraints, samples=1, steps=10,
+                  seed=0, progress=None)  # fmt: skip
+    m = out.motions[0].to(torch.float64)
+    assert m.num_frames == 60 and out.notes == []
+    root = Rig.from_skeleton(rig.skeleton).root
+    assert float((m.positions[40, root, [0, 2]] - torch.tensor([0.3, 1.2])).norm()) < 0.03
+    assert float((m.positions[30, foot] - torch.tensor(target["positions"][0])).norm()) < 0.03
+    assert "joint targets met within" in out.text
