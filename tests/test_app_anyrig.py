@@ -112,8 +112,10 @@ def test_waypoint_and_target_from_the_scene_are_met(model, rig):
     target = edits.target(first, 30, "fl_foot", position=True, rotation=False)
     target = edits.moved(target, [v + d for v, d in zip(target["positions"][0], (0.0, 0.05, 0.0), strict=True)])
     doc.constraints.append(target)
+    steps: list[tuple[int, int]] = []
     out = outcome(model, rig, check_timeline(doc.timeline), constraints=doc.constraints, samples=1, steps=10,
-                  seed=0, progress=None)  # fmt: skip
+                  seed=0, progress=lambda d, t: steps.append((d, t)))  # fmt: skip
+    assert steps == [(d, 20) for d in range(1, 21)]  # two passes of 10 steps on one bar
     m = out.motions[0].to(torch.float64)
     assert m.num_frames == 60 and out.notes == []
     root = Rig.from_skeleton(rig.skeleton).root

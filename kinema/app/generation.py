@@ -72,8 +72,8 @@ def outcome(
     cons, left = to_anyrig(constraints, rig.skeleton, model.fps)
     notes += left
     prompt, args = timeline[0]["prompt"], dict(rig=rig.skeleton, seconds=seconds, steps=steps, seed=seed)
-    took = 0.0
-    if any(isinstance(c, JointTarget) for c in cons):
+    took, passes = 0.0, 1 + any(isinstance(c, JointTarget) for c in cons)
+    if passes == 2:
         # joint targets are taken in the character frame: read the world targets in that of a first, raw
         # pass without them (the same seed puts the body there again), then generate with them
         first = model.generate(
@@ -81,11 +81,14 @@ def outcome(
             constraints=[c for c in cons if not isinstance(c, JointTarget)],
             samples=1,
             postprocess=False,
+            progress=_pass_progress(progress, 0, passes),
             **args,
         )
         cons, _ = to_anyrig(constraints, rig.skeleton, model.fps, reference=first.motions[0])
         took = first.report.seconds
-    res = model.generate(prompt, constraints=cons, samples=samples, **args)
+    res = model.generate(
+        prompt, constraints=cons, samples=samples, progress=_pass_progress(progress, passes - 1, passes), **args
+    )
     r = res.report
     motions = [rig.with_contacts(m) for m in res.motions]
     text = (
@@ -95,3 +98,10 @@ def outcome(
     if r.residuals_cm:
         text += f"; joint targets met within {max(r.residuals_cm):.1f} cm"
     return Outcome(motions, text, list(r.warnings), notes)
+
+
+def _pass_progress(progress: ProgressFn | None, k: int, passes: int) -> ProgressFn | None:
+    """``progress`` for pass ``k`` of ``passes`` (one bar over all of them)."""
+    if progress is None:
+        return None
+    return lambda done, total: progress(k * total + done, passes * total)

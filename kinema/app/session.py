@@ -174,7 +174,7 @@ class Session:
             seed=self.doc.settings.seed,
         )
         self.gen_btn.disabled = True
-        self.progress.value, self.progress.visible = (100.0 if gen.is_any_rig(self.model) else 0.0), True
+        self.progress.value, self.progress.visible = 0.0, True
         self.status.content = "Generating..."
         self.job = self.app.pool.submit(self._run, timeline, args)
 

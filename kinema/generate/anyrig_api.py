@@ -28,6 +28,7 @@ from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
 from kinema.generate.anyrig_sampling import sample_features, window_starts
+from kinema.generate.progress import ProgressFn
 from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
@@ -124,10 +125,12 @@ class AnyRigModel:
         guidance: Guidance | tuple[float, float] | None = None,
         heading: float = 0.0,
         postprocess: bool = True,
+        progress: ProgressFn | None = None,
     ) -> AnyRigResult:
         """``samples`` motions of ``seconds`` on ``rig`` for ``prompt`` ("" = no text) and ``constraints``
         (kinema.generate.anyrig_constraints; frames at the model's fps). ``heading`` (radians, from +Z
-        towards +X) is the facing at frame 0 when no root path or keyframe fixes it."""
+        towards +X) is the facing at frame 0 when no root path or keyframe fixes it. ``progress(done, total)``
+        is called after every denoiser step (kinema.generate.progress)."""
         t0 = time.perf_counter()
         if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
             raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
@@ -160,6 +163,7 @@ class AnyRigModel:
             steps=steps,
             samples=samples,
             generator=torch.Generator().manual_seed(seed),
+            progress=progress,
         )
         if not any(isinstance(c, (RootPath, Keyframe)) for c in constraints):
             feats = _face(feats, rig_n.root, heading)
