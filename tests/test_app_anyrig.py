@@ -5,6 +5,7 @@ model and are met on the motion it returns (a synthetic quadruped GLB, no datase
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 import pytest
 import torch
@@ -122,3 +123,26 @@ def test_waypoint_and_target_from_the_scene_are_met(model, rig):
     assert float((m.positions[40, root, [0, 2]] - torch.tensor([0.3, 1.2])).norm()) < 0.03
     assert float((m.positions[30, foot] - torch.tensor(target["positions"][0])).norm()) < 0.03
     assert "joint targets met within" in out.text
+
+
+FOX = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets" / "quaternius" / "animals_pack" / "Fox.glb"
+
+
+@pytest.mark.skipif(not FOX.is_file(), reason="the Quaternius dataset is not next to the repository")
+def test_fox_head_target_is_met_and_ik_bone_targets_are_named(model):
+    rig = load_rig(FOX, fps=model.fps)
+    panel = ConstraintPanel(_Gui(), _Scene(), _Host(model, rig.skeleton))
+    assert list(panel.joint.options) == list(rig.skeleton.names) and "Hand_R" not in panel.joint.options
+    timeline = [{"prompt": "A fox walks.", "seconds": 2.0}]
+    wp = edits.waypoint(30, 0.2, 1.0)
+    first = outcome(model, rig, timeline, constraints=[wp], samples=1, steps=5, seed=0, progress=None).motions[0]
+    head = edits.target(first, 20, "Head", position=True, rotation=False)
+    head = edits.moved(head, [v + d for v, d in zip(head["positions"][0], (0.0, 0.05, 0.0), strict=True)])
+    ik = edits.target(first, 20, "IKFrontLeg.L", position=True, rotation=False)
+    out = outcome(model, rig, timeline, constraints=[wp, head, ik], samples=1, steps=5, seed=0, progress=None)
+    m = out.motions[0].to(torch.float64)
+    assert float((m.positions[20, rig.skeleton.index("Head")] - torch.tensor(head["positions"][0])).norm()) < 0.03
+    assert out.notes == [
+        "the any-rig model cannot take targets on bones it moves by translation (IKFrontLeg.L; target a leg "
+        "bone); they were left out"
+    ]

@@ -8,8 +8,9 @@
   origin facing +Z, the way the model faces a motion without a path) at the height of the rest pose's
   root above its lowest joint;
 - full-body poses (``fullbody``) -> `Keyframe`;
-- what the model cannot take (rotation targets, foot contacts, targets on the root joint) is left out
-  and named in the returned notes.
+- what the model cannot take (rotation targets, foot contacts, targets on the root joint or on the
+  IK bones of a floor-level armature, which it moves by translation and does not bring to a target:
+  kinema.generate.anyrig_api.floor_root_children) is left out and named in the returned notes.
 Units: metres, radians, Y up, +Z forward; frames at the model's fps.
 """
 
@@ -19,6 +20,7 @@ import math
 
 import torch
 
+from kinema.generate.anyrig_api import floor_root_children
 from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath
 from kinema.geometry.rotations import axis_angle_to_quat, quat_rotate
 from kinema.motion.core import Motion
@@ -81,6 +83,7 @@ def to_anyrig(
     out: list[Constraint] = []
     left: dict[str, int] = {}
     root = Rig.from_skeleton(skeleton).root
+    moved_bones = set(floor_root_children(skeleton))
     wps = root_waypoints(constraints)
     if any(f == 0 for f, _, _ in wps):
         left["a waypoint on frame 0 (the root starts at the origin)"] = 1
@@ -99,6 +102,9 @@ def to_anyrig(
             j = skeleton.index(c["joint"])
             if j == root:
                 left["targets on the root joint (use waypoints)"] = 1
+                continue
+            if j in moved_bones:
+                left[f"targets on bones it moves by translation ({c['joint']}; target a leg bone)"] = 1
                 continue
             pos = local_target(c, skeleton, wps, reference)
             out.append(JointTarget(joint=j, frame=int(c["frame_indices"][0]), position=tuple(pos.tolist())))
