@@ -139,10 +139,14 @@ def test_fox_head_target_is_met_and_ik_bone_targets_are_named(model):
     head = edits.target(first, 20, "Head", position=True, rotation=False)
     head = edits.moved(head, [v + d for v, d in zip(head["positions"][0], (0.0, 0.05, 0.0), strict=True)])
     ik = edits.target(first, 20, "IKFrontLeg.L", position=True, rotation=False)
-    out = outcome(model, rig, timeline, constraints=[wp, head, ik], samples=1, steps=5, seed=0, progress=None)
+    toe = edits.target(first, 20, "FFB.R", position=True, rotation=False)  # below an IK bone
+    contacts = edits.contacts(0, 5, "both feet planted")
+    out = outcome(
+        model, rig, timeline, constraints=[wp, head, ik, toe, contacts], samples=1, steps=5, seed=0, progress=None
+    )
     m = out.motions[0].to(torch.float64)
     assert float((m.positions[20, rig.skeleton.index("Head")] - torch.tensor(head["positions"][0])).norm()) < 0.03
     assert out.notes == [
-        "the any-rig model cannot take targets on bones it moves by translation (IKFrontLeg.L; target a leg "
-        "bone); they were left out"
+        "the any-rig model cannot take foot-contact constraints, targets on bones it moves by translation "
+        "(IKFrontLeg.L, FFB.R; target a leg bone instead); they were left out"
     ]

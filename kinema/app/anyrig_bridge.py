@@ -75,6 +75,13 @@ def local_target(c: dict, skeleton: Skeleton, waypoints, reference: Motion | Non
     return character_frame(world, torch.tensor([x, height, z], dtype=torch.float64), psi)
 
 
+def translated_bones(skeleton: Skeleton, root: int) -> set[int]:
+    """The bones under a floor-level armature that the model moves by translation (its children off
+    the path to ``root``, e.g. the Quaternius IK leg bones) and everything below them."""
+    kids = set(floor_root_children(skeleton)) - set(skeleton.path_from_root(root))
+    return {j for j in range(skeleton.num_joints) if kids & set(skeleton.path_from_root(j))}
+
+
 def to_anyrig(
     constraints: list[dict], skeleton: Skeleton, fps: float, reference: Motion | None = None
 ) -> tuple[list[Constraint], list[str]]:
@@ -83,7 +90,7 @@ def to_anyrig(
     out: list[Constraint] = []
     left: dict[str, int] = {}
     root = Rig.from_skeleton(skeleton).root
-    moved_bones = set(floor_root_children(skeleton))
+    moved_bones, translated = translated_bones(skeleton, root), []
     wps = root_waypoints(constraints)
     if any(f == 0 for f, _, _ in wps):
         left["a waypoint on frame 0 (the root starts at the origin)"] = 1
@@ -104,7 +111,7 @@ def to_anyrig(
                 left["targets on the root joint (use waypoints)"] = 1
                 continue
             if j in moved_bones:
-                left[f"targets on bones it moves by translation ({c['joint']}; target a leg bone)"] = 1
+                translated.append(c["joint"])
                 continue
             pos = local_target(c, skeleton, wps, reference)
             out.append(JointTarget(joint=j, frame=int(c["frame_indices"][0]), position=tuple(pos.tolist())))
@@ -115,6 +122,9 @@ def to_anyrig(
             out += [Keyframe(frame=int(f), pose=pose, pose_frame=i) for i, f in enumerate(c["frame_indices"])]
         elif kind != "root2d":
             left[f"{kind} constraints"] = left.get(f"{kind} constraints", 0) + 1
+    if translated:
+        names = ", ".join(dict.fromkeys(translated))
+        left[f"targets on bones it moves by translation ({names}; target a leg bone instead)"] = 1
     notes = []
     if left:
         notes.append("the any-rig model cannot take " + ", ".join(left) + "; they were left out")
