@@ -123,6 +123,12 @@ def test_waypoint_and_target_from_the_scene_are_met(model, rig):
     assert float((m.positions[40, root, [0, 2]] - torch.tensor([0.3, 1.2])).norm()) < 0.03
     assert float((m.positions[30, foot] - torch.tensor(target["positions"][0])).norm()) < 0.03
     assert "joint targets met within" in out.text
+    host = _Host(model, rig.skeleton)
+    host.doc.constraints, host.result_motion = doc.constraints, lambda: m
+    panel = ConstraintPanel(_Gui(), _Scene(), host)
+    panel.show_residuals()
+    lines = panel.residual_md.content.splitlines()[1:]
+    assert len(lines) == 2 and all(float(line.split(": ")[1].split(" cm")[0]) < 3.0 for line in lines), lines
 
 
 FOX = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets" / "quaternius" / "animals_pack" / "Fox.glb"

@@ -129,3 +129,15 @@ def to_anyrig(
     if left:
         notes.append("the any-rig model cannot take " + ", ".join(left) + "; they were left out")
     return out, notes
+
+
+def waypoint_residual(c: dict, motion: Motion) -> str:
+    """A waypoint's / path's largest ground distance (cm) of the rig's root at its frames: the joint the
+    any-rig model's root path moves (unsmoothed, unlike the human model's waypoints)."""
+    frames = [int(f) for f in c["frame_indices"]]
+    if max(frames) >= motion.num_frames:
+        return "beyond the motion"
+    root = Rig.from_skeleton(motion.skeleton).root
+    xz = motion.to(torch.float64).positions[frames, root][:, [0, 2]]
+    err = (xz - torch.tensor(c["smooth_root_2d"], dtype=torch.float64)).norm(dim=-1).max()
+    return f"{100 * float(err):.1f} cm"

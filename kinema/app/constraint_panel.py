@@ -16,6 +16,7 @@ import math
 
 from kinema.app import edits
 from kinema.app import generation as gen
+from kinema.app.anyrig_bridge import waypoint_residual
 from kinema.app.residuals import residual
 from kinema.errors import KinemaError
 
@@ -143,8 +144,10 @@ class ConstraintPanel:
     def _residual(self, c: dict, motion) -> str:
         """Measured in the world as for the human model; the any-rig model takes no rotations or foot
         contacts (kinema.app.anyrig_bridge), which is said instead."""
-        if not gen.is_any_rig(self.host.model) or c["type"] not in ("end-effector", "foot-contact"):
+        if not gen.is_any_rig(self.host.model) or c["type"] == "fullbody":
             return residual(c, motion)
+        if c["type"] == "root2d":
+            return waypoint_residual(c, motion)
         if c["type"] == "foot-contact" or "positions" not in c:
             return "not used by this model"
         return residual({k: v for k, v in c.items() if k != "rotations"}, motion) + (

@@ -138,7 +138,8 @@ class Session:
             for group in self.views:
                 for view in group:
                     view.show(frame)
-        ours = self.shown_motion().skeleton.same_topology(self.skeleton)  # constraints are on this skeleton
+        # constraints are on this skeleton; the any-rig model takes no foot contacts (none drawn)
+        ours = self.shown_motion().skeleton.same_topology(self.skeleton) and not gen.is_any_rig(self.model)
         flags = contact_flags_at(self.doc.constraints, frame) if ours else None
         self.markers.draw_contacts(self.shown_motion(), frame, flags)
 
