@@ -26,6 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 CONSTRAINT_FILES = sorted((EXAMPLES / "constraints").glob("*.json"))
 TIMELINES = sorted((EXAMPLES / "timelines").glob("*.json"))
+OBJECTIVE_FILES = sorted((EXAMPLES / "objectives").glob("*.json"))
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 
 #: a prompt that fits each constraints file (a file asking for a walk's path gets a walk, ...)
@@ -69,7 +70,8 @@ def test_every_example_file_is_tested():
     """A new file in examples/ needs a prompt here (or a place in one of the lists)."""
     assert {p.stem for p in CONSTRAINT_FILES} == set(PROMPTS)
     assert TIMELINES and SCRIPTS
-    covered = set(CONSTRAINT_FILES) | set(TIMELINES) | set(SCRIPTS)
+    assert OBJECTIVE_FILES
+    covered = set(CONSTRAINT_FILES) | set(TIMELINES) | set(SCRIPTS) | set(OBJECTIVE_FILES)
     files = {p for p in EXAMPLES.rglob("*") if p.is_file() and "__pycache__" not in p.parts}
     assert files <= covered, f"untested files in examples/: {sorted(map(str, files - covered))}"
 
@@ -82,6 +84,23 @@ def test_constraints_example(path, model, bandai_workdir, monkeypatch):
     # (the synthetic clip's bones point elsewhere at rest than Bandai's: kinema.constraints.retarget aligns them)
     result = model.generate(PROMPTS[path.stem], seconds=SECONDS, constraints=path, seed=0)
     check_constraints_result(result, path.name, round(SECONDS * model.fps))
+
+
+@pytest.mark.parametrize("path", OBJECTIVE_FILES, ids=lambda p: p.stem)
+def test_objectives_example_reads_and_binds(path, model, bandai_workdir, monkeypatch):
+    """Each examples/objectives file binds its objectives (and its explicit constraints) to the shipped
+    model's skeleton for the 5-s motion its comment asks for; generating with them is tested in
+    tests/test_objectives_generate.py (hand-to-head, goal reach, time-agnostic path)."""
+    from kinema.constraints import load_constraints
+    from kinema.objectives.sample import collect_objectives
+
+    monkeypatch.chdir(bandai_workdir)  # goal_reach.json names a Bandai Namco clip relative to the repository
+    frames = round(SECONDS * model.fps)
+    bound = collect_objectives(path, None, model.skeleton, model.fps, frames)
+    assert bound, f"{path.name}: no objectives"
+    data = json.loads(path.read_text())
+    assert set(data) <= {"comment", "fps", "constraints", "objectives"}
+    load_constraints(path, model.skeleton, model.fps, frames)
 
 
 def check_constraints_result(result, label: str, frames: int) -> None:

@@ -191,6 +191,8 @@ def load_objectives(path_or_obj) -> list[Objective]:
             data = json.loads(Path(path_or_obj).read_text(encoding="utf-8"))
         except (OSError, ValueError) as err:
             raise ObjectiveError(f"cannot read objectives ({err})", source=source) from None
+        except RecursionError:
+            raise ObjectiveError("JSON nested too deeply to read (not a constraints file)", source=source) from None
         items = data.get("objectives", []) if isinstance(data, dict) else []
     elif isinstance(path_or_obj, dict):
         items = path_or_obj.get("objectives", [])
