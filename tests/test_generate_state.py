@@ -95,3 +95,15 @@ def test_exactly_the_frames_asked_for(model, seconds):
 def test_timeline_segment_shorter_than_a_frame(model):
     with pytest.raises(KinemaError, match="segment 0 .* lasts 0.01 s, shorter than one frame at 20 fps"):
         model.generate([("A person walks.", 0.01), ("A person waves.", 0.01)], steps=2)
+
+
+def test_constraint_objects_are_accepted_like_their_json(model):
+    """generate(constraints=[Root2DConstraint(...)]) gives the same motion as the JSON form (the
+    docstring promises constraint objects; the app found that they raised 'expected a JSON object')."""
+    from kinema.constraints import Root2DConstraint, constraint_to_json
+
+    c = Root2DConstraint(frame_indices=[40], positions=[[0.0, 2.0]])
+    as_object = model.generate("A person walks forward.", seconds=3, steps=5, seed=2, constraints=[c])
+    as_json = model.generate("A person walks forward.", seconds=3, steps=5, seed=2,
+                             constraints=[constraint_to_json(c)])
+    assert torch.equal(as_object[0].positions, as_json[0].positions)

@@ -15,10 +15,12 @@ import numpy as np
 import torch
 
 from kinema.constraints import (
+    Constraint,
     EndEffectorConstraint,
     FootContactConstraint,
     FullBodyConstraint,
     Root2DConstraint,
+    constraint_to_json,
     load_constraints,
 )
 from kinema.constraints.types import resolve_joint
@@ -53,6 +55,8 @@ def encode_user_constraints(rep: FlatRepresentation, constraints, total_frames: 
         return [], UserTargets(torch.zeros(total_frames, D), torch.zeros(total_frames, D))
     if isinstance(constraints, (str, Path)):
         constraints = Path(constraints)
+    elif isinstance(constraints, list):  # constraint objects go through the same checks as their JSON form
+        constraints = [constraint_to_json(c) if isinstance(c, Constraint) else c for c in constraints]
     if constraints_fps is not None and not (isinstance(constraints_fps, (int, float)) and
                                             math.isfinite(constraints_fps) and constraints_fps > 0):
         raise KinemaError(f"constraints_fps must be a positive number, got {constraints_fps!r}")
