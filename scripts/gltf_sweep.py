@@ -29,6 +29,7 @@ import pygltflib
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
+from blender_gltf import blender_bone_heads, max_head_error  # noqa: E402
 from gltf_reference import world_positions  # noqa: E402
 
 from kinema.io.bvh import read_bvh  # noqa: E402
@@ -79,30 +80,8 @@ def blender_error(glb: Path, work: Path) -> float:
     """Largest distance (metres) between Blender's bone heads and kinema's joints, first clip of ``glb``."""
     clip, motion = next(iter(read_gltf(glb).motions.items()))
     frames = sorted({0, motion.num_frames // 2, motion.num_frames - 1})
-    out = work / f"{glb.stem}.heads.json"
-    cmd = [
-        "blender",
-        "-b",
-        "--factory-startup",
-        "--python",
-        str(REPO / "scripts/blender_gltf_check.py"),
-        "--",
-        str(glb),
-        str(out),
-        clip,
-        ",".join(f"{f / motion.fps:.9f}" for f in frames),
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    if proc.returncode != 0 or not out.exists():
-        raise RuntimeError(f"Blender import failed: {(proc.stdout + proc.stderr)[-300:]}")
-    report = json.loads(out.read_text())
-    P = motion.positions.double().numpy()
-    worst = 0.0
-    for k, f in enumerate(frames):
-        for name, (x, y, z) in report["heads"][k].items():
-            want = P[f, motion.skeleton.names.index(name)]
-            worst = max(worst, float(np.linalg.norm([x - want[0], z - want[1], -y - want[2]])))
-    return worst
+    report = blender_bone_heads(glb, work / f"{glb.stem}.heads.json", clip, [f / motion.fps for f in frames])
+    return max_head_error(report, motion, frames)
 
 
 def main() -> int:

@@ -7,14 +7,13 @@ no numpy (Debian: ``apt-get install blender python3-numpy``; .ci/run installs bo
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import subprocess
 from pathlib import Path
 
-import numpy as np
 import pytest
+from blender_gltf import blender_bone_heads, max_head_error
 from gltf_synthetic import write_synthetic_glb
 
 from kinema.io.bvh import read_bvh
@@ -22,7 +21,6 @@ from kinema.io.gltf import read_gltf
 from kinema.io.gltf_writer import write_glb
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "scripts/blender_gltf_check.py"
 BLENDER = shutil.which("blender")
 
 
@@ -42,32 +40,10 @@ pytestmark = pytest.mark.skipif(
 
 def _check(glb: Path, clip: str, motion, tmp_path: Path) -> None:
     frames = sorted({0, 1, motion.num_frames // 2, motion.num_frames - 1})
-    times = [f / motion.fps for f in frames]
-    out = tmp_path / "heads.json"
-    cmd = [
-        BLENDER,
-        "-b",
-        "--factory-startup",
-        "--python",
-        str(SCRIPT),
-        "--",
-        str(glb),
-        str(out),
-        clip,
-        ",".join(f"{t:.9f}" for t in times),
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0 and out.exists(), proc.stdout[-2000:] + proc.stderr[-2000:]
-    report = json.loads(out.read_text())
+    report = blender_bone_heads(glb, tmp_path / "heads.json", clip, [f / motion.fps for f in frames], BLENDER)
     assert set(report["bones"]) == set(motion.skeleton.names)
     assert report["skinned"] and report["vertices"] > 0
-    P = motion.positions.double().numpy()
-    worst = 0.0
-    for k, f in enumerate(frames):
-        for name, (x, y, z) in report["heads"][k].items():
-            # Blender is Z up: (x, y, z)_blender = (x, -z, y)_gltf
-            want = P[f, motion.skeleton.names.index(name)]
-            worst = max(worst, float(np.linalg.norm([x - want[0], z - want[1], -y - want[2]])))
+    worst = max_head_error(report, motion, frames)
     assert worst < 1e-5, f"Blender bone heads differ from kinema by up to {worst * 1000:.4f} mm"
 
 
