@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from kinema.errors import KinemaError
+from kinema.model.config import reject_unknown_keys
 from kinema.representation.joint import NUM_CHANNELS
 
 ANYRIG_PRESETS: dict[str, dict[str, Any]] = {
@@ -121,9 +122,7 @@ class AnyRigConfig:
         kind = data.pop("kind", "anyrig")
         if kind != "anyrig":
             raise KinemaError(f"model config is of kind {kind!r}, not 'anyrig'")
-        unknown = set(data) - {f.name for f in fields(cls)}
-        if unknown:
-            raise KinemaError(f"unknown any-rig config keys: {sorted(unknown)}")
+        reject_unknown_keys(cls, data, "any-rig config keys")
         return cls(**data)
 
     def save_json(self, path: str | Path) -> None:

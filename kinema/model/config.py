@@ -55,6 +55,14 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+
+def reject_unknown_keys(cls, data, what: str) -> None:
+    """Raise ``KinemaError("unknown {what}: [...]")`` for keys of ``data`` that are not fields of the
+    dataclass ``cls`` (every config saved as JSON next to weights is read strictly: a typo is an error)."""
+    unknown = set(data) - {f.name for f in fields(cls)}
+    if unknown:
+        raise KinemaError(f"unknown {what}: {sorted(unknown)}")
+
 @dataclass
 class ModelConfig:
     """Shape of the denoiser.
@@ -139,10 +147,7 @@ class ModelConfig:
         """Rebuild from ``to_dict`` output; unknown keys or a mismatched ``feature_dim`` raise KinemaError."""
         data = dict(data)
         feature_dim = data.pop("feature_dim", None)
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise KinemaError(f"unknown model config keys: {sorted(unknown)}")
+        reject_unknown_keys(cls, data, "model config keys")
         try:
             config = cls(**data)
         except TypeError as exc:

@@ -11,7 +11,7 @@ training facts); loading checks every key.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
@@ -21,7 +21,7 @@ from torch import nn
 
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_write_bytes
-from kinema.model.config import ModelConfig
+from kinema.model.config import ModelConfig, reject_unknown_keys
 from kinema.model.layers import StageTransformer
 from kinema.representation.keyjoint import KEYJOINT_DIM
 
@@ -45,9 +45,7 @@ class KeyjointConfig:
     def from_dict(cls, data: dict) -> KeyjointConfig:
         if not isinstance(data, dict):
             raise KinemaError(f"keyjoint config must be an object, got {type(data).__name__}")
-        unknown = set(data) - {f.name for f in fields(cls)}
-        if unknown:
-            raise KinemaError(f"unknown keyjoint config keys: {sorted(unknown)}")
+        reject_unknown_keys(cls, data, "keyjoint config keys")
         return cls(**data)
 
     def stage_config(self) -> ModelConfig:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
@@ -25,6 +25,7 @@ from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
 from kinema.model.anyrig import AnyRigDenoiser
 from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.config import reject_unknown_keys
 from kinema.text import get_text_encoder
 from kinema.train.anyrig_data import AnyRigClips, Batch
 from kinema.train.anyrig_masks import random_masks
@@ -55,9 +56,7 @@ class AnyRigTrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> AnyRigTrainConfig:
-        unknown = set(d) - {f.name for f in fields(cls)}
-        if unknown:
-            raise KinemaError(f"unknown any-rig training settings: {sorted(unknown)}")
+        reject_unknown_keys(cls, d, "any-rig training settings")
         return cls(**d)
 
 
