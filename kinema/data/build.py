@@ -35,6 +35,7 @@ import torch
 
 from kinema.data.bandai import ClipInfo, list_clips, load_clip, min_toe_height
 from kinema.data.captions import captions_for, mirror_content
+from kinema.data.phrasings import extra_captions
 from kinema.data.split import SPLITS, assign_splits, group_of
 from kinema.errors import DataError
 from kinema.motion.contacts import ContactThresholds
@@ -103,6 +104,8 @@ def _process_clip(task: tuple[ClipInfo, float, bool]) -> list[tuple[np.ndarray, 
         "path": info.relpath,
         "skeleton": (skel.names, skel.parents, skel.offsets.numpy()),
     }
+    travel = motion.root_translation[-1, [0, 2]] - motion.root_translation[0, [0, 2]]
+    speed = float(travel.norm()) * fps / max(motion.num_frames - 1, 1)  # m/s, mean ground speed
     variants = [(motion, False)] + ([(motion.mirror(), True)] if mirror else [])
     out = []
     for m, mirrored in variants:
@@ -111,7 +114,10 @@ def _process_clip(task: tuple[ClipInfo, float, bool]) -> list[tuple[np.ndarray, 
         rec["clip_id"] = info.clip_id + (MIRROR_SUFFIX if mirrored else "")
         rec["content"] = mirror_content(info.content) if mirrored else info.content
         rec["mirrored"] = mirrored
-        rec["captions"] = captions_for(info.content, info.style, mirrored=mirrored)
+        # template captions first (evaluation prompts use captions[0]), then more verbs and speed words
+        rec["captions"] = captions_for(info.content, info.style, mirrored=mirrored) + extra_captions(
+            info.content, info.style, speed, mirrored=mirrored
+        )
         out.append((feats, rec))
     return out
 
