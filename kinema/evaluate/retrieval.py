@@ -26,7 +26,7 @@ import functools
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -40,6 +40,7 @@ from torch import nn
 
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_write_bytes, atomic_write_text
+from kinema.model.config import reject_unknown_keys
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.representation.transform import canonicalize_start
@@ -68,8 +69,8 @@ class RetrievalConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> RetrievalConfig:
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
+        reject_unknown_keys(cls, d, "retrieval model settings")
+        return cls(**d)
 
 
 def sinusoidal_positions(length: int, width: int) -> torch.Tensor:

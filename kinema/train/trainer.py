@@ -19,7 +19,7 @@ import math
 import os
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
@@ -29,7 +29,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
-from kinema.model.config import get_config
+from kinema.model.config import get_config, reject_unknown_keys
 from kinema.model.denoiser import Denoiser, local_root_stats
 from kinema.text import get_text_encoder
 from kinema.train.batching import BatchSampler, step_generator
@@ -76,8 +76,8 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
+        reject_unknown_keys(cls, d, "training settings")
+        return cls(**d)
 
 
 def content_weights(records: list[dict], power: float) -> list[float] | None:
