@@ -54,3 +54,18 @@ def test_reexport_keeps_model_card_and_cli_reports_errors(tiny_checkpoint, tmp_p
     with pytest.raises(KinemaError, match="sampling steps"):
         export_model(tiny_checkpoint, tmp_path / "y", sampling_steps=0)
     assert not (tmp_path / "y").exists()
+
+
+def test_export_raw_weights(tiny_checkpoint, tmp_path, capsys) -> None:
+    """``--weights raw`` packs the optimiser weights (they differ from the EMA of the tiny run); an
+    exported folder has no raw weights, which is a one-line error, exit 2."""
+    src = find_checkpoint(tiny_checkpoint)
+    raw = load_file(str(src / "model.safetensors"))
+    args = ["export", str(tiny_checkpoint), "--out", str(tmp_path / "raw"), "--weights", "raw", "--dtype", "float32"]
+    assert main(args) == 0
+    packed = load_file(str(tmp_path / "raw" / "ema.safetensors"))
+    assert all(torch.equal(packed[k], v) for k, v in raw.items())
+    ema = load_file(str(src / "ema.safetensors"))
+    assert any(not torch.equal(ema[k], v) for k, v in raw.items())
+    assert main(["export", str(tmp_path / "raw"), "--out", str(tmp_path / "again"), "--weights", "raw"]) == 2
+    assert "no model.safetensors" in capsys.readouterr().err

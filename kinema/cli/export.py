@@ -22,6 +22,9 @@ def register(sub) -> None:
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="default separated guidance weights saved with the model (finite, >= 0)")
     p.add_argument("--steps", type=positive_int, help="default DDIM steps saved with the model")
+    p.add_argument("--weights", default="ema", choices=("ema", "raw"),
+                   help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
+                        "mostly holds the starting weights)")
     p.add_argument("--known-prompts", type=Path, metavar="DATA",
                    help="dataset build whose train captions the model learned: their embeddings are saved as "
                         "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
@@ -38,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
         raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
-    out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps)
+    out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
+                      ema=args.weights == "ema")
     loaded = (load_anyrig if is_anyrig_checkpoint(out) else load_denoiser)(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
