@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
+import anyrig_fixtures
 import pytest
 import torch
-from rig_fixtures import fish, hexapod, quadruped, snake2, walking
+from rig_fixtures import hexapod, quadruped, snake2, walking
 
-from kinema.data.multirig_build import Description, assemble, write_build
-from kinema.data.sources import SourceFile
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
 from kinema.generate.anyrig_constraints import encode_constraints
@@ -25,37 +22,7 @@ from kinema.skeleton import Skeleton
 from kinema.text import get_text_encoder
 from kinema.train.anyrig_trainer import AnyRigTrainConfig, AnyRigTrainer
 
-
-def _variant(skel: Skeleton, k: int) -> Skeleton:
-    """The same shape under other joint names: a new rig for the build (rigs are keyed by topology)."""
-    return Skeleton([f"{n}{k}" for n in skel.names], skel.parents, skel.offsets * (1 + 0.1 * k), name=f"{skel.name}{k}")
-
-
-@pytest.fixture(scope="module")
-def creature_cache(tmp_path_factory) -> Path:
-    files = []
-    for k in range(3):
-        for skel in (quadruped(), fish(), hexapod()):
-            s = _variant(skel, k)
-            clips = {"walk": walking(s, frames=24, speed=0.0), "sway": walking(s, frames=12, speed=0.0)}
-            files.append(SourceFile(Path(f"{s.name}.bvh"), f"{s.name}.bvh", "bvh", clips))
-
-    def describe(f, name, motion, travel):
-        return Description([f"A {f.rel.split('.')[0]} does a {name}."])
-
-    out = tmp_path_factory.mktemp("creatures") / "cache"
-    write_build(out, assemble(files, 20.0, describe), {"dataset": "synthetic"})
-    return out
-
-
-@pytest.fixture(scope="module")
-def trained(creature_cache, tmp_path_factory) -> Path:
-    run = tmp_path_factory.mktemp("run")
-    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
-    tc = AnyRigTrainConfig(steps=4, ckpt_every=2, log_every=2, variants=1, text_encoder="hash-test-32", warmup=2)
-    trainer = AnyRigTrainer(cfg, tc, creature_cache, run, text_cache=None, log=lambda s: None)
-    trainer.run()
-    return run
+creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
 
 
 def test_training_writes_resumable_checkpoints(trained, creature_cache) -> None:

@@ -2,7 +2,8 @@
 
 Used by `kinema generate` when ``--model`` names an any-rig model. ``--rig`` is a GLB/glTF or BVH file
 (a GLB output keeps that rig's skinned mesh) or the id of a training rig; without ``--rig`` the known
-rigs are listed. ``--constraints`` is a JSON list (kinema.generate.anyrig_constraints.read_constraints).
+rigs are listed. ``--timeline`` is a JSON list of ``{prompt, seconds}`` segments, as for the
+human model. ``--constraints`` is a JSON list (kinema.generate.anyrig_constraints.read_constraints).
 """
 
 from __future__ import annotations
@@ -25,10 +26,15 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     from kinema.errors import KinemaError
     from kinema.generate.anyrig_constraints import read_constraints
     from kinema.generate.api import load_model
+    from kinema.generate.timeline import parse_timeline
     from kinema.io.atomic import check_output_path
 
-    if args.timeline is not None:
-        raise KinemaError("--timeline is not supported by any-rig models yet; give one PROMPT and --seconds")
+    what = args.prompt or ""
+    if args.timeline is not None:  # checked before the model loads; it overrides PROMPT and --seconds
+        if args.timeline.suffix.lower() != ".json" or not args.timeline.is_file():
+            raise KinemaError(f"{args.timeline}: no such timeline file (a .json list of {{prompt, seconds}})")
+        parse_timeline(args.timeline)
+        what = str(args.timeline)
     if args.rig is not None and not args.out.name.lower().endswith(SUFFIXES):
         raise KinemaError(f"{args.out}: output must end in {', '.join(SUFFIXES)}")
     constraints = read_constraints(args.constraints) if args.constraints is not None else []
@@ -40,12 +46,12 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     model = load_model(path, text_cache=Path("cache/text"))
     if args.rig is None:
         print(list_rigs(model))
-        if args.prompt:
+        if what:
             raise KinemaError(f"the any-rig model {args.model!r} needs --rig (a GLB/BVH file or a rig id listed above)")
         return 0
     guidance = None if args.guidance is None else tuple(args.guidance)
     res = model.generate(
-        args.prompt or "",
+        what,
         rig=args.rig,
         seconds=args.seconds or 4.0,
         constraints=constraints,
@@ -66,8 +72,8 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
         )
     rep = res.report
     print(
-        f"generated {len(res)} motion(s) on {rep.joints} joints, {rep.windows} window(s), {rep.steps} DDIM steps "
-        f"in {rep.seconds:.2f} s"
+        f"generated {len(res)} motion(s) on {rep.joints} joints, {rep.segments} segment(s), {rep.windows} window(s), "
+        f"{rep.steps} DDIM steps in {rep.seconds:.2f} s"
     )
     if rep.residuals_cm:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
