@@ -24,7 +24,14 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
+from kinema.generate.anyrig_constraints import (
+    Constraint,
+    JointTarget,
+    Keyframe,
+    RootMotion,
+    RootPath,
+    encode_constraints,
+)
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
 from kinema.generate.anyrig_sampling import sample_features
@@ -169,12 +176,16 @@ class AnyRigModel:
             progress=progress,
             plan=plan,
         )
-        if not any(isinstance(c, (RootPath, Keyframe)) for c in constraints):
+        if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
             feats = _face(feats, rig_n.root, heading)
         report = AnyRigReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints, segments=len(prompts))
         motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
         report.seconds = time.perf_counter() - t0
         return AnyRigResult(motions, report)
+
+    def frames(self, prompt: str | Sequence | Path, seconds: float = 4.0) -> int:
+        """Frames (at ``fps``) that ``generate`` makes for ``prompt`` (a text or a timeline) and ``seconds``."""
+        return self._plan(prompt, seconds)[1].frames
 
     def _steps(self, steps: int | None) -> int:
         n = self.loaded.sampler.num_train_steps
@@ -305,4 +316,4 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     return out
 
 
-__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootPath"]
+__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootMotion", "RootPath"]

@@ -8,7 +8,9 @@ Three kinds (frames at the model's fps; lengths in metres; Y up, +Z forward):
 - `Keyframe(frame=, pose=, pose_frame=0)`: a full-body pose (a `Motion` on the same skeleton, e.g. a
   frame of one of the rig's clips): every joint's position and rotation and the root height;
 - `RootPath(frames=, xz=)`: world ground waypoints of the root, starting from the origin at frame 0;
-  between waypoints the root moves straight at constant speed, facing where it goes.
+  between waypoints the root moves straight at constant speed, facing where it goes;
+- `RootMotion(motion=, until=)`: the root's path, height, rotation and heading copied from a motion on
+  the same rig for frames ``[0, until)`` (kinema.generate.anyrig_world uses it to meet world-frame targets).
 
 `encode_constraints` turns them into `FeatureTargets` on a rig in its normalised units (``scale`` =
 units per metre). `post_targets` turns them into world-frame `PostTargets` for the exact pass, once
@@ -31,6 +33,7 @@ from kinema.geometry.rotations import quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.skeleton import Skeleton
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -53,7 +56,17 @@ class RootPath:
     xz: Sequence[tuple[float, float]]
 
 
-Constraint = JointTarget | Keyframe | RootPath
+@dataclass(frozen=True, kw_only=True)
+class RootMotion:
+    """The root's path, height, rotation and heading on frames ``[0, until)`` taken from ``motion`` (metres,
+    on the same skeleton; e.g. a first pass): world joint targets stay where they were read in its
+    character frame (whose heading comes from the root's rotation)."""
+
+    motion: Motion
+    until: int
+
+
+Constraint = JointTarget | Keyframe | RootPath | RootMotion
 
 
 def _joint(rep: JointRepresentation, joint: str | int) -> int:
@@ -100,8 +113,19 @@ def encode_constraints(
             m[f, root, 3:9] = 1.0
         elif isinstance(c, RootPath):
             _root_path(c, x, m, root, scale, frames, rep.fps)
+        elif isinstance(c, RootMotion):
+            n = min(c.until, frames, c.motion.num_frames)
+            lt = None if c.motion.local_translations is None else c.motion.local_translations * scale
+            moved = Motion(
+                rep.rig.skeleton, rep.fps, c.motion.root_translation * scale, c.motion.local_rotations, None, lt
+            )
+            rows = list(range(11))  # ground velocity (heading frame), height, rotation, heading
+            x[:n, root, rows] = rep.from_motion(moved.crop(0, n)).to(x.dtype)[:, root, rows]
+            m[:n, root, rows] = 1.0
         else:
-            raise KinemaError(f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe or RootPath")
+            raise KinemaError(
+                f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe, RootPath or RootMotion"
+            )
     return FeatureTargets(x, m)
 
 
@@ -165,9 +189,36 @@ def _number_list(value, n: int | None, where: str) -> list[float]:
     return [float(v) for v in value]
 
 
+#: ``type`` values of the any-rig constraint list (`read_constraints`)
+ANYRIG_TYPES = ("joint", "root_path")
+
+
+def check_constraints(constraints: Sequence[Constraint], skeleton: Skeleton, frames: int, source: str) -> None:
+    """Joint names / indices and frames of ``constraints`` checked against ``skeleton`` and a motion of
+    ``frames`` frames, before generating; the one-line error names ``source`` and the constraint."""
+    for i, c in enumerate(constraints):
+        at = f"{source}: constraint {i}"
+        if isinstance(c, JointTarget):
+            if isinstance(c.joint, str) and c.joint not in skeleton.names:
+                raise KinemaError(
+                    f"{at}: joint {c.joint!r} is not in rig {skeleton.name or '?'} "
+                    f"({skeleton.num_joints} joints: {', '.join(skeleton.names)})"
+                )
+            if not isinstance(c.joint, str) and not 0 <= c.joint < skeleton.num_joints:
+                raise KinemaError(f"{at}: joint {c.joint} outside 0..{skeleton.num_joints - 1}")
+            seen = [c.frame]
+        elif isinstance(c, RootPath):
+            seen = list(c.frames)
+        else:
+            continue
+        bad = [f for f in seen if not 0 <= f < frames]
+        if bad:
+            raise KinemaError(f"{at}: frame {bad[0]} outside 0..{frames - 1} (the motion has {frames} frames)")
+
+
 def _from_json(i: int, obj, where: str) -> Constraint:
     at = f"{where}[{i}]"
-    if not isinstance(obj, dict) or obj.get("type") not in ("joint", "root_path"):
+    if not isinstance(obj, dict) or obj.get("type") not in ANYRIG_TYPES:
         raise KinemaError(f"{at}: expected an object with type 'joint' or 'root_path'")
     if obj["type"] == "joint":
         unknown = set(obj) - {"type", "joint", "frame", "position"}
