@@ -71,6 +71,7 @@ def test_world_targets_waypoints_and_keyframes_from_a_constraints_file(trained, 
          "c.json: constraint 0: frame 30 outside 0..29"),
         ([{"type": "right-hand", "times": [9.0], "positions": [[0, 1, 0]]}], "c.json: constraint 0 (right-hand)"),
         ([{"type": "root2d", "times": [1.0], "smooth_root_2d": [[0, 1, 2]]}], "c.json: constraint 0 (root2d)"),
+        ([{"type": "joint", "joint": "HeadA", "frame": 3, "position": [0, 1, 0], "fps": 30}], "c.json[0]: a joint"),
     ],
 )  # fmt: skip
 def test_bad_constraint_files_are_one_line_errors(trained, rig_file, tmp_path, capsys, constraints, message) -> None:
@@ -92,3 +93,19 @@ def test_any_rig_list_still_works_and_roles_and_keyframe_rows_are_split(trained,
     assert own == [] and [w["frame_indices"] for w in world] == [[2], [4]]
     assert world[1]["positions"] == [[0.0, 1.0, 1.0]] and world[0]["joint"] == "HeadA"
     assert json_form([], skel, 20.0, 30) == []
+
+
+def test_constraints_count_over_a_whole_timeline(trained, rig_file, tmp_path, capsys) -> None:
+    timeline = tmp_path / "t.json"
+    timeline.write_text(json.dumps([{"prompt": "A quadruped does a walk.", "seconds": 1.0},
+                                    {"prompt": "A quadruped does a sway.", "seconds": 1.0}]))  # fmt: skip
+    goal = [0.2, 0.9, 0.6]
+    target = [{"type": "end-effector", "joint": "HeadA", "times": [1.6], "positions": [goal]}]
+    code, m = _run(trained, rig_file, tmp_path, target, "--timeline", str(timeline))
+    assert code == 0 and m.num_frames == 40 and "2 segment(s)" in capsys.readouterr().out
+    assert float((m.positions[32, m.skeleton.index("HeadA")] - torch.tensor(goal)).norm()) < 0.01
+    code, _ = _run(trained, rig_file, tmp_path, target, "--constraints-fps", "30")
+    assert code == 2 and "time 1.6 s (frame 32) is beyond" in capsys.readouterr().err  # 1.5 s without the timeline
+    own = [{"type": "joint", "joint": "HeadA", "frame": 3, "position": [0, 1, 0]}]
+    assert _run(trained, rig_file, tmp_path, own, "--constraints-fps", "30")[0] == 2
+    assert "frames are at the model's fps" in capsys.readouterr().err

@@ -208,6 +208,11 @@ def load_constraints_file(
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
         raise KinemaError(f"{path}: cannot read constraints ({err})") from None
     if isinstance(data, list) and any(isinstance(o, dict) and o.get("type") in ANYRIG_TYPES for o in data):
+        if source_fps is not None:
+            raise KinemaError(
+                f"{path}: the any-rig list's frames are at the model's fps; a constraints fps "
+                "applies to docs/constraints.md files"
+            )
         cons = read_constraints(path)
         check_constraints(cons, skeleton, frames, str(path))
         return cons, []
