@@ -154,6 +154,16 @@ def test_bones_under_a_floor_armature_take_predicted_translations_and_feet_lock(
     assert torch.allclose(P[:, [1, 2, 4]], back.positions[:, [1, 2, 4]])
 
 
+def test_keyframes_keep_the_bone_translations_of_their_pose() -> None:
+    m = _armature_motion()
+    rep = JointRepresentation(Rig.from_skeleton(m.skeleton), 20.0)
+    targets = encode_constraints([Keyframe(frame=2, pose=m, pose_frame=7)], rep, 1.0, 5)
+    want = rep.from_motion(m)[7]
+    body = [j for j in range(m.num_joints) if j != rep.rig.root]
+    assert targets.mask[2, body, 0:9].eq(1).all()
+    assert torch.allclose(targets.x_tgt[2, body, 0:9], want[body, 0:9].float(), atol=1e-6)  # the moved feet too
+
+
 def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:
     from kinema.cli import main
 

@@ -105,8 +105,7 @@ def encode_constraints(
             f = _frame(c.frame, frames, "keyframe")
             if c.pose.num_joints != J:
                 raise KinemaError(f"keyframe pose has {c.pose.num_joints} joints, the rig has {J}")
-            pose = Motion(rep.rig.skeleton, rep.fps, c.pose.root_translation * scale, c.pose.local_rotations)
-            feats = rep.from_motion(pose.crop(c.pose_frame, c.pose_frame + 1))[0]
+            feats = rep.from_motion(_scaled(c.pose, rep, scale).crop(c.pose_frame, c.pose_frame + 1))[0]
             x[f], m[f, :, 0:9] = feats, 1.0
             m[f, root] = 0.0
             m[f, root, 1] = 1.0  # the root row: height only (its rotation is the root joint's)
@@ -127,6 +126,13 @@ def encode_constraints(
                 f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe, RootPath or RootMotion"
             )
     return FeatureTargets(x, m)
+
+
+def _scaled(m: Motion, rep: JointRepresentation, scale: float) -> Motion:
+    """``m`` (metres) on the representation's skeleton in its units, bone translations included (the
+    Quaternius rigs move the body and IK feet by translation)."""
+    lt = None if m.local_translations is None else m.local_translations * scale
+    return Motion(rep.rig.skeleton, rep.fps, m.root_translation * scale, m.local_rotations, None, lt)
 
 
 def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -> None:
