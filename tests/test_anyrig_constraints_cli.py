@@ -9,6 +9,7 @@ import json
 import anyrig_fixtures
 import pytest
 import torch
+from app_rig_data import synthetic_rig_glb
 from rig_fixtures import quadruped, walking
 
 from kinema.cli import main
@@ -109,3 +110,32 @@ def test_constraints_count_over_a_whole_timeline(trained, rig_file, tmp_path, ca
     own = [{"type": "joint", "joint": "HeadA", "frame": 3, "position": [0, 1, 0]}]
     assert _run(trained, rig_file, tmp_path, own, "--constraints-fps", "30")[0] == 2
     assert "frames are at the model's fps" in capsys.readouterr().err
+
+
+def test_keyframes_from_a_clip_of_the_rig(trained, tmp_path, capsys) -> None:
+    glb = synthetic_rig_glb(tmp_path / "quad.glb")  # 11 joints, one clip "Walk"
+    cfile, out = tmp_path / "k.json", tmp_path / "k.npz"
+    args = ["generate", "A thing walks.", "--model", str(trained), "--rig", str(glb), "--seconds", "1.5"]
+    args += ["--steps", "3", "--out", str(out), "--constraints", str(cfile)]
+    keyframe = {"type": "keyframe", "frame": 10, "clip": "quad.glb", "animation": "Walk", "clip_frame": 6}
+    cfile.write_text(json.dumps([keyframe]))
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert float(printed.split("constraint error after post-processing: max ")[1].split(" cm")[0]) < 1.0
+    for bad, message in (
+        ({**keyframe, "animation": "Run"}, "has no animation 'Run' (it has Walk)"),
+        ({**keyframe, "clip": "none.glb"}, "k.json[0]: clip 'none.glb': no such file"),
+        ({**keyframe, "clip_frame": 99}, "clip_frame 99 outside 0..19"),
+        ({**keyframe, "frames": 3}, "k.json[0]: a keyframe is {type, frame (int), clip"),
+    ):
+        cfile.write_text(json.dumps([bad]))
+        assert main(args) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1, err
+    other = tmp_path / "other.bvh"
+    walking(quadruped(), frames=4).save(other)
+    cfile.write_text(json.dumps([{**keyframe, "clip": str(other), "clip_frame": 0}]))
+    assert (
+        main(args) == 2
+        and "k.json: constraint 0: the keyframe's clip is on another skeleton" in capsys.readouterr().err
+    )

@@ -30,6 +30,8 @@ import torch
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_sampling import FeatureTargets
 from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.io.gltf import read_gltf
+from kinema.io.registry import load_motion
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation, yaw_quat
@@ -196,7 +198,8 @@ def _number_list(value, n: int | None, where: str) -> list[float]:
 
 
 #: ``type`` values of the any-rig constraint list (`read_constraints`)
-ANYRIG_TYPES = ("joint", "root_path")
+ANYRIG_TYPES = ("joint", "root_path", "keyframe")
+KEYFRAME_KEYS = {"type", "frame", "clip", "animation", "clip_frame"}
 
 
 def check_constraints(constraints: Sequence[Constraint], skeleton: Skeleton, frames: int, source: str) -> None:
@@ -215,6 +218,13 @@ def check_constraints(constraints: Sequence[Constraint], skeleton: Skeleton, fra
             seen = [c.frame]
         elif isinstance(c, RootPath):
             seen = list(c.frames)
+        elif isinstance(c, Keyframe):
+            if list(c.pose.skeleton.names) != list(skeleton.names):
+                raise KinemaError(
+                    f"{at}: the keyframe's clip is on another skeleton than rig {skeleton.name or '?'} "
+                    f"({c.pose.num_joints} joints, not the rig's {skeleton.num_joints} in its order)"
+                )
+            seen = [c.frame]
         else:
             continue
         bad = [f for f in seen if not 0 <= f < frames]
@@ -222,10 +232,45 @@ def check_constraints(constraints: Sequence[Constraint], skeleton: Skeleton, fra
             raise KinemaError(f"{at}: frame {bad[0]} outside 0..{frames - 1} (the motion has {frames} frames)")
 
 
-def _from_json(i: int, obj, where: str) -> Constraint:
+def _keyframe_from_json(obj: dict, at: str, base: Path, fps: float | None) -> Keyframe:
+    """``{"type": "keyframe", "frame", "clip", "animation", "clip_frame"}``: the pose of frame ``clip_frame``
+    (at ``fps``; the clip's own rate when None) of a BVH/npz clip or of a GLB's animation (by name, with
+    or without its armature prefix), relative paths from the constraints file's folder."""
+    frame, clip_frame, clip, anim = obj.get("frame"), obj.get("clip_frame", 0), obj.get("clip"), obj.get("animation")
+    if (
+        set(obj) - KEYFRAME_KEYS
+        or not all(isinstance(f, int) and not isinstance(f, bool) and f >= 0 for f in (frame, clip_frame))
+        or not isinstance(clip, str)
+        or not isinstance(anim, (str, type(None)))
+    ):
+        raise KinemaError(
+            f"{at}: a keyframe is {{type, frame (int), clip (GLB/BVH file), animation (GLB clip "
+            "name), clip_frame (int, default 0)}}"
+        )
+    path = Path(clip) if Path(clip).is_absolute() or not (base / clip).is_file() else base / clip
+    if not path.is_file():
+        raise KinemaError(f"{at}: clip {clip!r}: no such file")
+    if path.suffix.lower() in (".glb", ".gltf"):
+        motions = read_gltf(path, fps=fps).motions
+        names = {k: k for k in motions} | {k.split("|")[-1]: k for k in motions}
+        if anim not in names:
+            raise KinemaError(f"{at}: {path} has no animation {anim!r} (it has {', '.join(sorted(motions))})")
+        pose = motions[names[anim]]
+    else:
+        pose = load_motion(path)
+    if fps is not None and pose.fps != fps:
+        pose = pose.resample(fps)
+    if clip_frame >= pose.num_frames:
+        raise KinemaError(f"{at}: clip_frame {clip_frame} outside 0..{pose.num_frames - 1} ({path})")
+    return Keyframe(frame=frame, pose=pose, pose_frame=clip_frame)
+
+
+def _from_json(i: int, obj, where: str, base: Path = Path("."), fps: float | None = None) -> Constraint:
     at = f"{where}[{i}]"
     if not isinstance(obj, dict) or obj.get("type") not in ANYRIG_TYPES:
-        raise KinemaError(f"{at}: expected an object with type 'joint' or 'root_path'")
+        raise KinemaError(f"{at}: expected an object with type 'joint', 'root_path' or 'keyframe'")
+    if obj["type"] == "keyframe":
+        return _keyframe_from_json(obj, at, base, fps)
     if obj["type"] == "joint":
         unknown = set(obj) - {"type", "joint", "frame", "position"}
         if unknown or not isinstance(obj.get("joint"), (str, int)) or not isinstance(obj.get("frame"), int):
@@ -247,9 +292,11 @@ def _from_json(i: int, obj, where: str) -> Constraint:
     return RootPath(frames=frames, xz=[tuple(_number_list(p, 2, f"{at}.xz")) for p in xz])
 
 
-def read_constraints(path: str | Path) -> list[Constraint]:
+def read_constraints(path: str | Path, fps: float | None = None) -> list[Constraint]:
     """Constraints from a JSON list: ``{"type": "joint", "joint": "Head", "frame": 10, "position": [x, y, z]}``
-    (character frame, metres) and ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres)."""
+    (character frame, metres), ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres) and
+    ``{"type": "keyframe", "frame": 40, "clip": "Fox.glb", "animation": "Gallop", "clip_frame": 5}`` (a
+    pose of a clip on the same skeleton; clip frames at ``fps``, the model's)."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -257,4 +304,4 @@ def read_constraints(path: str | Path) -> list[Constraint]:
         raise KinemaError(f"{path}: cannot read constraints ({err})") from None
     if not isinstance(data, list):
         raise KinemaError(f"{path}: any-rig constraints are a JSON list of objects")
-    return [_from_json(i, obj, str(path)) for i, obj in enumerate(data)]
+    return [_from_json(i, obj, str(path), path.parent, fps) for i, obj in enumerate(data)]

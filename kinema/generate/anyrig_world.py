@@ -213,7 +213,7 @@ def load_constraints_file(
                 f"{path}: the any-rig list's frames are at the model's fps; a constraints fps "
                 "applies to docs/constraints.md files"
             )
-        cons = read_constraints(path)
+        cons = read_constraints(path, fps)
         check_constraints(cons, skeleton, frames, str(path))
         return cons, []
     checked = load_constraints(path, skeleton, fps, frames, source_fps=source_fps)
