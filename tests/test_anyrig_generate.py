@@ -9,7 +9,7 @@ from rig_fixtures import hexapod, quadruped, snake2, walking
 
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
-from kinema.generate.anyrig_constraints import encode_constraints
+from kinema.generate.anyrig_constraints import encode_constraints, post_targets
 from kinema.generate.anyrig_feet import lock_translated_feet
 from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.model.anyrig_config import get_anyrig_config
@@ -162,6 +162,20 @@ def test_keyframes_keep_the_bone_translations_of_their_pose() -> None:
     body = [j for j in range(m.num_joints) if j != rep.rig.root]
     assert targets.mask[2, body, 0:9].eq(1).all()
     assert torch.allclose(targets.x_tgt[2, body, 0:9], want[body, 0:9].float(), atol=1e-6)  # the moved feet too
+
+
+def test_keyframe_targets_keep_only_the_translations_generation_can_make() -> None:
+    m = _armature_motion()
+    lt = m.local_translations.clone()
+    lt[:, 2, 2] += 0.1  # the clip also stretches the neck, which the rig cannot do by rotations
+    m = Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, None, lt)
+    rep = JointRepresentation(Rig.from_skeleton(m.skeleton), 20.0)
+    t = post_targets([Keyframe(frame=5, pose=m, pose_frame=5)], m, rep, 1.0, translated=[1, 3, 4])
+    P = m.positions
+    assert torch.allclose(t.joint_positions[3][1][0], P[5, 3])  # the IK foot keeps its translation
+    head = t.joint_positions[2][1][0] - t.joint_positions[1][1][0]
+    assert torch.allclose(head, torch.tensor([0.0, 0.0, 0.3], dtype=head.dtype))  # the neck at its rest length
+    assert float((P[5, 2] - P[5, 1]).norm()) > 0.39
 
 
 def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:

@@ -235,7 +235,8 @@ class AnyRigModel:
         m = rep_n.to_motion(f)
         targets = None
         if postprocess:
-            targets = make_post_targets(constraints, m, rep_n, scale) if constraints else None
+            moved = floor_root_children(m.skeleton)
+            targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             m, post = run_postprocess(m, targets, rig=rep_n.rig)
             report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)

@@ -153,11 +153,17 @@ def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -
 
 
 def post_targets(
-    constraints: Sequence[Constraint], motion: Motion, rep: JointRepresentation, scale: float = 1.0
+    constraints: Sequence[Constraint],
+    motion: Motion,
+    rep: JointRepresentation,
+    scale: float = 1.0,
+    translated: Sequence[int] = (),
 ) -> PostTargets:
     """World-frame targets of the joint and keyframe constraints (given in metres) on a generated
     ``motion`` in units of ``scale`` per metre on the same skeleton: the character frame is placed at
-    the motion's own root and heading."""
+    the motion's own root and heading. A keyframe's pose keeps its bone translations only on the
+    ``translated`` joints (those generation moves by translation); elsewhere its bones have their rest
+    lengths, as the generated motion has: the pose the rig can take, not one it cannot."""
     G, P = motion.global_transforms()
     psi = rep.heading(G)
     root = rep.rig.root
@@ -173,7 +179,7 @@ def post_targets(
             local = torch.as_tensor(c.position, dtype=torch.float64) * scale
             add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
         elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
-            pose = c.pose.to(torch.float64)
+            pose = _rest_lengths(c.pose.to(torch.float64), translated)
             Gp, Pp = pose.global_transforms()
             turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
             for j in range(motion.num_joints):
@@ -185,6 +191,15 @@ def post_targets(
         return {j: (torch.tensor(fs), torch.stack(vs)) for j, (fs, vs) in d.items()}
 
     return PostTargets(joint_positions=pack(positions), joint_rotations=pack(rotations))
+
+
+def _rest_lengths(pose: Motion, keep: Sequence[int]) -> Motion:
+    """``pose`` with the rest offsets as bone translations, except on the joints ``keep``."""
+    if pose.local_translations is None:
+        return pose
+    lt = pose.skeleton.offsets.to(pose.local_translations)[None].repeat(pose.num_frames, 1, 1)
+    lt[:, list(keep)] = pose.local_translations[:, list(keep)]
+    return Motion(pose.skeleton, pose.fps, pose.root_translation, pose.local_rotations, pose.foot_contacts, lt)
 
 
 def _number_list(value, n: int | None, where: str) -> list[float]:
