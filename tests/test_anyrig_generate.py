@@ -11,11 +11,13 @@ from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
 from kinema.generate.anyrig_constraints import encode_constraints, post_targets
 from kinema.generate.anyrig_feet import lock_translated_feet
+from kinema.generate.anyrig_post import pin_root, unmet_warnings
 from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.model.anyrig_config import get_anyrig_config
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
+from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
@@ -176,6 +178,23 @@ def test_keyframe_targets_keep_only_the_translations_generation_can_make() -> No
     head = t.joint_positions[2][1][0] - t.joint_positions[1][1][0]
     assert torch.allclose(head, torch.tensor([0.0, 0.0, 0.3], dtype=head.dtype))  # the neck at its rest length
     assert float((P[5, 2] - P[5, 1]).norm()) > 0.39
+
+
+def test_pin_root_puts_keyframed_roots_back_and_leaves_far_frames() -> None:
+    m = _armature_motion(frames=40)
+    root = 1
+    P = m.positions
+    targets = PostTargets(joint_positions={root: (torch.tensor([15, 20]), P[[15, 20], root] + 0.1)})
+    pinned = pin_root(m, targets, root, reach_s=0.25)  # 5 frames at 20 fps
+    Q = pinned.positions
+    assert torch.allclose(Q[[15, 20], root], P[[15, 20], root] + 0.1)  # exactly on the keyframes
+    assert torch.allclose(Q[:10], P[:10]) and torch.allclose(Q[26:], P[26:])  # untouched beyond the fade
+    assert torch.allclose(Q[12, 0] - P[12, 0], torch.full((3,), 0.04, dtype=P.dtype))  # fading in linearly
+    assert pin_root(m, None, root) is m
+    assert unmet_warnings([(0.5, "Head", 3)], 20.0, []) == []
+    text = unmet_warnings([(0.5, "Head", 3), (2.0, "Tail", 40)], 20.0, [])
+    assert text == ["constraint not met after post-processing: Tail at frame 40 (2.00 s) 2.0 cm away"]
+    assert unmet_warnings([(2.0, "Tail", 40)], 20.0, text) == []  # said once
 
 
 def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:

@@ -34,6 +34,7 @@ from kinema.generate.anyrig_constraints import (
 )
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
+from kinema.generate.anyrig_post import pin_root, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
@@ -238,7 +239,10 @@ class AnyRigModel:
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             m, post = run_postprocess(m, targets, rig=rep_n.rig)
-            report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
+            m = pin_root(m, targets, rep_n.rig.root)
+            # unmet constraints are said once, measured on the finished motion in metres (below)
+            news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
+            report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
         if postprocess:
             skel = rep_n.rig.skeleton
@@ -248,9 +252,13 @@ class AnyRigModel:
         lt = None if m.local_translations is None else m.local_translations / scale
         motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if targets is not None:
-            P = motion.positions
+            P, worst = motion.positions, []
             for j, (frames, pos) in targets.joint_positions.items():
-                report.residuals_cm += (100 * (P[frames, j] - pos / scale).norm(dim=-1)).tolist()
+                err = 100 * (P[frames, j] - pos / scale).norm(dim=-1)
+                report.residuals_cm += err.tolist()
+                k = int(err.argmax())
+                worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
+            report.warnings += unmet_warnings(worst, self.fps, report.warnings)
         return motion
 
 

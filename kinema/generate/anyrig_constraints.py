@@ -184,6 +184,8 @@ def post_targets(
             turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
             for j in range(motion.num_joints):
                 add(rotations, j, c.frame, quat_mul(turn, Gp[c.pose_frame, j]))
+                if j == 0 and translated:  # a floor-level armature: generation keeps it on the floor
+                    continue
                 local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root]) * scale
                 add(positions, j, c.frame, P[c.frame, root] + local)  # the root itself stays where it was
 
