@@ -11,7 +11,7 @@ from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
 from kinema.generate.anyrig_constraints import encode_constraints, post_targets
 from kinema.generate.anyrig_feet import lock_translated_feet
-from kinema.generate.anyrig_post import pin_root, unmet_warnings
+from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.model.anyrig_config import get_anyrig_config
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
@@ -185,12 +185,16 @@ def test_pin_root_puts_keyframed_roots_back_and_leaves_far_frames() -> None:
     root = 1
     P = m.positions
     targets = PostTargets(joint_positions={root: (torch.tensor([15, 20]), P[[15, 20], root] + 0.1)})
-    pinned = pin_root(m, targets, root, reach_s=0.25)  # 5 frames at 20 fps
+    pins = root_pins(targets, root, [], m, m)
+    pinned = pin_root(m, pins, root, reach_s=0.25)  # 5 frames at 20 fps
     Q = pinned.positions
     assert torch.allclose(Q[[15, 20], root], P[[15, 20], root] + 0.1)  # exactly on the keyframes
     assert torch.allclose(Q[:10], P[:10]) and torch.allclose(Q[26:], P[26:])  # untouched beyond the fade
     assert torch.allclose(Q[12, 0] - P[12, 0], torch.full((3,), 0.04, dtype=P.dtype))  # fading in linearly
-    assert pin_root(m, None, root) is m
+    assert pin_root(m, {}, root) is m and root_pins(None, root, [], m, m) == {}
+    moved = pin_root(m, {30: P[30, root] + 0.2}, root)
+    waypoint = root_pins(None, root, [30], m, moved)[30]  # ground position from before, height from after
+    assert torch.allclose(waypoint, torch.stack([P[30, root, 0], P[30, root, 1] + 0.2, P[30, root, 2]]))
     assert unmet_warnings([(0.5, "Head", 3)], 20.0, []) == []
     text = unmet_warnings([(0.5, "Head", 3), (2.0, "Tail", 40)], 20.0, [])
     assert text == ["constraint not met after post-processing: Tail at frame 40 (2.00 s) 2.0 cm away"]

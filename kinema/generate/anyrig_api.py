@@ -34,7 +34,7 @@ from kinema.generate.anyrig_constraints import (
 )
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
-from kinema.generate.anyrig_post import pin_root, unmet_warnings
+from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
@@ -238,8 +238,9 @@ class AnyRigModel:
         if postprocess:
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
+            before, root = m, rep_n.rig.root
             m, post = run_postprocess(m, targets, rig=rep_n.rig)
-            m = pin_root(m, targets, rep_n.rig.root)
+            m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
             # unmet constraints are said once, measured on the finished motion in metres (below)
             news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
             report.warnings += [w for w in news if w not in report.warnings]
@@ -312,6 +313,12 @@ def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresenta
     lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
     lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - base)
     return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
+
+
+def _waypoint_frames(constraints) -> list[int]:
+    """Frame 0 and the waypoint frames of every root path (where the sampled root meets them exactly)."""
+    paths = [c for c in constraints if isinstance(c, RootPath)]
+    return sorted({0, *(int(f) for c in paths for f in c.frames)}) if paths else []
 
 
 def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
