@@ -2,60 +2,29 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
+import anyrig_fixtures
 import pytest
 import torch
-from rig_fixtures import fish, hexapod, quadruped, snake2, walking
+from rig_fixtures import hexapod, quadruped, snake2, walking
 
-from kinema.data.multirig_build import Description, assemble, write_build
-from kinema.data.sources import SourceFile
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
-from kinema.generate.anyrig_constraints import encode_constraints
+from kinema.generate.anyrig_constraints import encode_constraints, post_targets
 from kinema.generate.anyrig_feet import lock_translated_feet
+from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.model.anyrig_config import get_anyrig_config
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
+from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 from kinema.text import get_text_encoder
 from kinema.train.anyrig_trainer import AnyRigTrainConfig, AnyRigTrainer
 
-
-def _variant(skel: Skeleton, k: int) -> Skeleton:
-    """The same shape under other joint names: a new rig for the build (rigs are keyed by topology)."""
-    return Skeleton([f"{n}{k}" for n in skel.names], skel.parents, skel.offsets * (1 + 0.1 * k), name=f"{skel.name}{k}")
-
-
-@pytest.fixture(scope="module")
-def creature_cache(tmp_path_factory) -> Path:
-    files = []
-    for k in range(3):
-        for skel in (quadruped(), fish(), hexapod()):
-            s = _variant(skel, k)
-            clips = {"walk": walking(s, frames=24, speed=0.0), "sway": walking(s, frames=12, speed=0.0)}
-            files.append(SourceFile(Path(f"{s.name}.bvh"), f"{s.name}.bvh", "bvh", clips))
-
-    def describe(f, name, motion, travel):
-        return Description([f"A {f.rel.split('.')[0]} does a {name}."])
-
-    out = tmp_path_factory.mktemp("creatures") / "cache"
-    write_build(out, assemble(files, 20.0, describe), {"dataset": "synthetic"})
-    return out
-
-
-@pytest.fixture(scope="module")
-def trained(creature_cache, tmp_path_factory) -> Path:
-    run = tmp_path_factory.mktemp("run")
-    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
-    tc = AnyRigTrainConfig(steps=4, ckpt_every=2, log_every=2, variants=1, text_encoder="hash-test-32", warmup=2)
-    trainer = AnyRigTrainer(cfg, tc, creature_cache, run, text_cache=None, log=lambda s: None)
-    trainer.run()
-    return run
+creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
 
 
 def test_training_writes_resumable_checkpoints(trained, creature_cache) -> None:
@@ -185,6 +154,51 @@ def test_bones_under_a_floor_armature_take_predicted_translations_and_feet_lock(
     P = locked.positions
     assert float((P[1:, 3, [0, 2]] - P[:-1, 3, [0, 2]]).norm(dim=-1).max()) < 1e-9
     assert torch.allclose(P[:, [1, 2, 4]], back.positions[:, [1, 2, 4]])
+
+
+def test_keyframes_keep_the_bone_translations_of_their_pose() -> None:
+    m = _armature_motion()
+    rep = JointRepresentation(Rig.from_skeleton(m.skeleton), 20.0)
+    targets = encode_constraints([Keyframe(frame=2, pose=m, pose_frame=7)], rep, 1.0, 5)
+    want = rep.from_motion(m)[7]
+    body = [j for j in range(m.num_joints) if j != rep.rig.root]
+    assert targets.mask[2, body, 0:9].eq(1).all()
+    assert torch.allclose(targets.x_tgt[2, body, 0:9], want[body, 0:9].float(), atol=1e-6)  # the moved feet too
+
+
+def test_keyframe_targets_keep_only_the_translations_generation_can_make() -> None:
+    m = _armature_motion()
+    lt = m.local_translations.clone()
+    lt[:, 2, 2] += 0.1  # the clip also stretches the neck, which the rig cannot do by rotations
+    m = Motion(m.skeleton, m.fps, m.root_translation, m.local_rotations, None, lt)
+    rep = JointRepresentation(Rig.from_skeleton(m.skeleton), 20.0)
+    t = post_targets([Keyframe(frame=5, pose=m, pose_frame=5)], m, rep, 1.0, translated=[1, 3, 4])
+    P = m.positions
+    assert torch.allclose(t.joint_positions[3][1][0], P[5, 3])  # the IK foot keeps its translation
+    head = t.joint_positions[2][1][0] - t.joint_positions[1][1][0]
+    assert torch.allclose(head, torch.tensor([0.0, 0.0, 0.3], dtype=head.dtype))  # the neck at its rest length
+    assert float((P[5, 2] - P[5, 1]).norm()) > 0.39
+
+
+def test_pin_root_puts_keyframed_roots_back_and_leaves_far_frames() -> None:
+    m = _armature_motion(frames=40)
+    root = 1
+    P = m.positions
+    targets = PostTargets(joint_positions={root: (torch.tensor([15, 20]), P[[15, 20], root] + 0.1)})
+    pins = root_pins(targets, root, [], m, m)
+    pinned = pin_root(m, pins, root, reach_s=0.25)  # 5 frames at 20 fps
+    Q = pinned.positions
+    assert torch.allclose(Q[[15, 20], root], P[[15, 20], root] + 0.1)  # exactly on the keyframes
+    assert torch.allclose(Q[:10], P[:10]) and torch.allclose(Q[26:], P[26:])  # untouched beyond the fade
+    assert torch.allclose(Q[12, 0] - P[12, 0], torch.full((3,), 0.04, dtype=P.dtype))  # fading in linearly
+    assert pin_root(m, {}, root) is m and root_pins(None, root, [], m, m) == {}
+    moved = pin_root(m, {30: P[30, root] + 0.2}, root)
+    waypoint = root_pins(None, root, [30], m, moved)[30]  # ground position from before, height from after
+    assert torch.allclose(waypoint, torch.stack([P[30, root, 0], P[30, root, 1] + 0.2, P[30, root, 2]]))
+    assert unmet_warnings([(0.5, "Head", 3)], 20.0, []) == []
+    text = unmet_warnings([(0.5, "Head", 3), (2.0, "Tail", 40)], 20.0, [])
+    assert text == ["constraint not met after post-processing: Tail at frame 40 (2.00 s) 2.0 cm away"]
+    assert unmet_warnings([(2.0, "Tail", 40)], 20.0, text) == []  # said once
 
 
 def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:

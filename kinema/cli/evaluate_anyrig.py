@@ -1,4 +1,5 @@
-"""`kinema evaluate-anyrig`: per-rig metrics of an any-rig model on train and held-out rigs."""
+"""`kinema evaluate-anyrig`: per-rig metrics of an any-rig model on train and held-out rigs, and a table
+of the held-out rigs grouped by their similarity to the training rigs (kinema.evaluate.anyrig_groups)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,11 @@ from kinema.cli._args import positive_int
 
 
 def register(sub) -> None:
-    p = sub.add_parser("evaluate-anyrig", help="per-rig skate, jerk, stretch, constraint error, coverage/novelty")
+    p = sub.add_parser(
+        "evaluate-anyrig",
+        help="per-rig skate, jerk, stretch, constraint error, coverage/novelty, caption retrieval; held-out rigs "
+        "grouped by similarity to the training rigs",
+    )
     p.add_argument("--model", default="creatures", help="any-rig model: 'creatures' (shipped) or a run folder")
     p.add_argument("--data", type=Path, required=True, help="multi-rig build or manifest, e.g. cache/quat20")
     p.add_argument("--splits", nargs="+", default=["train", "val", "test"], choices=["train", "val", "test"])
@@ -25,6 +30,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from kinema.errors import KinemaError
     from kinema.evaluate.anyrig import TABLE_HEADER, evaluate_split
+    from kinema.evaluate.anyrig_groups import similarity_table, training_shapes
     from kinema.generate.anyrig_api import AnyRigModel
     from kinema.generate.api import load_model
     from kinema.io.atomic import atomic_write_text, check_output_path
@@ -36,10 +42,17 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model, text_cache=Path("cache/text"))
     if not isinstance(model, AnyRigModel):
         raise KinemaError(f"--model {args.model}: not an any-rig model")
+    shapes = training_shapes(model.loaded.train_rigs)
     print(TABLE_HEADER)
     rows = []
     for split in args.splits:
-        rows += evaluate_split(model, args.data, split, clips=args.clips, steps=args.steps, rigs=args.rigs)
+        rows += evaluate_split(
+            model, args.data, split, clips=args.clips, steps=args.steps, rigs=args.rigs, train_shapes=shapes
+        )
+    held = [r for r in rows if r["split"] != "train"]
+    if held:
+        print("\nheld-out rigs by similarity to the training rigs (kinema/evaluate/anyrig_groups.py):\n")
+        print(similarity_table(held))
     if args.out is not None:
         atomic_write_text(args.out, json.dumps(rows, indent=1) + "\n")
         print(f"wrote {args.out}")

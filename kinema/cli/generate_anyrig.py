@@ -2,7 +2,9 @@
 
 Used by `kinema generate` when ``--model`` names an any-rig model. ``--rig`` is a GLB/glTF or BVH file
 (a GLB output keeps that rig's skinned mesh) or the id of a training rig; without ``--rig`` the known
-rigs are listed. ``--constraints`` is a JSON list (kinema.generate.anyrig_constraints.read_constraints).
+rigs are listed. ``--timeline`` is a JSON list of ``{prompt, seconds}`` segments, as for the
+human model. ``--constraints`` is the any-rig JSON list (kinema.generate.anyrig_constraints.read_constraints)
+or a docs/constraints.md file (world frame; kinema.generate.anyrig_world), checked against the rig.
 """
 
 from __future__ import annotations
@@ -23,15 +25,14 @@ def list_rigs(model) -> str:
 
 def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     from kinema.errors import KinemaError
-    from kinema.generate.anyrig_constraints import read_constraints
     from kinema.generate.api import load_model
     from kinema.io.atomic import check_output_path
 
-    if args.timeline is not None:
-        raise KinemaError("--timeline is not supported by any-rig models yet; give one PROMPT and --seconds")
+    what = _prompt(args)
     if args.rig is not None and not args.out.name.lower().endswith(SUFFIXES):
         raise KinemaError(f"{args.out}: output must end in {', '.join(SUFFIXES)}")
-    constraints = read_constraints(args.constraints) if args.constraints is not None else []
+    if args.constraints is not None and not args.constraints.is_file():
+        raise KinemaError(f"{args.constraints}: no such constraints file")
     samples = args.samples or 1
     outputs = _outputs(args.out, samples)
     if args.rig is not None:
@@ -40,22 +41,10 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     model = load_model(path, text_cache=Path("cache/text"))
     if args.rig is None:
         print(list_rigs(model))
-        if args.prompt:
+        if what:
             raise KinemaError(f"the any-rig model {args.model!r} needs --rig (a GLB/BVH file or a rig id listed above)")
         return 0
-    guidance = None if args.guidance is None else tuple(args.guidance)
-    res = model.generate(
-        args.prompt or "",
-        rig=args.rig,
-        seconds=args.seconds or 4.0,
-        constraints=constraints,
-        samples=samples,
-        steps=args.steps,
-        seed=args.seed or 0,
-        guidance=guidance,
-        heading=math.radians(args.heading),
-        postprocess=not args.no_postprocess,
-    )
+    res, notes = _generate(model, args, what, samples)
     for motion, out in zip(res, outputs, strict=True):
         if args.fps is not None:
             motion = motion.resample(args.fps, keep_duration=True)
@@ -66,14 +55,55 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
         )
     rep = res.report
     print(
-        f"generated {len(res)} motion(s) on {rep.joints} joints, {rep.windows} window(s), {rep.steps} DDIM steps "
-        f"in {rep.seconds:.2f} s"
+        f"generated {len(res)} motion(s) on {rep.joints} joints, {rep.segments} segment(s), {rep.windows} window(s), "
+        f"{rep.steps} DDIM steps in {rep.seconds:.2f} s"
     )
     if rep.residuals_cm:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
-    for w in rep.warnings:
+    for w in [*notes, *rep.warnings]:
         print(f"warning: {w}")
     return 0
+
+
+def _prompt(args: argparse.Namespace):
+    """PROMPT, or the ``--timeline`` file (checked before the model loads; it overrides PROMPT and --seconds)."""
+    from kinema.errors import KinemaError
+    from kinema.generate.timeline import parse_timeline
+
+    if args.timeline is None:
+        return args.prompt or ""
+    if args.timeline.suffix.lower() != ".json" or not args.timeline.is_file():
+        raise KinemaError(f"{args.timeline}: no such timeline file (a .json list of {{prompt, seconds}})")
+    parse_timeline(args.timeline)
+    return str(args.timeline)
+
+
+def _generate(model, args: argparse.Namespace, what, samples: int):
+    """The motions for ``what`` on ``--rig`` with ``--constraints`` (an any-rig list, or a
+    docs/constraints.md file in the world frame: kinema.generate.anyrig_world), and notes of what the
+    model left out. The constraints are checked against the rig before anything is generated."""
+    from kinema.generate.anyrig_world import generate_world, load_constraints_file
+
+    rig = model.resolve_rig(args.rig)
+    seconds = args.seconds or 4.0
+    own, world = [], []
+    if args.constraints is not None:
+        frames = model.frames(what, seconds)
+        own, world = load_constraints_file(
+            args.constraints, rig.skeleton, model.fps, frames, source_fps=args.constraints_fps
+        )
+    kw = dict(
+        seconds=seconds,
+        steps=args.steps,
+        seed=args.seed or 0,
+        guidance=None if args.guidance is None else tuple(args.guidance),
+        heading=math.radians(args.heading),
+        postprocess=not args.no_postprocess,
+    )
+    if world:
+        res, notes, _ = generate_world(model, what, rig=rig, constraints=world, samples=samples, **kw)
+        return res, notes
+    return model.generate(what, rig=rig, constraints=own, samples=samples, **kw), []
 
 
 def _outputs(out: Path, n: int) -> list[Path]:

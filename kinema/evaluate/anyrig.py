@@ -14,7 +14,13 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
 - ``constraint_cm``: error (cm at 1-m scale) of one joint target per motion after post-processing: the
   first end effector's position at the middle frame, taken from a reference clip (character frame);
 - ``coverage`` / ``novelty``: Dragon App. C AUCs (kinema.evaluate.distribution) of 10-frame windows
-  of root-relative joint positions in the heading frame, against the rig's own clips.
+  of root-relative joint positions in the heading frame, against the rig's own clips;
+- ``retrieval_hits`` / ``retrieval_n`` / ``retrieval_chance``: caption retrieval among the rig's
+  evaluated clips (picked with distinct captions): a motion generated from clip i's caption is a hit
+  when the clip nearest to it by `motion_descriptor` has that caption; chance = the share of clips
+  with it (1 / clips when the captions differ). Only for rigs with two or more distinct captions;
+- ``similarity`` / ``nearest`` (held-out splits, with ``train_shapes``): the rig's class against the
+  training rigs (kinema.evaluate.anyrig_groups).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from pathlib import Path
 import torch
 
 from kinema.data.multirig import MultiRigData
+from kinema.evaluate.anyrig_groups import RigShape, classify, rig_shape
 from kinema.evaluate.distribution import coverage_novelty_auc
 from kinema.evaluate.metrics import position_jerk
 from kinema.generate.anyrig_api import AnyRigModel, JointTarget, floor_root_children
@@ -87,6 +94,31 @@ def _target(rig: Rig, ref: Motion, rep: JointRepresentation, frames: int) -> Joi
     return JointTarget(joint=j, frame=f, position=tuple(float(v) for v in pos))
 
 
+def motion_descriptor(m: Motion, rep: JointRepresentation) -> torch.Tensor:
+    """A clip as one vector for caption retrieval (rig units): per joint but the root, the mean and the
+    standard deviation over frames of its root-relative position in the heading frame (6 numbers: the
+    pose and how much it moves), then the root's mean ground speed and its height's mean and std."""
+    f = rep.from_motion(m.to(torch.float64))
+    root = rep.rig.root
+    pos = f[:, [j for j in range(m.num_joints) if j != root], 0:3]
+    r = f[:, root]
+    tail = torch.stack([r[:, [0, 2]].norm(dim=-1).mean(), r[:, 1].mean(), r[:, 1].std()])
+    return torch.cat([pos.mean(0).flatten(), pos.std(0).flatten(), tail])
+
+
+def caption_retrieval(gen: list[Motion], refs: list[Motion], captions: list[str], rep) -> dict:
+    """Hits, tries and chance of caption retrieval (see the module docstring); empty when not defined."""
+    if len(refs) < 2 or len(set(captions)) < 2:
+        return {}
+    ref_d = torch.stack([motion_descriptor(m, rep) for m in refs])
+    hits = 0
+    for g, cap in zip(gen, captions, strict=True):
+        nearest = int((ref_d - motion_descriptor(g, rep)).norm(dim=-1).argmin())
+        hits += captions[nearest] == cap
+    chance = sum(captions.count(c) for c in captions) / len(captions) ** 2
+    return {"retrieval_hits": hits, "retrieval_n": len(gen), "retrieval_chance": chance}
+
+
 def _mean(xs: list[float | None]) -> float | None:
     xs = [x for x in xs if x is not None]
     return sum(xs) / len(xs) if xs else None
@@ -126,6 +158,7 @@ def evaluate_rig(
         "constraint_cm": max(cons) if cons else None,
         "coverage": None if cn is None else cn.coverage_auc,
         "novelty": None if cn is None else cn.novelty_auc,
+        **caption_retrieval(gen, motions, captions, rep),
         "seconds": time.perf_counter() - t0,
     }
 
@@ -138,9 +171,12 @@ def evaluate_split(
     clips: int = 3,
     steps: int = 20,
     rigs: list[str] | None = None,
+    train_shapes: list[RigShape] | None = None,
     log=print,
 ) -> list[dict]:
-    """`evaluate_rig` for every rig of ``split`` (or the named ``rigs``), up to ``clips`` clips each."""
+    """`evaluate_rig` for every rig of ``split`` (or the named ``rigs``), up to ``clips`` clips each,
+    with different captions where the rig has them; rigs of a held-out split are classified against
+    ``train_shapes`` (kinema.evaluate.anyrig_groups.training_shapes of the model) when given."""
     d = MultiRigData(data, split=split)
     by_rig: dict[str, list[int]] = {}
     for i, rec in enumerate(d.clips):
@@ -149,14 +185,31 @@ def evaluate_split(
     for rid, idx in sorted(by_rig.items()):
         if rigs and rid not in rigs:
             continue
-        pick = idx[:: max(1, len(idx) // clips)][:clips]
+        pick = _pick(idx, [d.clips[i]["captions"][0] for i in idx], clips)
         motions = [d.motion(i).to(torch.float32) for i in pick]
         caps = [d.clips[i]["captions"][0] for i in pick]
         row = evaluate_rig(model, rid, motions, caps, steps=steps)
         row["split"] = split
+        if train_shapes is not None and split != "train":
+            row["similarity"], row["nearest"] = classify(rig_shape(rid, motions[0].skeleton), train_shapes)
         rows.append(row)
         log(format_row(row))
     return rows
+
+
+def _pick(idx: list[int], captions: list[str], n: int) -> list[int]:
+    """Up to ``n`` of the clips ``idx``, spread over the list, first with captions not taken yet."""
+    order = idx[:: max(1, len(idx) // n)] + idx
+    taken, pick = set(), []
+    for i in order:
+        cap = captions[idx.index(i)]
+        if i not in pick and cap not in taken and len(pick) < n:
+            pick.append(i)
+            taken.add(cap)
+    for i in order:  # fewer distinct captions than n: fill with the spread clips
+        if i not in pick and len(pick) < n:
+            pick.append(i)
+    return pick
 
 
 def _f(x, digits: int = 2) -> str:
@@ -164,14 +217,18 @@ def _f(x, digits: int = 2) -> str:
 
 
 def format_row(r: dict) -> str:
+    similarity = "training rig" if r["split"] == "train" else r.get("similarity", "-")
+    if r.get("nearest"):
+        similarity += f" ({r['nearest']})"
+    retrieval = f"{r['retrieval_hits']}/{r['retrieval_n']}" if r.get("retrieval_n") else "-"
     return (
-        f"| {r['rig']} | {r['split']} | {r['joints']} | {r['contacts']} | {_f(r['skate'])} | {_f(r['skate_ref'])} "
-        f"| {_f(r['skate_ratio'])} | {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} | {r['stretch']:.1e} "
-        f"| {_f(r['constraint_cm'])} | {_f(r['coverage'])} | {_f(r['novelty'])} |"
+        f"| {r['rig']} | {r['split']} | {similarity} | {r['joints']} | {r['contacts']} | {_f(r['skate'])} "
+        f"| {_f(r['skate_ref'])} | {_f(r['skate_ratio'])} | {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} "
+        f"| {r['stretch']:.1e} | {_f(r['constraint_cm'])} | {_f(r['coverage'])} | {_f(r['novelty'])} | {retrieval} |"
     )
 
 
 TABLE_HEADER = (
-    "| rig | split | joints | contacts | skate | skate (own clips) | ratio | jerk | jerk (own clips) | stretch "
-    "| constraint cm | coverage AUC | novelty AUC |\n|" + "---|" * 13
+    "| rig | split | similarity (nearest training rig) | joints | contacts | skate | skate (own clips) | ratio | jerk "
+    "| jerk (own clips) | stretch | constraint cm | coverage AUC | novelty AUC | retrieval |\n|" + "---|" * 15
 )

@@ -24,11 +24,22 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_constraints import Constraint, JointTarget, Keyframe, RootPath, encode_constraints
+from kinema.generate.anyrig_constraints import (
+    Constraint,
+    JointTarget,
+    Keyframe,
+    RootMotion,
+    RootPath,
+    encode_constraints,
+)
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
-from kinema.generate.anyrig_sampling import sample_features, window_starts
+from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
+from kinema.generate.anyrig_sampling import sample_features
+from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
+from kinema.generate.segments import segment_bounds
+from kinema.generate.timeline import parse_timeline
 from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
@@ -44,12 +55,14 @@ from kinema.skeleton import Skeleton
 
 @dataclass
 class AnyRigReport:
-    """What one ``generate`` call did: wall time, steps, windows, constraint errors (cm), warnings."""
+    """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
+    warnings."""
 
     seconds: float = 0.0
     steps: int = 0
     windows: int = 1
     joints: int = 0
+    segments: int = 1
     residuals_cm: list[float] = field(default_factory=list)
     foot_lock: list[dict] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
@@ -114,7 +127,7 @@ class AnyRigModel:
     # ------------------------------------------------------------------ generation
     def generate(
         self,
-        prompt: str,
+        prompt: str | Sequence | Path,
         *,
         rig: str | Path | Skeleton | Rig,
         seconds: float = 4.0,
@@ -127,36 +140,34 @@ class AnyRigModel:
         postprocess: bool = True,
         progress: ProgressFn | None = None,
     ) -> AnyRigResult:
-        """``samples`` motions of ``seconds`` on ``rig`` for ``prompt`` ("" = no text) and ``constraints``
-        (kinema.generate.anyrig_constraints; frames at the model's fps). ``heading`` (radians, from +Z
-        towards +X) is the facing at frame 0 when no root path or keyframe fixes it. ``progress(done, total)``
-        is called after every denoiser step (kinema.generate.progress)."""
+        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.generate.anyrig_constraints;
+        frames at the model's fps, counted over the whole motion).
+
+        ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline: a list of ``{"prompt",
+        "seconds"}`` / ``(prompt, seconds)`` segments or a timeline .json path (kinema.generate.timeline;
+        ``seconds`` is then ignored). A timeline's segments are denoised together, each by windows with its
+        own prompt that re-play the end of the previous segment and are cross-faded with it
+        (kinema.generate.anyrig_windows). ``heading`` (radians, from +Z towards +X) is the facing at frame 0
+        when no root path or keyframe fixes it. ``progress(done, total)`` is called after every denoiser step."""
         t0 = time.perf_counter()
-        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
-            raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
             raise KinemaError(f"samples must be a positive integer, got {samples!r}")
-        steps = self.loaded.sampler.num_inference_steps if steps is None else steps
-        if (
-            isinstance(steps, bool)
-            or not isinstance(steps, int)
-            or not 1 <= steps <= self.loaded.sampler.num_train_steps
-        ):
-            raise KinemaError(f"steps must be an integer in 1..{self.loaded.sampler.num_train_steps}, got {steps!r}")
+        steps = self._steps(steps)
+        prompts, plan = self._plan(prompt, seconds)
+        T = plan.frames
         rig_m = self.resolve_rig(rig)
         scale = 1.0 / rest_extent(rig_m.skeleton)
         rig_n = Rig.from_dict(
             {k: v for k, v in rig_m.to_dict().items() if k != "skeleton"}, skeleton=rig_m.skeleton.scaled(scale)
         )
         rep_n = JointRepresentation(rig_n, self.fps)
-        T = max(2, round(seconds * self.fps))
         constraints = list(constraints)
         targets = encode_constraints(constraints, rep_n, scale, T) if constraints else None
         feats = sample_features(
             self.loaded.denoiser,
             batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),
             frames=T,
-            text_emb=self.text_encoder.encode([prompt]) if prompt else None,
+            text_emb=self._texts(prompts),
             targets=targets,
             sampler=self.loaded.sampler,
             guidance=self._guidance(guidance),
@@ -164,15 +175,50 @@ class AnyRigModel:
             samples=samples,
             generator=torch.Generator().manual_seed(seed),
             progress=progress,
+            plan=plan,
         )
-        if not any(isinstance(c, (RootPath, Keyframe)) for c in constraints):
+        if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
             feats = _face(feats, rig_n.root, heading)
-        report = AnyRigReport(
-            steps=steps, windows=len(window_starts(T, self.loaded.config.window)), joints=rig_m.num_joints
-        )
+        report = AnyRigReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints, segments=len(prompts))
         motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
         report.seconds = time.perf_counter() - t0
         return AnyRigResult(motions, report)
+
+    def frames(self, prompt: str | Sequence | Path, seconds: float = 4.0) -> int:
+        """Frames (at ``fps``) that ``generate`` makes for ``prompt`` (a text or a timeline) and ``seconds``."""
+        return self._plan(prompt, seconds)[1].frames
+
+    def _steps(self, steps: int | None) -> int:
+        n = self.loaded.sampler.num_train_steps
+        steps = self.loaded.sampler.num_inference_steps if steps is None else steps
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= n:
+            raise KinemaError(f"steps must be an integer in 1..{n}, got {steps!r}")
+        return steps
+
+    def _plan(self, prompt, seconds: float) -> tuple[list[str], WindowPlan]:
+        """The prompts and the window plan of a single prompt or a timeline (see `generate`)."""
+        W = self.loaded.config.window
+        if isinstance(prompt, str) and not prompt.lower().endswith(".json"):
+            if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+                raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
+            return [prompt], single_plan(max(2, round(seconds * self.fps)), W)
+        segments = parse_timeline(prompt)
+        bounds = segment_bounds(segments, self.fps)
+        if bounds[-1] < 2:
+            raise KinemaError(f"the timeline lasts {bounds[-1]} frame(s); at least 2 are needed")
+        return [s.prompt for s in segments], segment_plan(bounds, W, segment_overlap(self.fps, W))
+
+    def _texts(self, prompts: list[str]) -> torch.Tensor | None:
+        """``(P, D)`` embeddings of ``prompts`` (zero rows for empty ones); None when all are empty."""
+        real = sorted({p for p in prompts if p})
+        if not real:
+            return None
+        emb = dict(zip(real, self.text_encoder.encode(real), strict=True))
+        out = torch.zeros(len(prompts), self.loaded.config.text_dim)
+        for i, p in enumerate(prompts):
+            if p:
+                out[i] = emb[p]
+        return out
 
     def _guidance(self, guidance) -> Guidance:
         if guidance is None:
@@ -190,9 +236,14 @@ class AnyRigModel:
         m = rep_n.to_motion(f)
         targets = None
         if postprocess:
-            targets = make_post_targets(constraints, m, rep_n, scale) if constraints else None
+            moved = floor_root_children(m.skeleton)
+            targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
+            before, root = m, rep_n.rig.root
             m, post = run_postprocess(m, targets, rig=rep_n.rig)
-            report.warnings += [w for w in post.get("warnings", []) if w not in report.warnings]
+            m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
+            # unmet constraints are said once, measured on the finished motion in metres (below)
+            news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
+            report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
         if postprocess:
             skel = rep_n.rig.skeleton
@@ -202,9 +253,13 @@ class AnyRigModel:
         lt = None if m.local_translations is None else m.local_translations / scale
         motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if targets is not None:
-            P = motion.positions
+            P, worst = motion.positions, []
             for j, (frames, pos) in targets.joint_positions.items():
-                report.residuals_cm += (100 * (P[frames, j] - pos / scale).norm(dim=-1)).tolist()
+                err = 100 * (P[frames, j] - pos / scale).norm(dim=-1)
+                report.residuals_cm += err.tolist()
+                k = int(err.argmax())
+                worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
+            report.warnings += unmet_warnings(worst, self.fps, report.warnings)
         return motion
 
 
@@ -260,6 +315,12 @@ def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresenta
     return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
 
 
+def _waypoint_frames(constraints) -> list[int]:
+    """Frame 0 and the waypoint frames of every root path (where the sampled root meets them exactly)."""
+    paths = [c for c in constraints if isinstance(c, RootPath)]
+    return sorted({0, *(int(f) for c in paths for f in c.frames)}) if paths else []
+
+
 def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     """Turn every sample so that its heading at frame 0 is ``heading`` (features are heading-invariant
     except the root's cos/sin of the heading)."""
@@ -271,4 +332,4 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     return out
 
 
-__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootPath"]
+__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootMotion", "RootPath"]

@@ -8,7 +8,9 @@ Three kinds (frames at the model's fps; lengths in metres; Y up, +Z forward):
 - `Keyframe(frame=, pose=, pose_frame=0)`: a full-body pose (a `Motion` on the same skeleton, e.g. a
   frame of one of the rig's clips): every joint's position and rotation and the root height;
 - `RootPath(frames=, xz=)`: world ground waypoints of the root, starting from the origin at frame 0;
-  between waypoints the root moves straight at constant speed, facing where it goes.
+  between waypoints the root moves straight at constant speed, facing where it goes;
+- `RootMotion(motion=, until=)`: the root's path, height, rotation and heading copied from a motion on
+  the same rig for frames ``[0, until)`` (kinema.generate.anyrig_world uses it to meet world-frame targets).
 
 `encode_constraints` turns them into `FeatureTargets` on a rig in its normalised units (``scale`` =
 units per metre). `post_targets` turns them into world-frame `PostTargets` for the exact pass, once
@@ -28,9 +30,12 @@ import torch
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_sampling import FeatureTargets
 from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.io.gltf import read_gltf
+from kinema.io.registry import load_motion
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.skeleton import Skeleton
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -53,7 +58,17 @@ class RootPath:
     xz: Sequence[tuple[float, float]]
 
 
-Constraint = JointTarget | Keyframe | RootPath
+@dataclass(frozen=True, kw_only=True)
+class RootMotion:
+    """The root's path, height, rotation and heading on frames ``[0, until)`` taken from ``motion`` (metres,
+    on the same skeleton; e.g. a first pass): world joint targets stay where they were read in its
+    character frame (whose heading comes from the root's rotation)."""
+
+    motion: Motion
+    until: int
+
+
+Constraint = JointTarget | Keyframe | RootPath | RootMotion
 
 
 def _joint(rep: JointRepresentation, joint: str | int) -> int:
@@ -92,17 +107,34 @@ def encode_constraints(
             f = _frame(c.frame, frames, "keyframe")
             if c.pose.num_joints != J:
                 raise KinemaError(f"keyframe pose has {c.pose.num_joints} joints, the rig has {J}")
-            pose = Motion(rep.rig.skeleton, rep.fps, c.pose.root_translation * scale, c.pose.local_rotations)
-            feats = rep.from_motion(pose.crop(c.pose_frame, c.pose_frame + 1))[0]
+            feats = rep.from_motion(_scaled(c.pose, rep, scale).crop(c.pose_frame, c.pose_frame + 1))[0]
             x[f], m[f, :, 0:9] = feats, 1.0
             m[f, root] = 0.0
             m[f, root, 1] = 1.0  # the root row: height only (its rotation is the root joint's)
             m[f, root, 3:9] = 1.0
         elif isinstance(c, RootPath):
             _root_path(c, x, m, root, scale, frames, rep.fps)
+        elif isinstance(c, RootMotion):
+            n = min(c.until, frames, c.motion.num_frames)
+            lt = None if c.motion.local_translations is None else c.motion.local_translations * scale
+            moved = Motion(
+                rep.rig.skeleton, rep.fps, c.motion.root_translation * scale, c.motion.local_rotations, None, lt
+            )
+            rows = list(range(11))  # ground velocity (heading frame), height, rotation, heading
+            x[:n, root, rows] = rep.from_motion(moved.crop(0, n)).to(x.dtype)[:, root, rows]
+            m[:n, root, rows] = 1.0
         else:
-            raise KinemaError(f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe or RootPath")
+            raise KinemaError(
+                f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe, RootPath or RootMotion"
+            )
     return FeatureTargets(x, m)
+
+
+def _scaled(m: Motion, rep: JointRepresentation, scale: float) -> Motion:
+    """``m`` (metres) on the representation's skeleton in its units, bone translations included (the
+    Quaternius rigs move the body and IK feet by translation)."""
+    lt = None if m.local_translations is None else m.local_translations * scale
+    return Motion(rep.rig.skeleton, rep.fps, m.root_translation * scale, m.local_rotations, None, lt)
 
 
 def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -> None:
@@ -121,11 +153,17 @@ def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -
 
 
 def post_targets(
-    constraints: Sequence[Constraint], motion: Motion, rep: JointRepresentation, scale: float = 1.0
+    constraints: Sequence[Constraint],
+    motion: Motion,
+    rep: JointRepresentation,
+    scale: float = 1.0,
+    translated: Sequence[int] = (),
 ) -> PostTargets:
     """World-frame targets of the joint and keyframe constraints (given in metres) on a generated
     ``motion`` in units of ``scale`` per metre on the same skeleton: the character frame is placed at
-    the motion's own root and heading."""
+    the motion's own root and heading. A keyframe's pose keeps its bone translations only on the
+    ``translated`` joints (those generation moves by translation); elsewhere its bones have their rest
+    lengths, as the generated motion has: the pose the rig can take, not one it cannot."""
     G, P = motion.global_transforms()
     psi = rep.heading(G)
     root = rep.rig.root
@@ -141,11 +179,13 @@ def post_targets(
             local = torch.as_tensor(c.position, dtype=torch.float64) * scale
             add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
         elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
-            pose = c.pose.to(torch.float64)
+            pose = _rest_lengths(c.pose.to(torch.float64), translated)
             Gp, Pp = pose.global_transforms()
             turn = quat_mul(yaw_quat(psi[c.frame]), yaw_quat(-rep.heading(Gp)[c.pose_frame]))
             for j in range(motion.num_joints):
                 add(rotations, j, c.frame, quat_mul(turn, Gp[c.pose_frame, j]))
+                if j == 0 and translated:  # a floor-level armature: generation keeps it on the floor
+                    continue
                 local = quat_rotate(turn, Pp[c.pose_frame, j] - Pp[c.pose_frame, root]) * scale
                 add(positions, j, c.frame, P[c.frame, root] + local)  # the root itself stays where it was
 
@@ -153,6 +193,15 @@ def post_targets(
         return {j: (torch.tensor(fs), torch.stack(vs)) for j, (fs, vs) in d.items()}
 
     return PostTargets(joint_positions=pack(positions), joint_rotations=pack(rotations))
+
+
+def _rest_lengths(pose: Motion, keep: Sequence[int]) -> Motion:
+    """``pose`` with the rest offsets as bone translations, except on the joints ``keep``."""
+    if pose.local_translations is None:
+        return pose
+    lt = pose.skeleton.offsets.to(pose.local_translations)[None].repeat(pose.num_frames, 1, 1)
+    lt[:, list(keep)] = pose.local_translations[:, list(keep)]
+    return Motion(pose.skeleton, pose.fps, pose.root_translation, pose.local_rotations, pose.foot_contacts, lt)
 
 
 def _number_list(value, n: int | None, where: str) -> list[float]:
@@ -165,10 +214,80 @@ def _number_list(value, n: int | None, where: str) -> list[float]:
     return [float(v) for v in value]
 
 
-def _from_json(i: int, obj, where: str) -> Constraint:
+#: ``type`` values of the any-rig constraint list (`read_constraints`)
+ANYRIG_TYPES = ("joint", "root_path", "keyframe")
+KEYFRAME_KEYS = {"type", "frame", "clip", "animation", "clip_frame"}
+
+
+def check_constraints(constraints: Sequence[Constraint], skeleton: Skeleton, frames: int, source: str) -> None:
+    """Joint names / indices and frames of ``constraints`` checked against ``skeleton`` and a motion of
+    ``frames`` frames, before generating; the one-line error names ``source`` and the constraint."""
+    for i, c in enumerate(constraints):
+        at = f"{source}: constraint {i}"
+        if isinstance(c, JointTarget):
+            if isinstance(c.joint, str) and c.joint not in skeleton.names:
+                raise KinemaError(
+                    f"{at}: joint {c.joint!r} is not in rig {skeleton.name or '?'} "
+                    f"({skeleton.num_joints} joints: {', '.join(skeleton.names)})"
+                )
+            if not isinstance(c.joint, str) and not 0 <= c.joint < skeleton.num_joints:
+                raise KinemaError(f"{at}: joint {c.joint} outside 0..{skeleton.num_joints - 1}")
+            seen = [c.frame]
+        elif isinstance(c, RootPath):
+            seen = list(c.frames)
+        elif isinstance(c, Keyframe):
+            if list(c.pose.skeleton.names) != list(skeleton.names):
+                raise KinemaError(
+                    f"{at}: the keyframe's clip is on another skeleton than rig {skeleton.name or '?'} "
+                    f"({c.pose.num_joints} joints, not the rig's {skeleton.num_joints} in its order)"
+                )
+            seen = [c.frame]
+        else:
+            continue
+        bad = [f for f in seen if not 0 <= f < frames]
+        if bad:
+            raise KinemaError(f"{at}: frame {bad[0]} outside 0..{frames - 1} (the motion has {frames} frames)")
+
+
+def _keyframe_from_json(obj: dict, at: str, base: Path, fps: float | None) -> Keyframe:
+    """``{"type": "keyframe", "frame", "clip", "animation", "clip_frame"}``: the pose of frame ``clip_frame``
+    (at ``fps``; the clip's own rate when None) of a BVH/npz clip or of a GLB's animation (by name, with
+    or without its armature prefix), relative paths from the constraints file's folder."""
+    frame, clip_frame, clip, anim = obj.get("frame"), obj.get("clip_frame", 0), obj.get("clip"), obj.get("animation")
+    if (
+        set(obj) - KEYFRAME_KEYS
+        or not all(isinstance(f, int) and not isinstance(f, bool) and f >= 0 for f in (frame, clip_frame))
+        or not isinstance(clip, str)
+        or not isinstance(anim, (str, type(None)))
+    ):
+        raise KinemaError(
+            f"{at}: a keyframe is {{type, frame (int), clip (GLB/BVH file), animation (GLB clip "
+            "name), clip_frame (int, default 0)}}"
+        )
+    path = Path(clip) if Path(clip).is_absolute() or not (base / clip).is_file() else base / clip
+    if not path.is_file():
+        raise KinemaError(f"{at}: clip {clip!r}: no such file")
+    if path.suffix.lower() in (".glb", ".gltf"):
+        motions = read_gltf(path, fps=fps).motions
+        names = {k: k for k in motions} | {k.split("|")[-1]: k for k in motions}
+        if anim not in names:
+            raise KinemaError(f"{at}: {path} has no animation {anim!r} (it has {', '.join(sorted(motions))})")
+        pose = motions[names[anim]]
+    else:
+        pose = load_motion(path)
+    if fps is not None and pose.fps != fps:
+        pose = pose.resample(fps)
+    if clip_frame >= pose.num_frames:
+        raise KinemaError(f"{at}: clip_frame {clip_frame} outside 0..{pose.num_frames - 1} ({path})")
+    return Keyframe(frame=frame, pose=pose, pose_frame=clip_frame)
+
+
+def _from_json(i: int, obj, where: str, base: Path = Path("."), fps: float | None = None) -> Constraint:
     at = f"{where}[{i}]"
-    if not isinstance(obj, dict) or obj.get("type") not in ("joint", "root_path"):
-        raise KinemaError(f"{at}: expected an object with type 'joint' or 'root_path'")
+    if not isinstance(obj, dict) or obj.get("type") not in ANYRIG_TYPES:
+        raise KinemaError(f"{at}: expected an object with type 'joint', 'root_path' or 'keyframe'")
+    if obj["type"] == "keyframe":
+        return _keyframe_from_json(obj, at, base, fps)
     if obj["type"] == "joint":
         unknown = set(obj) - {"type", "joint", "frame", "position"}
         if unknown or not isinstance(obj.get("joint"), (str, int)) or not isinstance(obj.get("frame"), int):
@@ -190,9 +309,11 @@ def _from_json(i: int, obj, where: str) -> Constraint:
     return RootPath(frames=frames, xz=[tuple(_number_list(p, 2, f"{at}.xz")) for p in xz])
 
 
-def read_constraints(path: str | Path) -> list[Constraint]:
+def read_constraints(path: str | Path, fps: float | None = None) -> list[Constraint]:
     """Constraints from a JSON list: ``{"type": "joint", "joint": "Head", "frame": 10, "position": [x, y, z]}``
-    (character frame, metres) and ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres)."""
+    (character frame, metres), ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres) and
+    ``{"type": "keyframe", "frame": 40, "clip": "Fox.glb", "animation": "Gallop", "clip_frame": 5}`` (a
+    pose of a clip on the same skeleton; clip frames at ``fps``, the model's)."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -200,4 +321,4 @@ def read_constraints(path: str | Path) -> list[Constraint]:
         raise KinemaError(f"{path}: cannot read constraints ({err})") from None
     if not isinstance(data, list):
         raise KinemaError(f"{path}: any-rig constraints are a JSON list of objects")
-    return [_from_json(i, obj, str(path)) for i, obj in enumerate(data)]
+    return [_from_json(i, obj, str(path), path.parent, fps) for i, obj in enumerate(data)]

@@ -1,0 +1,73 @@
+"""Last steps of any-rig post-processing: the root put back where keyframes and root waypoints placed
+it (`root_pins`, `pin_root`) and one warning for the targets left unmet on the finished motion (`unmet_warnings`,
+in centimetres of the rig in metres). Shapes: motions ``(T, J, ...)``; frames at the motion's fps.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.motion.core import Motion
+from kinema.postprocess.targets import PostTargets
+
+
+def unmet_warnings(worst: list[tuple[float, str, int]], fps: float, said: list[str], tol_cm: float = 1.0) -> list[str]:
+    """One warning naming the joint targets left more than ``tol_cm`` away after post-processing
+    (``worst``: per joint, its largest error in cm, its name and that frame), the worst three first."""
+    bad = sorted((w for w in worst if w[0] > tol_cm), reverse=True)
+    if not bad:
+        return []
+    named = ", ".join(f"{name} at frame {f} ({f / fps:.2f} s) {cm:.1f} cm away" for cm, name, f in bad[:3])
+    more = f" and {len(bad) - 3} more joint(s)" if len(bad) > 3 else ""
+    text = f"constraint not met after post-processing: {named}{more}"
+    return [] if text in said else [text]
+
+
+def root_pins(
+    targets: PostTargets | None, root: int, waypoint_frames: list[int], before: Motion, after: Motion
+) -> dict[int, torch.Tensor]:
+    """Frame -> where the root joint must be after post-processing: a keyframe's root target (3D), and
+    on a root path's waypoint frames the ground position the sampled motion ``before`` post-processing
+    had (it meets the waypoints exactly) at the height post-processing gave it (``after``); frames with
+    other joint targets keep ``after``'s root (the exact pass placed those joints around it)."""
+    pins: dict[int, torch.Tensor] = {}
+    P = after.positions
+    if targets is not None and root in targets.joint_positions:
+        frames, pos = targets.joint_positions[root]
+        for f, p in zip(frames.tolist(), pos.to(P.dtype), strict=True):
+            pins.setdefault(int(f), p)
+    B = before.positions.to(P.dtype)
+    for f in waypoint_frames:
+        if f not in pins and 0 <= f < after.num_frames:
+            pins[f] = torch.stack([B[f, root, 0], P[f, root, 1], B[f, root, 2]])
+    if pins and targets is not None:  # frames whose joint targets the exact pass met: the root stays
+        for frames, _ in targets.joint_positions.values():
+            for f in frames.tolist():
+                pins.setdefault(int(f), P[int(f), root])
+    return pins
+
+
+def pin_root(m: Motion, pins: dict[int, torch.Tensor], root: int, reach_s: float = 0.5) -> Motion:
+    """``m`` moved so that its root joint is exactly at ``pins`` (frame -> position; `root_pins`):
+    de-jittering moves the root (on a rig whose body hangs from a floor-level armature, also by
+    smoothing the armature's rotation), and the exact pass turns joints but does not move the root back.
+    The offsets at the pinned frames are interpolated linearly between them and fade to zero over
+    ``reach_s`` seconds before the first and after the last; other frames keep post-processing's root."""
+    if not pins:
+        return m
+    P = m.positions
+    T, n = m.num_frames, max(1, round(reach_s * m.fps))
+    keys = sorted(pins)
+    anchors = [(f, pins[f].to(P.dtype) - P[f, root]) for f in keys]
+    if keys[0] > 0:
+        anchors.insert(0, (max(0, keys[0] - n), torch.zeros(3, dtype=P.dtype)))
+    if keys[-1] < T - 1:
+        anchors.append((min(T - 1, keys[-1] + n), torch.zeros(3, dtype=P.dtype)))
+    shift = torch.zeros(T, 3, dtype=P.dtype)
+    for (fa, da), (fb, db) in zip(anchors, anchors[1:], strict=False):
+        w = torch.linspace(0.0, 1.0, fb - fa + 1, dtype=P.dtype)[:, None]
+        shift[fa : fb + 1] = (1 - w) * da + w * db
+    if len(anchors) == 1:
+        shift[anchors[0][0]] = anchors[0][1]
+    root_t = m.root_translation.to(P.dtype) + shift
+    return Motion(m.skeleton, m.fps, root_t, m.local_rotations, m.foot_contacts, m.local_translations)
