@@ -71,6 +71,46 @@ def format_timeline_table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def _pm(stats: dict | None) -> str:
+    return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
+
+
+def format_phrasings_table(data: dict) -> str:
+    """The "Prompts in other words" tables (markdown; kinema.evaluate.phrasings), or "" when not run."""
+    ph = data.get("phrasings")
+    if not ph:
+        return ""
+    summ, cap = ph["summary"], ph["captured"]
+    order = {True: "yes", False: "**no**", None: "-"}[summ["speed_ordered"]]
+    lines = [f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
+             "mean ± sd (min-max)):", "", "| Group | Probes | Samples | Speed (m/s) |", "|---|---:|---:|---|"]
+    lines += [f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} |" for g, v in summ["speed"].items()]
+    caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
+    lines += ["", f"Groups in order (slow walk < walk < jog < sprint): {order}. Captured "
+              f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.", ""]
+    lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
+              "|---|---|---:|---:|---:|"]
+    lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
+              f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |" for h in summ["hand"]]
+    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % of {v['clips']} clips" for s, v in cap["hand"].items())
+    lines += ["", f"Raised = the named hand gets above the head and higher than the other hand. Captured "
+              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}."]
+    ho = ph.get("heldout")
+    if ho:
+        lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
+                  f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
+                  "captions):",
+                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID |",
+                  "|---|---:|---:|---:|"]
+        names = {"ground_truth": "Ground truth", "template": "Model (raw), template prompt",
+                 "heldout": "Model (raw), held-out prompt"}
+        for row, v in ho["rows"].items():
+            r_t = f"{_fmt(v['r1_template'], 100, 1)} / {_fmt(v['r3_template'], 100, 1)}"
+            r_h = f"{_fmt(v['r1_heldout'], 100, 1)} / {_fmt(v['r3_heldout'], 100, 1)}"
+            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} |")
+    return "\n".join(lines)
+
+
 def _markdown(data: dict) -> str:
     meta, timing, text = data["meta"], data["timing"], data["text"]
     rows = list(data["table"])
@@ -116,6 +156,10 @@ def _markdown(data: dict) -> str:
                 "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
                 f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
                 "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md)."]
+    if data.get("phrasings"):
+        out += ["", "## Prompts in other words", "", format_phrasings_table(data), "",
+                "Probes and held-out captions use verb phrases that no training caption contains "
+                "(kinema.data.phrasings; docs/evaluation.md)."]
     out += ["", "## Timing", "",
             f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
             f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "
