@@ -214,6 +214,46 @@ def heldout_retrieval(
     return out
 
 
+def generate_heldout(
+    model,
+    cases: list[dict],
+    motions: dict,
+    datasets: dict,
+    *,
+    seed: int,
+    steps=None,
+    guidance=None,
+    on_case: Callable[[], None] | None = None,
+) -> tuple[list[dict], dict[str, list[Motion]]]:
+    """Every text case generated again from a held-out caption (same seed and length as the case; raw).
+
+    Returns (per case ``{"id", "prompt", "heldout_prompt"}``, rows ``ground_truth`` / ``template`` /
+    ``heldout`` -> motions); ``template`` (the case's raw motion) is left out when the run had no raw row."""
+    pairs, rows = [], {"ground_truth": [], "template": [], "heldout": []}
+    text = [(i, c) for i, c in enumerate(cases) if c["kind"] == "text"]
+    for n, (i, case) in enumerate(text):
+        prompt = heldout_prompt(case, datasets[(case["source"]["data"], case["source"]["split"])], n)
+        res = model.generate(
+            prompt,
+            seconds=case["seconds"],
+            samples=1,
+            steps=steps,
+            guidance=guidance,
+            seed=seed * 100003 + i,
+            postprocess=False,
+            heading=case["heading"],
+        )
+        pairs.append({"id": case["id"], "prompt": case["prompt"], "heldout_prompt": prompt})
+        rows["ground_truth"].append(motions[case["id"]]["ground_truth"])
+        rows["template"].append(motions[case["id"]].get("raw"))
+        rows["heldout"].append(res[0])
+        if on_case is not None:
+            on_case()
+    if any(m is None for m in rows["template"]):
+        del rows["template"]
+    return pairs, rows
+
+
 # ----------------------------------------------------------------------------- the part of the run
 def run_phrasings(
     model,
@@ -238,8 +278,8 @@ def run_phrasings(
     held-out rows have no R@k); ``embed(retrieval, motions)``: retrieval embeddings (the runner's)."""
     from tqdm.auto import tqdm
 
-    text = [(i, c) for i, c in enumerate(cases) if c["kind"] == "text"]
-    bar = tqdm(total=len(PROBES) + len(text), desc="phrasings", disable=not progress, unit="gen")
+    n_text = sum(c["kind"] == "text" for c in cases)
+    bar = tqdm(total=len(PROBES) + n_text, desc="phrasings", disable=not progress, unit="gen")
     probes = run_probes(
         model, PROBES, samples=samples, seed=seed, steps=steps, guidance=guidance, on_probe=lambda: bar.update(1)
     )
@@ -252,48 +292,21 @@ def run_phrasings(
         "captured": captured_reference(datasets[(src["data"], src["split"])]),
         "heldout": None,
     }
-    rows: dict[str, list[Motion]] = {"ground_truth": [], "template": [], "heldout": []}
-    pairs = []
-    for n, (i, case) in enumerate(text):
-        ds = datasets[(case["source"]["data"], case["source"]["split"])]
-        prompt = heldout_prompt(case, ds, n)
-        m = model.generate(
-            prompt,
-            seconds=case["seconds"],
-            samples=1,
-            steps=steps,
-            guidance=guidance,
-            seed=seed * 100003 + i,
-            postprocess=False,
-            heading=case["heading"],
-        )[0]
-        pairs.append({"id": case["id"], "prompt": case["prompt"], "heldout_prompt": prompt})
-        rows["ground_truth"].append(motions[case["id"]]["ground_truth"])
-        rows["template"].append(motions[case["id"]].get("raw"))
-        rows["heldout"].append(m)
-        bar.update(1)
+    pairs, rows = generate_heldout(
+        model, cases, motions, datasets, seed=seed, steps=steps, guidance=guidance, on_case=lambda: bar.update(1)
+    )
     bar.close()
-    if not text:
+    if not pairs:
         return out
-    if any(m is None for m in rows["template"]):
-        del rows["template"]  # a post-only run: no raw template motions to compare with
+    keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid")
     out["heldout"] = {
-        "cases": len(text),
+        "cases": len(pairs),
         "pairs": pairs,
         "distinct_template": None,
         "distinct_heldout": None,
-        "rows": {row: dict.fromkeys(("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid")) for row in rows},
+        "rows": {row: dict.fromkeys(keys) for row in rows},
     }
     if retrieval is not None:
-        out["heldout"].update(
-            heldout_retrieval(
-                retrieval,
-                [p["prompt"] for p in pairs],
-                [p["heldout_prompt"] for p in pairs],
-                rows,
-                embed,
-                text_cache,
-                warn,
-            )
-        )
+        texts = ([p["prompt"] for p in pairs], [p["heldout_prompt"] for p in pairs])
+        out["heldout"].update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn))
     return out

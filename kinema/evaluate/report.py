@@ -82,7 +82,9 @@ def format_phrasings_table(data: dict) -> str:
         return ""
     summ, cap = ph["summary"], ph["captured"]
     order = {True: "yes", False: "**no**", None: "-"}[summ["speed_ordered"]]
-    lines = [f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
+    lines = ["Probes and held-out captions use verb phrases that no training caption contains "
+             "(kinema.data.phrasings; docs/evaluation.md).", "",
+             f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
              "mean ± sd (min-max)):", "", "| Group | Probes | Samples | Speed (m/s) |", "|---|---:|---:|---|"]
     lines += [f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} |" for g, v in summ["speed"].items()]
     caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
@@ -156,10 +158,7 @@ def _markdown(data: dict) -> str:
                 "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
                 f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
                 "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md)."]
-    if data.get("phrasings"):
-        out += ["", "## Prompts in other words", "", format_phrasings_table(data), "",
-                "Probes and held-out captions use verb phrases that no training caption contains "
-                "(kinema.data.phrasings; docs/evaluation.md)."]
+    out += ["", "## Prompts in other words", "", format_phrasings_table(data)] if data.get("phrasings") else []
     out += ["", "## Timing", "",
             f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
             f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "
