@@ -167,6 +167,7 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     md = (tmp_path / "out" / "report.md").read_text()
     assert "## Prompts in other words" in md and "A woman lifts her left arm up high." in md
     assert json.loads((tmp_path / "out" / "report.json").read_text())["phrasings"] == data["phrasings"]
+    assert data["plots"]["phrasings"] == "plots/phrasings.png" and (tmp_path / "out" / "plots/phrasings.png").is_file()
 
 
 @pytest.mark.parametrize(

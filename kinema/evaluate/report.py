@@ -166,7 +166,7 @@ def _markdown(data: dict) -> str:
     plots = data.get("plots", {})
     if plots:
         out += ["## Plots", ""]
-        for name in ("keyframes", "foot_skate"):
+        for name in ("keyframes", "foot_skate", "phrasings"):
             if plots.get(name):
                 out.append(f"![{name}]({plots[name]})")
         out += [f"![{Path(p).stem}]({p})" for p in plots.get("filmstrips", [])]
@@ -236,6 +236,49 @@ def plot_foot_skate(data: dict, path: Path) -> bool:
     return True
 
 
+def plot_phrasings(data: dict, path: Path) -> bool:
+    """Probes: speed of every sample per speed probe against the captured walk/run speeds (left), and
+    the named vs other hand's height over the head per hand probe sample (right)."""
+    from matplotlib.figure import Figure
+
+    ph = data.get("phrasings")
+    if not ph:
+        return False
+    speed = [r for r in ph["probes"] if r["kind"] == "speed"]
+    hand = [r for r in ph["probes"] if r["kind"] == "hand"]
+    fig = Figure(figsize=(11, 4.4), dpi=100, layout="constrained")
+    ax = fig.add_subplot(1, 2, 1)
+    for content, colour in (("walk", "#2a9d4b"), ("run", "#e0452b"), ("dash", "#7b3fbf")):
+        v = ph["captured"]["speed"].get(content)
+        if v:
+            ax.axhspan(v["mean"] - v["std"], v["mean"] + v["std"], color=colour, alpha=0.12)
+            ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
+    for n, r in enumerate(speed):
+        ax.scatter([n] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1")
+    ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("pelvis ground speed (m/s)")
+    ax.set_title("Speed probes (raw, every sample)")
+    ax.grid(alpha=0.3, axis="y")
+    if ph["captured"]["speed"]:
+        ax.legend(fontsize=7, loc="upper left")
+    ax = fig.add_subplot(1, 2, 2)
+    for n, r in enumerate(hand):
+        ax.scatter([n - 0.1] * len(r["hand_over_head"]), r["hand_over_head"], s=18, color="#1f6fd1",
+                   label="named hand" if n == 0 else None)
+        ax.scatter([n + 0.1] * len(r["other_over_head"]), r["other_over_head"], s=18, color="#999999",
+                   label="other hand" if n == 0 else None)
+    ax.axhline(0.0, color="black", lw=0.8)
+    ax.set_xticks(range(len(hand)), [f"{r['group']}: {r['prompt']}" for r in hand], rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("highest over the head (m)")
+    ax.set_title("Hand probes (raw; > 0 = above the head)")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7)
+    _save_fig(fig, path)
+    return True
+
+
 def _render_targets(case: dict) -> list:
     """Filmstrip targets of a case: end-effector positions and root waypoints (paths thinned)."""
     out = []
@@ -273,11 +316,13 @@ def write_report(results, out_dir, filmstrips: int = 4) -> dict:
     out = Path(out_dir)
     (out / "plots").mkdir(parents=True, exist_ok=True)
     data = dict(results.data)
-    plots: dict = {"keyframes": None, "foot_skate": None, "filmstrips": []}
+    plots: dict = {"keyframes": None, "foot_skate": None, "phrasings": None, "filmstrips": []}
     if plot_keyframes(data, out / "plots" / "keyframes.png"):
         plots["keyframes"] = "plots/keyframes.png"
     if plot_foot_skate(data, out / "plots" / "foot_skate.png"):
         plots["foot_skate"] = "plots/foot_skate.png"
+    if plot_phrasings(data, out / "plots" / "phrasings.png"):
+        plots["phrasings"] = "plots/phrasings.png"
     mode = "post" if "post" in data["meta"]["modes"] else data["meta"]["modes"][0]
     for case in pick_filmstrip_cases(results.cases, filmstrips):
         motion = results.motions.get(case["id"], {}).get(mode)
