@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import re
+from pathlib import Path
 
 import pytest
 import torch
@@ -22,6 +24,7 @@ from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
 FPS, T = 20.0, 41
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "evaluation.md"
 
 
 def _body() -> Skeleton:
@@ -89,8 +92,14 @@ def test_probe_summary_orders_speed_groups_and_counts_raised_hands():
     assert walk["std"] == pytest.approx(0.1) and (walk["min"], walk["max"]) == (1.3, 1.5)
     (hand,) = s["hand"]
     assert hand["raised_fraction"] == pytest.approx(2 / 3) and hand["hand_over_head_m"] == pytest.approx(0.4 / 3)
+    sprint = s["speed"]["4 sprint"]
+    assert sprint["gap"] == pytest.approx(2.1) and sprint["separated"] and "gap" not in s["speed"]["1 slow walk"]
+    assert sprint["gap_se"] == pytest.approx(math.sqrt(0.01 / 1 + 0.25 / 1))  # sample variances over n - 1
     records[3]["speeds"] = [1.2]  # the sprint now slower than the walk
     assert probe_summary(records)["speed_ordered"] is False
+    records[3]["speeds"] = [1.45, 1.55]  # faster than the walk by 0.1 m/s, within the noise (se 0.11)
+    summary = probe_summary(records)
+    assert summary["speed"]["4 sprint"]["gap"] > 0 and summary["speed_ordered"] is False
 
 
 class _Clips:
@@ -161,6 +170,21 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     # the template row is the main table's raw row: same motions, same captions
     assert ho["rows"]["template"]["r3_template"] == res.data["table"]["raw"]["r3_whole"]
     assert res.data["timing"]["phrasings_seconds"] > 0.0
+    documented = set(re.findall(r"`([a-z0-9_]+)`", DOCS.read_text(encoding="utf-8")))
+    nested = [
+        ph,
+        ph["probes"][-1],
+        ph["summary"],
+        ph["summary"]["speed"]["4 sprint"],
+        ph["summary"]["hand"][0],
+        ph["captured"],
+        ho,
+        ho["pairs"][0],
+        *ho["rows"].values(),
+        ho["rows"],
+    ]
+    undocumented = {k for d in nested for k in d if k not in documented}
+    assert not undocumented, undocumented
     table = format_phrasings_table(res.data)
     assert "| 4 sprint | 2 | 2 |" in table and "| Model (raw), held-out prompt |" in table
     data = write_report(res, tmp_path / "out", filmstrips=0)

@@ -24,6 +24,7 @@ Frames are at the model's fps; positions in metres.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 
@@ -38,6 +39,7 @@ PROBE_SECONDS = 4.0
 SPEED_CONTENTS = ("walk", "run", "dash")
 HAND_CONTENTS = {"left": "raise-up-left-hand", "right": "raise-up-right-hand"}
 PROBE_SEED = 70001  # probe k is generated with seed * 100003 + PROBE_SEED + k
+SEPARATION = 2.0  # a speed group is faster than the one before when its mean is this many standard errors above
 
 
 # ----------------------------------------------------------------------------- measures
@@ -122,15 +124,20 @@ def _stats(values: list[float]) -> dict:
 
 
 def probe_summary(records: list[dict]) -> dict:
-    """Speed groups (ordered by name: mean, std, min, max of the samples), whether their means increase
-    in that order, and per hand probe the fraction of samples that raise the named hand."""
+    """Speed groups (ordered by name: mean, std, min, max of the samples; from the second on ``gap``, the
+    mean minus the previous group's, its standard error ``gap_se`` and ``separated``: gap >
+    :data:`SEPARATION` standard errors), ``speed_ordered`` (every group separated from the one before),
+    and per hand probe the fraction of samples that raise the named hand."""
     groups = sorted({r["group"] for r in records if r["kind"] == "speed"})
     speed = {
         g: _stats([s for r in records if r["group"] == g and r["kind"] == "speed" for s in r["speeds"]])
         | {"probes": sum(r["group"] == g and r["kind"] == "speed" for r in records)}
         for g in groups
     }
-    means = [speed[g]["mean"] for g in groups]
+    for prev, g in zip(groups, groups[1:], strict=False):
+        a, b = speed[prev], speed[g]
+        se = math.sqrt(a["std"] ** 2 / max(a["n"] - 1, 1) + b["std"] ** 2 / max(b["n"] - 1, 1))
+        b.update(gap=b["mean"] - a["mean"], gap_se=se, separated=b["mean"] - a["mean"] > SEPARATION * se)
     hands = [
         {
             "prompt": r["prompt"],
@@ -145,7 +152,7 @@ def probe_summary(records: list[dict]) -> dict:
     ]
     return {
         "speed": speed,
-        "speed_ordered": None if len(means) < 2 else all(a < b for a, b in zip(means, means[1:], strict=False)),
+        "speed_ordered": None if len(groups) < 2 else all(speed[g]["separated"] for g in groups[1:]),
         "hand": hands,
     }
 

@@ -85,10 +85,14 @@ def format_phrasings_table(data: dict) -> str:
     lines = ["Probes and held-out captions use verb phrases that no training caption contains "
              "(kinema.data.phrasings; docs/evaluation.md).", "",
              f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
-             "mean ± sd (min-max)):", "", "| Group | Probes | Samples | Speed (m/s) |", "|---|---:|---:|---|"]
-    lines += [f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} |" for g, v in summ["speed"].items()]
+             "mean ± sd (min-max)):", "",
+             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
+    for g, v in summ["speed"].items():
+        gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
+        lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
     caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
-    lines += ["", f"Groups in order (slow walk < walk < jog < sprint): {order}. Captured "
+    lines += ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above the one "
+              f"before): {order}. Captured "
               f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.", ""]
     lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
               "|---|---|---:|---:|---:|"]
