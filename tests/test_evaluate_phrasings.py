@@ -187,6 +187,7 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     assert not undocumented, undocumented
     table = format_phrasings_table(res.data)
     assert "| 4 sprint | 2 | 2 |" in table and "| Model (raw), held-out prompt |" in table
+    assert "Probes the model warned are far from its training captions:" in table
     data = write_report(res, tmp_path / "out", filmstrips=0)
     md = (tmp_path / "out" / "report.md").read_text()
     assert "## Prompts in other words" in md and "A woman lifts her left arm up high." in md

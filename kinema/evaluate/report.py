@@ -98,9 +98,11 @@ def format_phrasings_table(data: dict) -> str:
               "|---|---|---:|---:|---:|"]
     lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
               f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |" for h in summ["hand"]]
+    flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
     hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % of {v['clips']} clips" for s, v in cap["hand"].items())
     lines += ["", f"Raised = the named hand gets above the head and higher than the other hand. Captured "
-              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}."]
+              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}. Probes the model "
+              f"warned are far from its training captions: {', '.join(flagged) or 'none'}."]
     ho = ph.get("heldout")
     if ho:
         lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
