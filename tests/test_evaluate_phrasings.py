@@ -167,6 +167,9 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
         assert 0.0 <= row["r1_template"] <= row["r3_template"] <= 1.0
         assert 0.0 <= row["r1_heldout"] <= row["r3_heldout"] <= 1.0
     assert ho["rows"]["ground_truth"]["fid"] == pytest.approx(0.0, abs=1e-6) and ho["rows"]["heldout"]["fid"] > 0.0
+    for row, ranks in ho["ranks"].items():  # per-case ranks agree with R@k
+        assert len(ranks) == 3 and ho["rows"][row]["r3_template"] == pytest.approx(sum(r < 3 for r in ranks) / 3)
+        assert ho["rows"][row]["r1_template"] == pytest.approx(sum(r < 1 for r in ranks) / 3)
     # the template row is the main table's raw row: same motions, same captions
     assert ho["rows"]["template"]["r3_template"] == res.data["table"]["raw"]["r3_whole"]
     assert res.data["timing"]["phrasings_seconds"] > 0.0

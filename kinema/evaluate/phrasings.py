@@ -197,8 +197,14 @@ def heldout_retrieval(
 ) -> dict:
     """Per row of ``motions`` ("ground_truth", "template", "heldout"): R@1 / R@3 against the template
     captions and against the held-out captions (ranked over all text cases), and FID against the
-    ground truth (None for fewer than 2 cases)."""
-    out: dict = {"distinct_template": len(set(template)), "distinct_heldout": len(set(heldout)), "rows": {}}
+    ground truth (None for fewer than 2 cases); ``ranks``: per row and case, how many template
+    captions are nearer to the motion than its own (0 = retrieved first; R@k = share of ranks < k)."""
+    out: dict = {
+        "distinct_template": len(set(template)),
+        "distinct_heldout": len(set(heldout)),
+        "rows": {},
+        "ranks": {},
+    }
     with torch.no_grad():
         texts = {
             "template": retrieval.encode_captions(template, cache_dir=text_cache),
@@ -218,7 +224,16 @@ def heldout_retrieval(
             if warn is not None:
                 warn += [f"FID (phrasings, {row}): {w.message}" for w in caught]
         out["rows"][row] = vals
+        out["ranks"][row] = own_caption_ranks(texts["template"], e)
     return out
+
+
+def own_caption_ranks(text_emb: torch.Tensor, motion_emb: torch.Tensor) -> list[int]:
+    """Per motion i: the captions strictly nearer (cosine) than caption i, as R-precision counts them."""
+    t = torch.nn.functional.normalize(text_emb.double(), dim=-1)
+    m = torch.nn.functional.normalize(motion_emb.double(), dim=-1)
+    d = 1.0 - m @ t.T
+    return [int(r) for r in (d < d.diagonal()[:, None]).sum(dim=-1)]
 
 
 def generate_heldout(
@@ -312,6 +327,7 @@ def run_phrasings(
         "distinct_template": None,
         "distinct_heldout": None,
         "rows": {row: dict.fromkeys(keys) for row in rows},
+        "ranks": None,
     }
     if retrieval is not None:
         texts = ([p["prompt"] for p in pairs], [p["heldout_prompt"] for p in pairs])
