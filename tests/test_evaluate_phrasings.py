@@ -13,6 +13,7 @@ import torch
 from kinema.data.phrasings import PROBES, heldout_captions
 from kinema.evaluate.phrasings import (
     captured_reference,
+    content_accuracy,
     ground_speed,
     hand_heights,
     heldout_prompt,
@@ -102,6 +103,18 @@ def test_probe_summary_orders_speed_groups_and_counts_raised_hands():
     assert summary["speed"]["4 sprint"]["gap"] > 0 and summary["speed_ordered"] is False
 
 
+def test_content_accuracy_takes_the_label_of_the_nearest_ground_truth_clip():
+    gt = torch.tensor([[1.0, 0.0], [0.9, 0.1], [0.0, 1.0], [-1.0, 0.2]])
+    contents = ["walk", "walk", "bow", "run"]
+    # nearest other clip: 1, 0, 1 (cosine), 2 -> only the two walks find their own label
+    assert content_accuracy(gt, gt, contents, leave_out_self=True) == pytest.approx(0.5)
+    assert content_accuracy(gt, gt, contents, leave_out_self=False) == pytest.approx(1.0)
+    motions = torch.tensor([[2.0, 0.1], [0.1, 3.0], [0.2, 1.0], [-1.0, 0.1]])  # walk, bow, bow, run by direction
+    assert content_accuracy(motions, gt, contents, leave_out_self=False) == pytest.approx(0.75)  # case 2 wants bow
+    same = torch.tensor([[1.0, 0.0]] * 4)  # every motion looks like clip 0 (a walk): right for the two walks
+    assert content_accuracy(same, gt, contents, leave_out_self=False) == pytest.approx(0.5)
+
+
 class _Clips:
     def __init__(self, clips):
         self.clips = clips
@@ -162,10 +175,11 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     by_id = {r["clip_id"]: r for r in ds.clips}
     for case, pair in zip(cases, ho["pairs"], strict=True):
         assert pair["prompt"] == case["prompt"]
-        assert pair["heldout_prompt"] in heldout_captions(by_id[case["clip_id"]]["content"])
+        assert pair["content"] == by_id[case["clip_id"]]["content"]
+        assert pair["heldout_prompt"] in heldout_captions(pair["content"])
     for row in ho["rows"].values():
         assert 0.0 <= row["r1_template"] <= row["r3_template"] <= 1.0
-        assert 0.0 <= row["r1_heldout"] <= row["r3_heldout"] <= 1.0
+        assert 0.0 <= row["r1_heldout"] <= row["r3_heldout"] <= 1.0 and 0.0 <= row["content_acc"] <= 1.0
     assert ho["rows"]["ground_truth"]["fid"] == pytest.approx(0.0, abs=1e-6) and ho["rows"]["heldout"]["fid"] > 0.0
     for row, ranks in ho["ranks"].items():  # per-case ranks agree with R@k
         assert len(ranks) == 3 and ho["rows"][row]["r3_template"] == pytest.approx(sum(r < 3 for r in ranks) / 3)

@@ -178,12 +178,30 @@ def captured_reference(dataset) -> dict:
 
 
 # ----------------------------------------------------------------------------- held-out text cases
+def case_content(case: dict, dataset) -> str:
+    """The content label of a case's clip (mirrored clips carry the mirrored label already)."""
+    return next(r["content"] for r in dataset.clips if r["clip_id"] == case["clip_id"])
+
+
 def heldout_prompt(case: dict, dataset, index: int) -> str:
-    """A held-out caption for a text case: of its clip's content label (mirrored clips carry the mirrored
-    label already), the ``index``-th one cyclically."""
-    rec = next(r for r in dataset.clips if r["clip_id"] == case["clip_id"])
-    caps = heldout_captions(rec["content"])
+    """A held-out caption for a text case: of its clip's content label, the ``index``-th one cyclically."""
+    caps = heldout_captions(case_content(case, dataset))
     return caps[index % len(caps)]
+
+
+def content_accuracy(
+    motion_emb: torch.Tensor, gt_emb: torch.Tensor, contents: list[str], leave_out_self: bool
+) -> float:
+    """Share of motions whose nearest ground-truth clip (cosine, retrieval motion embeddings) has their
+    content label: content following judged without captions, so without style words or paraphrases.
+    ``leave_out_self`` (for the ground truth itself) skips a clip's own embedding."""
+    m = torch.nn.functional.normalize(motion_emb.double(), dim=-1)
+    g = torch.nn.functional.normalize(gt_emb.double(), dim=-1)
+    sim = m @ g.T
+    if leave_out_self:
+        sim.fill_diagonal_(-math.inf)
+    nearest = sim.argmax(dim=-1).tolist()
+    return sum(contents[j] == contents[i] for i, j in enumerate(nearest)) / len(contents)
 
 
 def heldout_retrieval(
@@ -194,10 +212,12 @@ def heldout_retrieval(
     embed,
     text_cache=None,
     warn: list[str] | None = None,
+    contents: list[str] | None = None,
 ) -> dict:
     """Per row of ``motions`` ("ground_truth", "template", "heldout"): R@1 / R@3 against the template
     captions and against the held-out captions (ranked over all text cases), and FID against the
-    ground truth (None for fewer than 2 cases); ``ranks``: per row and case, how many template
+    ground truth (None for fewer than 2 cases), ``content_acc`` (:func:`content_accuracy`, given the
+    cases' ``contents``; None for fewer than 2 cases); ``ranks``: per row and case, how many template
     captions are nearer to the motion than its own (0 = retrieved first; R@k = share of ranks < k)."""
     out: dict = {
         "distinct_template": len(set(template)),
@@ -223,6 +243,9 @@ def heldout_retrieval(
                 vals["fid"] = D.fid(emb["ground_truth"], e)
             if warn is not None:
                 warn += [f"FID (phrasings, {row}): {w.message}" for w in caught]
+        vals["content_acc"] = None
+        if contents is not None and len(contents) >= 2:
+            vals["content_acc"] = content_accuracy(e, emb["ground_truth"], contents, row == "ground_truth")
         out["rows"][row] = vals
         out["ranks"][row] = own_caption_ranks(texts["template"], e)
     return out
@@ -265,7 +288,8 @@ def generate_heldout(
             postprocess=False,
             heading=case["heading"],
         )
-        pairs.append({"id": case["id"], "prompt": case["prompt"], "heldout_prompt": prompt})
+        content = case_content(case, datasets[(case["source"]["data"], case["source"]["split"])])
+        pairs.append({"id": case["id"], "content": content, "prompt": case["prompt"], "heldout_prompt": prompt})
         rows["ground_truth"].append(motions[case["id"]]["ground_truth"])
         rows["template"].append(motions[case["id"]].get("raw"))
         rows["heldout"].append(res[0])
@@ -320,7 +344,7 @@ def run_phrasings(
     bar.close()
     if not pairs:
         return out
-    keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid")
+    keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid", "content_acc")
     out["heldout"] = {
         "cases": len(pairs),
         "pairs": pairs,
@@ -331,5 +355,6 @@ def run_phrasings(
     }
     if retrieval is not None:
         texts = ([p["prompt"] for p in pairs], [p["heldout_prompt"] for p in pairs])
-        out["heldout"].update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn))
+        contents = [p["content"] for p in pairs]
+        out["heldout"].update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn, contents))
     return out

@@ -108,14 +108,18 @@ def format_phrasings_table(data: dict) -> str:
         lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
                   f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
                   "captions):",
-                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID |",
-                  "|---|---:|---:|---:|"]
+                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID | "
+                  "Content acc. (%) |", "|---|---:|---:|---:|---:|"]
         names = {"ground_truth": "Ground truth", "template": "Model (raw), template prompt",
                  "heldout": "Model (raw), held-out prompt"}
         for row, v in ho["rows"].items():
             r_t = f"{_fmt(v['r1_template'], 100, 1)} / {_fmt(v['r3_template'], 100, 1)}"
             r_h = f"{_fmt(v['r1_heldout'], 100, 1)} / {_fmt(v['r3_heldout'], 100, 1)}"
-            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} |")
+            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} | "
+                         f"{_fmt(v.get('content_acc'), 100, 1)} |")
+        lines += ["", "Content acc. = the nearest ground-truth clip of the text cases (retrieval motion embedding) "
+                  "has the case's content label (the ground truth: its nearest other clip); no captions involved, "
+                  "so style words and the retrieval model's reading of paraphrases do not count."]
     return "\n".join(lines)
 
 

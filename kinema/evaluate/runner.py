@@ -208,7 +208,8 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
     it cannot be loaded the text metrics are None and the reason is in ``data["warnings"]``.
     ``mm_prompts`` x ``mm_samples`` extra text-only samples measure multimodality; ``phrasings`` > 0 adds
     the probes (that many samples each) and held-out text cases of kinema.evaluate.phrasings. Case ``i`` is
-    generated with seed ``seed * 100003 + i``, multimodality prompt ``k`` with ``seed * 100003 + 50021 + k``."""
+    generated with seed ``seed * 100003 + i`` (its held-out phrasing too), multimodality prompt ``k`` with
+    ``seed * 100003 + 50021 + k``, probe ``k`` with ``seed * 100003 + 70001 + k``."""
     modes = [MODE_NAMES[bool(p)] for p in postprocess_modes]
     if not modes or len(set(modes)) != len(modes):
         raise KinemaError(f"postprocess_modes must list False and/or True once each, got {postprocess_modes}")
