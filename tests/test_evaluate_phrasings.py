@@ -235,3 +235,17 @@ def test_cli_rejects_bad_phrasing_options(tiny_checkpoint, tiny_data, tmp_path, 
     lines = [ln for ln in (err.out + err.err).strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and option in lines[0], lines
     assert not (tmp_path / "o").exists()
+
+
+def test_cli_checks_the_probe_joints_before_the_run(tiny_checkpoint, tiny_data, tmp_path, capsys, monkeypatch):
+    from kinema.cli import main
+    from kinema.evaluate import phrasings
+
+    monkeypatch.setattr(phrasings, "PROBE_ROLES", ("pelvis", "tail"))  # a role the human skeleton lacks
+    argv = ["evaluate", "--model", str(tiny_checkpoint), "--data", str(tiny_data), "--split", "train"]
+    argv += ["--out", str(tmp_path / "o"), "--cases", "2", "--timeline-cases", "0", "--no-progress"]
+    assert main(argv) == 2
+    err = capsys.readouterr()
+    lines = [ln for ln in (err.out + err.err).strip().splitlines() if ln.strip() and not ln.startswith("suite:")]
+    assert len(lines) == 1 and "--phrasings" in lines[0] and "tail" in lines[0], lines
+    assert not (tmp_path / "o" / "report.json").exists()

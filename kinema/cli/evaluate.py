@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     from kinema.data.dataset import MotionDataset
     from kinema.errors import KinemaError
+    from kinema.evaluate.phrasings import PROBE_ROLES
     from kinema.evaluate.report import format_phrasings_table, format_table, format_timeline_table, write_report
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
@@ -89,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
             save_suite(cases, args.suite)
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
     model = load_model(args.model, text_cache=Path("cache/text"))
+    if args.phrasings:  # the probes' measures need these joints: fail now, not after the suite
+        try:
+            model.skeleton.require_roles(PROBE_ROLES)
+        except KinemaError as err:
+            raise KinemaError(f"--phrasings: {err}; or pass --phrasings 0") from None
     if args.imputation_only:
         model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
     save_suite(cases, out / "suite.json")

@@ -38,6 +38,7 @@ from kinema.representation.kimodo import features_to_motion
 PROBE_SECONDS = 4.0
 SPEED_CONTENTS = ("walk", "run", "dash")
 HAND_CONTENTS = {"left": "raise-up-left-hand", "right": "raise-up-right-hand"}
+PROBE_ROLES = ("pelvis", "head", "left_hand", "right_hand")  # skeleton roles the measures need
 PROBE_SEED = 70001  # probe k is generated with seed * 100003 + PROBE_SEED + k
 SEPARATION = 2.0  # a speed group is faster than the one before when its mean is this many standard errors above
 
