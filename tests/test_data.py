@@ -19,8 +19,9 @@ from safetensors.torch import load_file
 from kinema.cli import main
 from kinema.data.bandai import ClipInfo, list_clips, load_clip, min_toe_height
 from kinema.data.build import FILES, select_subset
-from kinema.data.captions import mirror_content
+from kinema.data.captions import captions_for, mirror_content
 from kinema.data.dataset import MotionDataset
+from kinema.data.phrasings import speed_band, speed_captions
 from kinema.data.split import assign_splits, group_of
 from kinema.errors import DataError
 from kinema.representation.kimodo import motion_to_features
@@ -109,6 +110,26 @@ def test_mirrored_copies_have_mirrored_labels_and_captions(records):
     assert sided >= 1  # the subset holds e.g. raise-up-left-hand and walk-turn-left
     bye = [m for m in mirrors if m["content"] == "bye"]
     assert bye and all("left hand" in c for c in bye[0]["captions"] if "hand" in c)
+
+
+def test_speed_captions_follow_the_templates_of_locomotion_clips(records, clips_by_id):
+    """Walk/run/dash clips get the words of their measured speed band after the unchanged template captions."""
+    seen = set()
+    for r in records:
+        info = clips_by_id[r["source_clip_id"]]
+        templates = captions_for(info.content, info.style, mirrored=r["mirrored"])
+        assert r["captions"][: len(templates)] == templates  # captions[0] is still the evaluation prompt
+        motion = load_clip(info, 20)
+        travel = (motion.root_translation[-1] - motion.root_translation[0])[[0, 2]].norm()
+        speed = float(travel) * 20 / (motion.num_frames - 1)
+        tail = r["captions"][len(templates) :]
+        if info.content in ("walk", "run", "dash"):
+            seen.add(info.content)
+            words = speed_captions(info.content, speed)
+            assert words and tail[-len(words) :] == words, (r["clip_id"], speed_band(info.content, speed))
+        else:
+            assert not any(w in c for c in tail for w in ("slowly", "pace", "speed", "fast")), tail
+    assert {"walk", "run"} <= seen  # (the synthetic data has no dash among the 12)
 
 
 def test_mirrored_features_are_those_of_the_mirrored_motion(build, records, clips_by_id):

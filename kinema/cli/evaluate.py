@@ -18,6 +18,11 @@ def register(sub) -> None:
     p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
     p.add_argument("--timeline-cases", type=int, default=8,
                    help="multi-prompt timeline cases added when building a suite (default 8; 0 = none)")
+    p.add_argument("--text-fraction", type=float, default=0.3,
+                   help="share of text-only cases when building a suite (default 0.3; 1 = text cases only)")
+    p.add_argument("--phrasings", type=int, default=3, metavar="SAMPLES",
+                   help="prompts in other words: samples per probe prompt, plus the text cases again from held-out "
+                        "captions (default 3; 0 = skip)")
     p.add_argument("--seed", type=seed, default=0, help="suite and generation seed")
     p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting)")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
@@ -43,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
 
     from kinema.data.dataset import MotionDataset
     from kinema.errors import KinemaError
-    from kinema.evaluate.report import format_table, format_timeline_table, write_report
+    from kinema.evaluate.phrasings import PROBE_ROLES
+    from kinema.evaluate.report import format_phrasings_table, format_table, format_timeline_table, write_report
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
     from kinema.evaluate.timeline import build_timeline_cases
@@ -54,6 +60,10 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.cases < 1 or args.timeline_cases < 0:
         raise KinemaError("--cases must be at least 1 and --timeline-cases at least 0")
+    if not 0.0 < args.text_fraction <= 1.0:
+        raise KinemaError(f"--text-fraction must be in (0, 1], got {args.text_fraction:g}")
+    if args.phrasings < 0:
+        raise KinemaError(f"--phrasings must be at least 0 (samples per probe prompt), got {args.phrasings}")
     if args.steps is not None and args.steps < 1:
         raise KinemaError("--steps must be at least 1")
     if args.filmstrips < 0 or args.mm[0] < 0:
@@ -68,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not args.data.is_dir():
             raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
-        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed)
+        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed,
+                            text_fraction=args.text_fraction)
         if args.timeline_cases:
             try:
                 cases += build_timeline_cases(MotionDataset(args.data, args.split), args.data.resolve(), args.split,
@@ -79,6 +90,11 @@ def run(args: argparse.Namespace) -> int:
             save_suite(cases, args.suite)
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
     model = load_model(args.model, text_cache=Path("cache/text"))
+    if args.phrasings:  # the probes' measures need these joints: fail now, not after the suite
+        try:
+            model.skeleton.require_roles(PROBE_ROLES)
+        except KinemaError as err:
+            raise KinemaError(f"--phrasings: {err}; or pass --phrasings 0") from None
     if args.imputation_only:
         model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
     save_suite(cases, out / "suite.json")
@@ -86,13 +102,16 @@ def run(args: argparse.Namespace) -> int:
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,
                         progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
                         mm_samples=args.mm[1], text_cache=Path("cache/text"),
-                        guidance=tuple(args.guidance) if args.guidance else None)
+                        guidance=tuple(args.guidance) if args.guidance else None, phrasings=args.phrasings)
     data = write_report(results, out, filmstrips=args.filmstrips)
     print()
     print(format_table(data))
     if data.get("timeline"):
         print()
         print(format_timeline_table(data))
+    if data.get("phrasings"):
+        print()
+        print(format_phrasings_table(data))
     for w in data["warnings"]:
         print(f"warning: {w}")
     print(f"wrote {out / 'report.md'}, {out / 'report.json'}, {out / 'suite.json'} and {out / 'plots'}/")

@@ -71,6 +71,58 @@ def format_timeline_table(data: dict) -> str:
     return "\n".join(lines)
 
 
+def _pm(stats: dict | None) -> str:
+    return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
+
+
+def format_phrasings_table(data: dict) -> str:
+    """The "Prompts in other words" tables (markdown; kinema.evaluate.phrasings), or "" when not run."""
+    ph = data.get("phrasings")
+    if not ph:
+        return ""
+    summ, cap = ph["summary"], ph["captured"]
+    order = {True: "yes", False: "**no**", None: "-"}[summ["speed_ordered"]]
+    lines = ["Probes and held-out captions use verb phrases that no training caption contains "
+             "(kinema.data.phrasings; docs/evaluation.md).", "",
+             f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
+             "mean ± sd (min-max)):", "",
+             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
+    for g, v in summ["speed"].items():
+        gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
+        lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
+    caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
+    lines += ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above the one "
+              f"before): {order}. Captured "
+              f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.", ""]
+    lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
+              "|---|---|---:|---:|---:|"]
+    lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
+              f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |" for h in summ["hand"]]
+    flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
+    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % of {v['clips']} clips" for s, v in cap["hand"].items())
+    lines += ["", f"Raised = the named hand gets above the head and higher than the other hand. Captured "
+              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}. Probes the model "
+              f"warned are far from its training captions: {', '.join(flagged) or 'none'}."]
+    ho = ph.get("heldout")
+    if ho:
+        lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
+                  f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
+                  "captions):",
+                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID | "
+                  "Content acc. (%) |", "|---|---:|---:|---:|---:|"]
+        names = {"ground_truth": "Ground truth", "template": "Model (raw), template prompt",
+                 "heldout": "Model (raw), held-out prompt"}
+        for row, v in ho["rows"].items():
+            r_t = f"{_fmt(v['r1_template'], 100, 1)} / {_fmt(v['r3_template'], 100, 1)}"
+            r_h = f"{_fmt(v['r1_heldout'], 100, 1)} / {_fmt(v['r3_heldout'], 100, 1)}"
+            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} | "
+                         f"{_fmt(v.get('content_acc'), 100, 1)} |")
+        lines += ["", "Content acc. = the nearest ground-truth clip of the text cases (retrieval motion embedding) "
+                  "has the case's content label (the ground truth: its nearest other clip); no captions involved, "
+                  "so style words and the retrieval model's reading of paraphrases do not count."]
+    return "\n".join(lines)
+
+
 def _markdown(data: dict) -> str:
     meta, timing, text = data["meta"], data["timing"], data["text"]
     rows = list(data["table"])
@@ -116,6 +168,7 @@ def _markdown(data: dict) -> str:
                 "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
                 f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
                 "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md)."]
+    out += ["", "## Prompts in other words", "", format_phrasings_table(data)] if data.get("phrasings") else []
     out += ["", "## Timing", "",
             f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
             f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "
@@ -123,7 +176,7 @@ def _markdown(data: dict) -> str:
     plots = data.get("plots", {})
     if plots:
         out += ["## Plots", ""]
-        for name in ("keyframes", "foot_skate"):
+        for name in ("keyframes", "foot_skate", "phrasings"):
             if plots.get(name):
                 out.append(f"![{name}]({plots[name]})")
         out += [f"![{Path(p).stem}]({p})" for p in plots.get("filmstrips", [])]
@@ -193,6 +246,49 @@ def plot_foot_skate(data: dict, path: Path) -> bool:
     return True
 
 
+def plot_phrasings(data: dict, path: Path) -> bool:
+    """Probes: speed of every sample per speed probe against the captured walk/run speeds (left), and
+    the named vs other hand's height over the head per hand probe sample (right)."""
+    from matplotlib.figure import Figure
+
+    ph = data.get("phrasings")
+    if not ph:
+        return False
+    speed = [r for r in ph["probes"] if r["kind"] == "speed"]
+    hand = [r for r in ph["probes"] if r["kind"] == "hand"]
+    fig = Figure(figsize=(11, 4.4), dpi=100, layout="constrained")
+    ax = fig.add_subplot(1, 2, 1)
+    for content, colour in (("walk", "#2a9d4b"), ("run", "#e0452b"), ("dash", "#7b3fbf")):
+        v = ph["captured"]["speed"].get(content)
+        if v:
+            ax.axhspan(v["mean"] - v["std"], v["mean"] + v["std"], color=colour, alpha=0.12)
+            ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
+    for n, r in enumerate(speed):
+        ax.scatter([n] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1")
+    ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("pelvis ground speed (m/s)")
+    ax.set_title("Speed probes (raw, every sample)")
+    ax.grid(alpha=0.3, axis="y")
+    if ph["captured"]["speed"]:
+        ax.legend(fontsize=7, loc="upper left")
+    ax = fig.add_subplot(1, 2, 2)
+    for n, r in enumerate(hand):
+        ax.scatter([n - 0.1] * len(r["hand_over_head"]), r["hand_over_head"], s=18, color="#1f6fd1",
+                   label="named hand" if n == 0 else None)
+        ax.scatter([n + 0.1] * len(r["other_over_head"]), r["other_over_head"], s=18, color="#999999",
+                   label="other hand" if n == 0 else None)
+    ax.axhline(0.0, color="black", lw=0.8)
+    ax.set_xticks(range(len(hand)), [f"{r['group']}: {r['prompt']}" for r in hand], rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("highest over the head (m)")
+    ax.set_title("Hand probes (raw; > 0 = above the head)")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7)
+    _save_fig(fig, path)
+    return True
+
+
 def _render_targets(case: dict) -> list:
     """Filmstrip targets of a case: end-effector positions and root waypoints (paths thinned)."""
     out = []
@@ -230,11 +326,13 @@ def write_report(results, out_dir, filmstrips: int = 4) -> dict:
     out = Path(out_dir)
     (out / "plots").mkdir(parents=True, exist_ok=True)
     data = dict(results.data)
-    plots: dict = {"keyframes": None, "foot_skate": None, "filmstrips": []}
+    plots: dict = {"keyframes": None, "foot_skate": None, "phrasings": None, "filmstrips": []}
     if plot_keyframes(data, out / "plots" / "keyframes.png"):
         plots["keyframes"] = "plots/keyframes.png"
     if plot_foot_skate(data, out / "plots" / "foot_skate.png"):
         plots["foot_skate"] = "plots/foot_skate.png"
+    if plot_phrasings(data, out / "plots" / "phrasings.png"):
+        plots["phrasings"] = "plots/phrasings.png"
     mode = "post" if "post" in data["meta"]["modes"] else data["meta"]["modes"][0]
     for case in pick_filmstrip_cases(results.cases, filmstrips):
         motion = results.motions.get(case["id"], {}).get(mode)

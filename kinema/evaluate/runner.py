@@ -22,6 +22,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.evaluate import metrics as M
+from kinema.evaluate.phrasings import run_phrasings
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
 from kinema.evaluate.timeline import run_timeline_case, timeline_summary
 from kinema.motion.core import Motion
@@ -200,13 +201,15 @@ def _bar(total: int, progress: bool, desc: str):
 
 def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: int | None = None, seed: int = 0,
               progress: bool = True, retrieval="default", mm_prompts: int = 3, mm_samples: int = 4,
-              guidance=None, text_cache=None, datasets: dict | None = None) -> EvalResults:
+              guidance=None, text_cache=None, datasets: dict | None = None, phrasings: int = 0) -> EvalResults:
     """Generate and score every case; returns :class:`EvalResults` (see docs/evaluation.md).
 
     ``retrieval``: "default" (the shipped weights), a folder, a loaded ``RetrievalModel`` or None; when
     it cannot be loaded the text metrics are None and the reason is in ``data["warnings"]``.
-    ``mm_prompts`` x ``mm_samples`` extra text-only samples measure multimodality. Case ``i`` is
-    generated with seed ``seed * 100003 + i``, multimodality prompt ``k`` with ``seed * 100003 + 50021 + k``."""
+    ``mm_prompts`` x ``mm_samples`` extra text-only samples measure multimodality; ``phrasings`` > 0 adds
+    the probes (that many samples each) and held-out text cases of kinema.evaluate.phrasings. Case ``i`` is
+    generated with seed ``seed * 100003 + i`` (its held-out phrasing too), multimodality prompt ``k`` with
+    ``seed * 100003 + 50021 + k``, probe ``k`` with ``seed * 100003 + 70001 + k``."""
     modes = [MODE_NAMES[bool(p)] for p in postprocess_modes]
     if not modes or len(set(modes)) != len(modes):
         raise KinemaError(f"postprocess_modes must list False and/or True once each, got {postprocess_modes}")
@@ -306,7 +309,11 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         captions = [s["prompt"] for c in timelines for s in c["segments"]]
         tl_records = [r for r in records if r["kind"] == "timeline"]
         tl_table = timeline_summary(tl_records, captions, tl_segments, ret, text_cache, _embed)
-    wall = time.perf_counter() - t_start
+    t_phr = time.perf_counter()
+    phr = None if not phrasings else run_phrasings(
+        model, cases, motions, datasets, ret, samples=phrasings, seed=seed, steps=steps, guidance=guidance,
+        text_cache=text_cache, embed=_embed, warn=warn, progress=progress)
+    wall, t_phr = time.perf_counter() - t_start, time.perf_counter() - t_phr
     data = {
         "format": "kinema-eval-report", "version": 1,
         "meta": {"model": str(getattr(getattr(model, "loaded", None), "path", model)), "fps": model.fps,
@@ -319,12 +326,14 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
                  "root_smoothing": float(getattr(model, "root_smoothing", 0.0)),
                  "joint_sigma": float(getattr(model, "joint_sigma", 0.0))},
         "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds, "postprocess_seconds": post_seconds,
-                   "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples)},
+                   "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
+                   "phrasings_seconds": t_phr if phrasings else None},
         "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},
         "text": text_info,
         "by_kind": _by_kind(records, rows),
         "by_keyframes": _by_keyframes(records, rows),
         "timeline": tl_table if timelines else None,
+        "phrasings": phr,
         "cases": records,
         "warnings": warn,
     }
