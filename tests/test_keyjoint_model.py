@@ -118,9 +118,13 @@ def test_model_files_round_trip_and_reject_unknown_keys(tmp_path) -> None:
 
 
 def test_training_runs_resumes_and_exports(tiny_data, tmp_path) -> None:
-    from kinema.train.keyjoint import ema_decay, main
+    from kinema.train.keyjoint import annealed_lr, ema_decay, main
 
     assert ema_decay(0) == pytest.approx(0.1) and ema_decay(10**6) == 0.999
+    assert annealed_lr(3e-4, 3e-5, 0.0) == pytest.approx(3e-4) and annealed_lr(3e-4, 3e-5, 1.0) == pytest.approx(3e-5)
+    assert annealed_lr(3e-4, 3e-5, 0.5) == pytest.approx(1.65e-4) and annealed_lr(3e-4, 3e-5, 2.0) == pytest.approx(
+        3e-5
+    )
     out = tmp_path / "kj"
     args = [
         "--data",
@@ -145,7 +149,12 @@ def test_training_runs_resumes_and_exports(tiny_data, tmp_path) -> None:
     main(args)
     first = json.loads((out / "state.json").read_text())["step"]
     assert first >= 1
-    main(args)
+    main([*args, "--lr-end", "1e-5"])
     assert json.loads((out / "state.json").read_text())["step"] > first
     model, info = load_keyjoint_model(out / "export")
-    assert info["steps"] > first and "CC BY-NC" in info["licence"] and model.config.text_dim == 32
+    assert (
+        info["lr_end"] == 1e-5
+        and info["steps"] > first
+        and "CC BY-NC" in info["licence"]
+        and model.config.text_dim == 32
+    )
