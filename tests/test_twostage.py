@@ -183,3 +183,37 @@ def test_two_stage_misuse_is_one_line_errors(model, tmp_path) -> None:
         text=True,
     )
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "keyjoint.json" in r.stderr
+
+
+def test_bench_twostage_times_both_rows(model, tmp_path) -> None:
+    import json
+
+    from kinema.bench.twostage import sparse_example
+
+    cons = sparse_example(model.skeleton, 5.0, model.fps)
+    assert [c["frame_indices"][0] for c in cons] == [30, 60, 90]
+    idx = keyjoint_indices(model.skeleton)
+    assert [c["joint"] for c in cons] == [model.skeleton.names[idx[c]] for c in (3, 2, 0)]
+    out = tmp_path / "bench.json"
+    cmd = [
+        sys.executable,
+        "-m",
+        "kinema",
+        "bench",
+        "twostage",
+        "--steps",
+        "3",
+        "--repeats",
+        "1",
+        "--seconds",
+        "3",
+        "--threads",
+        "1",
+        "--out",
+        str(out),
+    ]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(out.read_text())["rows"]
+    assert [x["row"] for x in rows] == ["single-stage", "two-stage"] and all(x["raw_s"] > 0 for x in rows)
+    assert "| 3 | two-stage |" in r.stdout
