@@ -3,6 +3,7 @@ handed to the body sampler, and generate(keyjoint_model=...) with the shipped mo
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -150,8 +151,16 @@ def test_two_stage_meets_far_sparse_targets_better_than_single_stage(model) -> N
 
     kw = {"seconds": 5.0, "constraints": cons, "steps": 20, "postprocess": False}
     one = model.generate(PROMPT, **kw)[0]
-    two = model.generate(PROMPT, keyjoint_model="default", **kw)[0]
+    calls = []
+    two = model.generate(PROMPT, keyjoint_model="default", progress=lambda d, n: calls.append((d, n)), **kw)[0]
     assert error(two) < 0.3 and error(one) > 3 * error(two)
+    # progress counts the steps of both stage-2 passes, once, up to the end
+    assert calls[-1][0] == calls[-1][1] and [d for d, _ in calls] == sorted({d for d, _ in calls})
+    # without the refinement pass the body stops short of the plan (measured: 14.6 vs 9.3 cm worst target)
+    planner = KeyjointPlanner.load("default")
+    assert planner.refine == 1
+    unrefined = model.generate(PROMPT, keyjoint_model=dataclasses.replace(planner, refine=0), **kw)[0]
+    assert error(two) < 0.8 * error(unrefined)
 
 
 def test_two_stage_misuse_is_one_line_errors(model, tmp_path) -> None:
