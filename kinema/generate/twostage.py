@@ -9,8 +9,9 @@ bent towards the targets (:func:`displace_keyjoints`) and the targets are impute
 
 Stage 2 runs kinema's body sampler with the user's own feature targets untouched (so every constraint
 type keeps its meaning) and the planned trajectory filled in wherever the user set nothing
-(:func:`with_keyjoint_plan`): the smoothed pelvis as a dense root path, the heading, and the six
-joints' positions on every frame.
+(:func:`with_keyjoint_plan`): the smoothed pelvis as a dense root path, the heading, and the positions
+of the targeted keyjoints on every frame. One refinement pass then re-samples the body from the same
+noise with those trajectories moved on by the miss the first pass left (:data:`REFINE_PASSES`).
 
 Why the displacement (measured on 8 sparse-protocol test crops, raw, keyjoint model at step 3335):
 with imputation alone the small model's own trajectory ignored far targets and jumped onto them at the
