@@ -43,3 +43,27 @@ def test_uniform_timing_baseline_spreads_the_path_over_the_window() -> None:
     )
     steps = (pts[1:] - pts[:-1]).norm(dim=-1)
     assert float(steps.max() - steps.min()) < 5e-3  # uniform in arc length (chords cut the corners slightly)
+
+
+def test_suite_ee_part_runs_the_suites_end_effector_cases_both_ways(tiny_data) -> None:
+    import kinema
+    from kinema.evaluate.sfcontrol_suite import ee_cases, evaluate_suite_ee, has_ee_positions, summarize_suite
+    from kinema.evaluate.suite import build_suite
+    from kinema.generate.twostage import KeyjointPlanner
+
+    cases = build_suite(tiny_data, "all", num_cases=12, seed=0)
+    picked = ee_cases(cases)
+    assert picked and all(has_ee_positions(c) for _, c in picked)
+    assert all(c["kind"] in ("end_effector", "mixed") for _, c in picked)
+    first = picked[0][0]
+    model = kinema.load_model()
+    lines = []
+    out = evaluate_suite_ee(
+        model, cases[: first + 1], planner=KeyjointPlanner.load("default"), steps=2, progress=lines.append
+    )
+    assert set(out) == {"single-stage", "two-stage"} and len(lines) == 1
+    one, two = out["single-stage"][0], out["two-stage"][0]
+    assert one["id"] == two["id"] == cases[first]["id"] and one["ee_pos_cm"] >= 0 and two["ee_pos_cm"] >= 0
+    assert one["ee_pos_cm"] != two["ee_pos_cm"]  # the two rows are different generations
+    table = summarize_suite(out)
+    assert table["two-stage"]["cases"] == 1 and table["single-stage"]["ee_pos_cm"] == one["ee_pos_cm"]

@@ -8,18 +8,14 @@ import math
 import pytest
 import torch
 
-from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
-from kinema.generate.twostage import sample_keyjoints
 from kinema.model.keyjoint import KeyjointConfig, KeyjointDenoiser, load_keyjoint_model, save_keyjoint_model
 from kinema.motion.core import Motion
-from kinema.motion.smoothing import smooth_time
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.keyjoint import (
     HEADING,
     KEYJOINT_DIM,
     canonicalize_keyjoints,
-    completion_targets,
     keyjoint_indices,
     keyjoints_from_features,
     sparse_mask,
@@ -97,22 +93,6 @@ def test_canonicalize_puts_the_root_at_the_origin_facing_the_angle() -> None:
     assert torch.allclose(d0, d1, atol=1e-5)  # a rigid motion
 
 
-def test_completion_targets_put_the_keyjoints_back_in_world_space() -> None:
-    m = _motion()
-    rep = FlatRepresentation.for_skeleton(m.skeleton, 20.0)
-    idx = keyjoint_indices(m.skeleton)
-    k = keyjoints_from_features(rep.from_motion(m).float(), rep, idx)[None]
-    x, mask = completion_targets(k, rep, idx)
-    root = x[0][:, rep.root_xz]
-    pelvis = k[0, :, [0, 2]]
-    assert torch.allclose(root, smooth_time(pelvis, 0.5 * 20.0), atol=1e-5)
-    jp = x[0][:, rep.joint_pos].reshape(30, -1, 3)[:, idx].clone()
-    jp[..., 0] += root[:, None, 0]
-    jp[..., 2] += root[:, None, 1]
-    assert torch.allclose(jp, k[0, :, :18].reshape(30, 6, 3), atol=1e-5)
-    assert int(mask[0].sum()) == 30 * (18 + 2 + 2)
-
-
 def test_sparse_masks_follow_the_schemes() -> None:
     g = torch.Generator().manual_seed(1)
     masks = [sparse_mask(60, g) for _ in range(400)]
@@ -137,30 +117,14 @@ def test_model_files_round_trip_and_reject_unknown_keys(tmp_path) -> None:
         load_keyjoint_model(tmp_path)
 
 
-def test_keyjoint_sampling_meets_its_sparse_targets_exactly() -> None:
-    torch.manual_seed(0)
-    model = KeyjointDenoiser(KeyjointConfig(width=32, layers=1, heads=2, text_dim=8)).eval()
-    k = torch.randn(1, 40, KEYJOINT_DIM)
-    m = torch.zeros_like(k)
-    m[0, [0, 20, 39], :3] = 1.0
-    out = sample_keyjoints(
-        model,
-        DDIMSampler(),
-        torch.randn(1, 8),
-        torch.tensor([[1.0, 0.0]]),
-        k,
-        m,
-        steps=4,
-        generator=torch.Generator().manual_seed(0),
-    )
-    assert torch.allclose(out[m > 0], k[m > 0], atol=1e-5)
-    assert out.shape == (1, 40, KEYJOINT_DIM) and torch.isfinite(out).all()
-
-
 def test_training_runs_resumes_and_exports(tiny_data, tmp_path) -> None:
-    from kinema.train.keyjoint import ema_decay, main
+    from kinema.train.keyjoint import annealed_lr, ema_decay, main
 
     assert ema_decay(0) == pytest.approx(0.1) and ema_decay(10**6) == 0.999
+    assert annealed_lr(3e-4, 3e-5, 0.0) == pytest.approx(3e-4) and annealed_lr(3e-4, 3e-5, 1.0) == pytest.approx(3e-5)
+    assert annealed_lr(3e-4, 3e-5, 0.5) == pytest.approx(1.65e-4) and annealed_lr(3e-4, 3e-5, 2.0) == pytest.approx(
+        3e-5
+    )
     out = tmp_path / "kj"
     args = [
         "--data",
@@ -185,7 +149,12 @@ def test_training_runs_resumes_and_exports(tiny_data, tmp_path) -> None:
     main(args)
     first = json.loads((out / "state.json").read_text())["step"]
     assert first >= 1
-    main(args)
+    main([*args, "--lr-end", "1e-5"])
     assert json.loads((out / "state.json").read_text())["step"] > first
     model, info = load_keyjoint_model(out / "export")
-    assert info["steps"] > first and "CC BY-NC" in info["licence"] and model.config.text_dim == 32
+    assert (
+        info["lr_end"] == 1e-5
+        and info["steps"] > first
+        and "CC BY-NC" in info["licence"]
+        and model.config.text_dim == 32
+    )

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from kinema.io.atomic import atomic_write_bytes
 
-SPARSE_ROWS = ("single-stage", "two-stage", "two-stage (root path)", "single-stage + noise opt")
+SPARSE_ROWS = ("single-stage", "two-stage", "single-stage + noise opt")
 
 
 def add_arguments(p) -> None:
@@ -25,7 +25,7 @@ def add_arguments(p) -> None:
         help="'suite' (Kimodo-style test suite, default) or 'sfcontrol' (sparse keyjoint control, "
         "goal reaching, implicit tasks; docs/objectives.md)",
     )
-    p.add_argument("--keyjoint-model", type=Path, help="sfcontrol: keyjoint model folder for the two-stage row")
+    p.add_argument("--keyjoint-model", help="sfcontrol: keyjoint model ('default' or a folder) for the two-stage rows")
     p.add_argument("--objective-steps", type=int, default=8, help="sfcontrol: noise iterations (default 8)")
     p.add_argument(
         "--sparse-rows",
@@ -37,9 +37,10 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--parts",
         nargs="+",
-        choices=("sparse", "goal", "tasks"),
+        choices=("sparse", "ee", "goal", "tasks"),
         default=("sparse", "goal", "tasks"),
-        help="sfcontrol: which protocols to run (default all)",
+        help="sfcontrol: which protocols to run (default sparse goal tasks; 'ee': the suite's end-effector "
+        "cases (--suite, else --cases built) single-stage vs two-stage)",
     )
 
 
@@ -71,13 +72,12 @@ TASK_COLS = [
 
 
 def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
-    from kinema.diffusion.sampler import DDIMSampler
     from kinema.evaluate import sfcontrol as S
-    from kinema.model.keyjoint import load_keyjoint_model
+    from kinema.generate.twostage import KeyjointPlanner
 
     rows, kj = list(args.sparse_rows), None
     if args.keyjoint_model is not None:
-        kj = (load_keyjoint_model(args.keyjoint_model)[0], DDIMSampler())
+        kj = KeyjointPlanner.load(args.keyjoint_model)
     else:
         rows = [r for r in rows if not r.startswith("two-stage")]
     cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
@@ -88,6 +88,35 @@ def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     )
     title = f"Sparse control ({len(cases)} test crops of 5 s, a target every 1.5 s on 3 of 6 keyjoints, raw)"
     return res, [_table(title, res, SPARSE_COLS)]
+
+
+EE_COLS = [
+    ("cases", "cases", "d"),
+    ("ee_pos_cm", "EE pos (cm)", ".2f"),
+    ("ee_rot_deg", "EE rot (deg)", ".1f"),
+    ("root2d_pos_cm", "2D root (cm)", ".2f"),
+    ("foot_skate_cm_s", "skate (cm/s)", ".1f"),
+    ("jerk", "jerk", ".0f"),
+    ("seconds", "s / motion", ".2f"),
+]
+
+
+def _ee(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
+    from kinema.evaluate import sfcontrol_suite as E
+    from kinema.evaluate.suite import build_suite, load_suite, save_suite
+    from kinema.generate.twostage import KeyjointPlanner
+
+    if args.suite is not None and args.suite.exists():
+        cases = load_suite(args.suite)
+    else:
+        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed)
+        if args.suite is not None:
+            save_suite(cases, args.suite)
+    kj = None if args.keyjoint_model is None else KeyjointPlanner.load(args.keyjoint_model)
+    per_case = E.evaluate_suite_ee(model, cases, planner=kj, steps=args.steps, seed=args.seed)
+    res = E.summarize_suite(per_case)
+    title = f"Suite end-effector cases ({len(cases)}-case suite, {args.split} split, seed {args.seed}, raw)"
+    return {"summary": res, "cases": per_case}, [_table(title, res, EE_COLS)]
 
 
 def _goal(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
@@ -113,7 +142,7 @@ def run_sfcontrol(args: argparse.Namespace) -> int:
     out = args.out or Path("out/eval/sfcontrol")
     model = load_model(args.model, text_cache=Path("cache/text"))
     report, md = {"cases": args.cases, "steps": args.steps, "objective_steps": args.objective_steps}, []
-    for part, fn in (("sparse", _sparse), ("goal", _goal), ("tasks", _tasks)):
+    for part, fn in (("sparse", _sparse), ("ee", _ee), ("goal", _goal), ("tasks", _tasks)):
         if part in args.parts:
             report[part], tables = fn(args, model)
             md += tables

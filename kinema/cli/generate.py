@@ -65,6 +65,10 @@ def register(sub) -> None:
     p.add_argument("--objective-steps", type=non_negative_int, metavar="N",
                    help="noise-optimisation iterations for the constraints file's objectives (default 12; "
                    "docs/objectives.md)")
+    p.add_argument("--keyjoint-model", metavar="MODEL",
+                   help="two-stage control: 'default' (the shipped keyjoint model) or a keyjoint model folder "
+                        "plans pelvis, head, hands and feet from the constraints first, then the body follows "
+                        "(docs/constraints.md; one prompt up to 10 s, no objectives)")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
@@ -115,6 +119,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     """Output suffix, constraint and timeline files: checked before anything is loaded."""
     from kinema.errors import KinemaError
     from kinema.generate.timeline import parse_timeline
+    from kinema.generate.twostage import KeyjointPlanner
     from kinema.objectives.io import load_objectives
 
     if args.preview:
@@ -128,6 +133,8 @@ def _check_inputs(args: argparse.Namespace) -> None:
         raise KinemaError(f"{args.constraints}: no such constraints file")
     if args.constraints is not None:
         load_objectives(args.constraints)  # objective syntax errors before the model loads
+    if args.keyjoint_model is not None:
+        KeyjointPlanner.check(args.keyjoint_model)
     if args.timeline is not None:
         if args.timeline.suffix.lower() != ".json":
             raise KinemaError(f"{args.timeline}: a timeline must be a .json file")
@@ -182,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
         what, seconds=seconds, constraints=args.constraints, samples=samples, steps=args.steps,
         guidance=guidance, seed=DEFAULT_SEED if args.seed is None else args.seed,
         postprocess=not args.no_postprocess, heading=math.radians(args.heading), progress=not args.no_progress,
-        objective_steps=args.objective_steps, **extra,
+        objective_steps=args.objective_steps, keyjoint_model=args.keyjoint_model, **extra,
     )
     for motion, path in zip(motions, outputs, strict=True):
         if args.fps is not None:

@@ -7,10 +7,8 @@ positions. Rows (all *raw*, no post-processing):
 
 - ``single-stage``: today's sampler, each target an ``end-effector`` constraint (imputation plus the
   sampler's root/joint corrections);
-- ``two-stage``: the keyjoint model completes the keyjoint trajectory, which the body model follows
-  densely (kinema.generate.twostage);
-- ``two-stage (root path)``: the keyjoint model's smoothed pelvis as a dense root path, the sparse
-  targets as the single-stage row's end-effector constraints;
+- ``two-stage``: the same constraints with ``keyjoint_model``: the keyjoint model plans the six
+  keyjoints, the body model follows them (kinema.generate.twostage);
 - ``single-stage + noise opt``: single-stage with each target also a ``reach`` objective on its frame
   (noise optimisation, then snapping: kinema.objectives).
 
@@ -30,10 +28,7 @@ import torch
 from kinema.data.dataset import MotionDataset
 from kinema.evaluate.metrics import foot_skate, jerk
 from kinema.evaluate.suite import ground_truth_motion
-from kinema.generate.twostage import complete_body, sample_keyjoints
 from kinema.motion.core import Motion
-from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
-from kinema.representation.flat import FlatRepresentation
 from kinema.representation.keyjoint import KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices, subsample_every
 
 SECONDS, EVERY, FRACTION = 5.0, 1.5, 0.5
@@ -92,37 +87,6 @@ def keyjoint_targets(targets, skeleton, T: int) -> tuple[torch.Tensor, torch.Ten
     return k, m
 
 
-def run_two_stage(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | None) -> Motion:
-    """One two-stage motion for a case (keyjoint model ``kj`` then the body model of ``model``)."""
-    rep: FlatRepresentation = model.representation
-    T = case["gt"].num_frames
-    g = torch.Generator().manual_seed(seed)
-    k_tgt, k_mask = keyjoint_targets(case["targets"], rep.skeleton, T)
-    text = model.encode_text(case["prompt"])
-    c_dir = torch.tensor([[1.0, 0.0]])
-    keys = sample_keyjoints(kj, kj_sampler, text, c_dir, k_tgt, k_mask, generator=g)
-    L = model.loaded
-    feats = complete_body(L.denoiser, L.sampler, rep, text, keys, L.guidance, steps=steps, generator=g)
-    return rep.to_motion(feats[0])
-
-
-def run_two_stage_root(model, kj, kj_sampler, case: dict, *, seed: int, steps: int | None) -> Motion:
-    """Two-stage, root only: the keyjoint model's pelvis (smoothed) becomes a dense root path, the sparse
-    targets stay end-effector constraints of the body model (the single-stage row plus a planned root)."""
-    rep: FlatRepresentation = model.representation
-    T = case["gt"].num_frames
-    g = torch.Generator().manual_seed(seed)
-    k_tgt, k_mask = keyjoint_targets(case["targets"], rep.skeleton, T)
-    text = model.encode_text(case["prompt"])
-    keys = sample_keyjoints(kj, kj_sampler, text, torch.tensor([[1.0, 0.0]]), k_tgt, k_mask, generator=g)
-    root = smooth_time(keys[0, :, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * rep.fps)
-    path = {"type": "root2d", "frame_indices": list(range(T)), "smooth_root_2d": root.tolist(), "dense": True}
-    cons = [path, *as_constraints(case["targets"], rep.skeleton)]
-    return model.generate(case["prompt"], seconds=SECONDS, constraints=cons, steps=steps, seed=seed, postprocess=False)[
-        0
-    ]
-
-
 def score(motion: Motion, case: dict, seconds: float) -> dict:
     return {
         "control_cm": 100 * control_error(motion, case["targets"]),
@@ -149,22 +113,18 @@ def evaluate_sparse(
         sk = model.skeleton
         for row in rows:
             t0 = time.perf_counter()
-            if row == "two-stage":
-                m = run_two_stage(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
-            elif row == "two-stage (root path)":
-                m = run_two_stage_root(model, keyjoint[0], keyjoint[1], case, seed=seed, steps=steps)
-            else:
-                objs = as_objectives(case["targets"], sk, model.fps) if row.endswith("noise opt") else None
-                m = model.generate(
-                    case["prompt"],
-                    seconds=SECONDS,
-                    constraints=as_constraints(case["targets"], sk),
-                    steps=steps,
-                    seed=seed,
-                    postprocess=False,
-                    objectives=objs,
-                    objective_steps=objective_steps if objs else None,
-                )[0]
+            objs = as_objectives(case["targets"], sk, model.fps) if row.endswith("noise opt") else None
+            m = model.generate(
+                case["prompt"],
+                seconds=SECONDS,
+                constraints=as_constraints(case["targets"], sk),
+                steps=steps,
+                seed=seed,
+                postprocess=False,
+                objectives=objs,
+                objective_steps=objective_steps if objs else None,
+                keyjoint_model=keyjoint if row == "two-stage" else None,
+            )[0]
             out[row]["scores"].append(score(m, case, time.perf_counter() - t0))
             out[row]["motions"].append(m)
         progress(

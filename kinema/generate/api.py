@@ -14,6 +14,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -25,6 +26,7 @@ from kinema.generate.progress import ProgressFn, StepProgress, split_progress
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
+from kinema.generate.twostage import KeyjointPlanner, sample_two_stage
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
@@ -144,6 +146,7 @@ class KinemaModel:
         progress: bool | ProgressFn = False,
         objectives=None,
         objective_steps: int | None = None,
+        keyjoint_model=None,
     ) -> GenerationResult:
         """Generate ``samples`` motions; returns them with this call's report (``result.report``).
 
@@ -168,6 +171,10 @@ class KinemaModel:
                 docs/objectives.md): JSON-style dicts or Objective objects, added to a constraints file's
                 ``"objectives"``; the chain then runs ``steps`` (default 5) DDIM steps.
             objective_steps: Adam iterations on the noise (default 12 when there are objectives).
+            keyjoint_model: two-stage control (kinema.generate.twostage, docs/constraints.md): ``"default"``
+                (the shipped keyjoint model), a keyjoint model folder or a loaded ``KeyjointPlanner``;
+                the keyjoints (pelvis, head, hands, ankles) are planned first from the constraints,
+                then the body follows them. One segment (up to ``max_seconds``), no objectives.
             progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
                 steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
                 changes the result.
@@ -181,6 +188,7 @@ class KinemaModel:
         plan = plan_segments(self.representation, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
         bound = collect_objectives(constraints, objectives, self.skeleton, self.fps, plan.total_frames)
+        planner = self._planner(keyjoint_model, plan, bound)
         obj_report: dict = {}
         if bound:
             settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
@@ -191,7 +199,8 @@ class KinemaModel:
             raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
                                                             opt, split_progress(progress)[0])
         else:
-            raw, plans = self._sample_batch(plan, guide, steps, g, heading, samples, progress), [plan] * samples
+            raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner)
+            plans = [plan] * samples
         motions, residuals = [], []
         for motion, sample_plan in zip(raw, plans, strict=True):
             motion, report = sample_plan.postprocess(motion) if postprocess else (motion, {})
@@ -209,6 +218,17 @@ class KinemaModel:
         return GenerationResult(motions, report)
 
     # ------------------------------------------------------------------ internals
+    def _planner(self, keyjoint_model, plan: SegmentPlan, bound) -> KeyjointPlanner | None:
+        """The keyjoint planner of a two-stage call (None for single-stage), checked against the call."""
+        if keyjoint_model is None:
+            return None
+        if bound:
+            raise KinemaError("keyjoint_model (two-stage control) cannot be combined with objectives")
+        if len(plan.segments) > 1:
+            raise KinemaError(f"keyjoint_model (two-stage control) plans one segment of up to "
+                              f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
+        return keyjoint_model if isinstance(keyjoint_model, KeyjointPlanner) else KeyjointPlanner.load(keyjoint_model)
+
     def _check_counts(self, samples, steps, seed) -> tuple[int, int, int]:
         """Validated ``samples``, ``steps`` (the saved default filled in) and ``seed``."""
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
@@ -269,7 +289,8 @@ class KinemaModel:
                               anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
                               joint_sigma=self.joint_sigma)
 
-    def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress) -> list[Motion]:
+    def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress,
+                      planner: KeyjointPlanner | None = None) -> list[Motion]:
         """``samples`` raw motions (all segments, cross-faded), sampled as one batch per segment.
 
         Sampling all motions in one denoiser batch is faster per motion than one after another (the
@@ -289,8 +310,9 @@ class KinemaModel:
             settings = self._settings(seg.num_frames, guide, steps)
             text = self.encode_text(seg.prompt)
             text = None if text is None else text.expand(samples, -1)
-            feats = sample_features(L.denoiser, L.sampler, rep, text, targets, settings, generator=g,
-                                    progress=bar, on_step=None if counter is None else counter.segment(k))
+            sample = sample_features if planner is None else partial(sample_two_stage, planner=planner)
+            feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=bar,
+                           on_step=None if counter is None else counter.segment(k))
             rep.shift_root_xz(feats, shift[:, None])
             parts = [rep.to_motion(f) for f in feats]
             motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,

@@ -3,8 +3,8 @@
 A keyjoint frame is ``(20,)``: world positions (metres, Y up) of the pelvis, head, left hand, right
 hand, left ankle and right ankle (6 x 3, in that order), then the root heading ``(cos, sin)`` (0 faces
 +Z). It is read straight from the flat features (``joint_pos`` holds positions with x/z relative to the
-smoothed root, so the world position is ``joint_pos + root_xz``) and turned back into dense body-model
-targets for full-body completion (:func:`completion_targets`). Shapes: keyjoints ``(..., T, 20)``,
+smoothed root, so the world position is ``joint_pos + root_xz``); kinema.generate.twostage turns a
+planned trajectory back into body-model targets. Shapes: keyjoints ``(..., T, 20)``,
 features ``(..., T, D)``.
 
 Sparse training masks follow the paper's selection schemes (Sec. 4.4): *cross* (random keyjoints at
@@ -18,7 +18,6 @@ import math
 
 import torch
 
-from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
 from kinema.skeleton import Skeleton
 
@@ -66,38 +65,6 @@ def canonicalize_keyjoints(k: torch.Tensor, root_xz0: torch.Tensor, angle: torch
     p[..., 2] -= root_xz0[..., 1, None, None]
     hc, hs = k[..., 0, HEADING].unbind(-1)
     return rotate_keyjoints(torch.cat([p.flatten(-2), out[..., HEADING]], dim=-1), angle - torch.atan2(hs, hc))
-
-
-def completion_targets(
-    k: torch.Tensor, rep: FlatRepresentation, idx: list[int], mask_frames: torch.Tensor | None = None
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Dense body-model targets ``(x_tgt, mask) (B, T, D)`` (unnormalised) from keyjoints ``(B, T, 20)``.
-
-    The smoothed root x/z is the pelvis under the representation's 0.5-s Gaussian (its definition);
-    heading and the six joints' root-relative positions are set on every frame (or the frames where
-    ``mask_frames (B, T)`` is True)."""
-    B, T, _ = k.shape
-    x = torch.zeros(B, T, rep.dim, dtype=k.dtype)
-    m = torch.zeros_like(x)
-    p = k[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3))
-    root = smooth_time(p[..., 0, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * rep.fps)  # (B, T, 2)
-    rx, rz = rep.root_xz
-    x[..., rx], x[..., rz] = root[..., 0], root[..., 1]
-    x[..., rep.heading] = k[..., HEADING] / k[..., HEADING].norm(dim=-1, keepdim=True).clamp_min(1e-6)
-    jp = x[..., rep.joint_pos].unflatten(-1, (rep.num_joints, 3))
-    rel = p.clone()
-    rel[..., 0] -= root[..., 0, None]
-    rel[..., 2] -= root[..., 1, None]
-    jp[..., idx, :] = rel
-    x[..., rep.joint_pos] = jp.flatten(-2)
-    mj = m[..., rep.joint_pos].unflatten(-1, (rep.num_joints, 3))
-    mj[..., idx, :] = 1.0
-    m[..., rep.joint_pos] = mj.flatten(-2)
-    m[..., [rx, rz]] = 1.0
-    m[..., rep.heading] = 1.0
-    if mask_frames is not None:
-        m = m * mask_frames[..., None].to(m)
-    return x, m
 
 
 # ---------------------------------------------------------------------------- training masks

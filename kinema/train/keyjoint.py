@@ -104,6 +104,18 @@ def ema_decay(step: int, limit: float = 0.999) -> float:
     return min(limit, (1 + step) / (10 + step))
 
 
+def annealed_lr(start: float, end: float, fraction: float) -> float:
+    """Cosine from ``start`` to ``end`` over the run's wall-clock budget (``fraction`` in [0, 1]): a
+    resumed run with a fixed time budget ends at a low learning rate whatever its step count."""
+    f = min(max(fraction, 0.0), 1.0)
+    return end + 0.5 * (start - end) * (1 + math.cos(math.pi * f))
+
+
+def set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
+    for group in opt.param_groups:
+        group["lr"] = lr
+
+
 def train_step(model, ema, opt, schedule, b: dict, g: torch.Generator, step: int) -> float:
     x0 = model.normalize(b["k"])
     B = x0.shape[0]
@@ -175,6 +187,8 @@ def run(args: argparse.Namespace) -> Path:
         print(f"resumed {out} at step {step} ({seconds / 60:.1f} min)", flush=True)
     t0, last, losses = time.perf_counter(), time.perf_counter(), []
     while time.perf_counter() - t0 < args.minutes * 60:
+        if args.lr_end is not None:
+            set_lr(opt, annealed_lr(args.lr, args.lr_end, (time.perf_counter() - t0) / (args.minutes * 60)))
         losses.append(train_step(model, ema, opt, schedule, data.batch(args.batch, g), g, step))
         step += 1
         if step % args.log_every == 0:
@@ -192,6 +206,7 @@ def run(args: argparse.Namespace) -> Path:
         "data": str(args.data),
         "batch": args.batch,
         "lr": args.lr,
+        "lr_end": args.lr_end,
         "fps": data.fps,
         "text_encoder": data.text_id,
         "licence": "trained on Bandai Namco motion data (CC BY-NC 4.0): non-commercial use only",
@@ -209,6 +224,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--lr-end", type=float, default=None, help="anneal to this rate (cosine) over --minutes")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--log-every", type=int, default=50)
     p.add_argument("--save-every", type=int, default=500)

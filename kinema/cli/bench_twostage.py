@@ -1,0 +1,47 @@
+"""``kinema bench twostage``: explicit sparse control, single-stage vs two-stage (kinema.bench.twostage)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from kinema.bench.twostage import HEADER, bench_two_stage
+from kinema.cli._args import positive_float, positive_int
+from kinema.io.atomic import atomic_write_bytes
+
+
+def register_bench(targets) -> None:
+    p = targets.add_parser(
+        "twostage",
+        help="sparse control: seconds and raw error, single-stage vs the keyjoint model first",
+        description="Generates a walk with end-effector targets every 1.5 s, with and without the keyjoint "
+        "model planning first (generate --keyjoint-model), and prints seconds per motion and the raw "
+        "target error for each DDIM step count.",
+    )
+    p.add_argument("--keyjoint-model", default="default", help="'default' (shipped) or a keyjoint model folder")
+    p.add_argument("--seconds", type=positive_float, default=5.0, help="motion length (default 5)")
+    p.add_argument("--steps", type=positive_int, nargs="+", default=[10, 25, 50], help="DDIM steps (default 10 25 50)")
+    p.add_argument("--repeats", type=positive_int, default=2, help="motions per row (seeds 0..N-1)")
+    p.add_argument("--out", type=Path, help="also write the rows as JSON here")
+    p.add_argument("--threads", type=positive_int, help="torch threads (default: kinema.runtime's choice)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from kinema.generate.api import load_model
+    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.io.atomic import check_output_path
+    from kinema.runtime import configure_threads
+
+    if args.out is not None:
+        check_output_path(args.out)
+    planner = KeyjointPlanner.load(args.keyjoint_model)
+    threads = configure_threads(args.threads)
+    model = load_model("default", text_cache=Path("cache/text"))
+    print(f"sparse control, {args.seconds:g}-s walk, {args.repeats} seed(s), {threads} thread(s)")
+    print(HEADER)
+    rows = bench_two_stage(model, planner, args.seconds, args.steps, args.repeats)
+    if args.out is not None:
+        atomic_write_bytes(args.out, (json.dumps({"seconds": args.seconds, "rows": rows}, indent=1) + "\n").encode())
+    return 0
