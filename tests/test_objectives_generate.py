@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -14,6 +15,7 @@ from kinema.errors import KinemaError
 from kinema.objectives import ObjectiveError, Reach
 
 PROMPT = "A person walks forward."
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 # to the walker's left at chest height: the unoptimised (3-step) walk's right hand passes > 1.5 m away
 TARGET = [0.7, 1.3, 1.2]
 
@@ -170,3 +172,15 @@ def test_time_agnostic_path_is_followed_and_not_when_ignored(model) -> None:
     assert o["before"][0] > 0.5  # the unoptimised walk does not trace this bend
     assert o["optimised"][0] < o["before"][0]  # two iterations already move towards it
     assert o["after"][0] < 0.05 and res.report.objectives["snapped"] == [41]  # one root target per window frame
+
+
+def test_postprocessing_never_silently_undoes_an_objective(model) -> None:
+    """examples/objectives/path_time_agnostic.json: the raw walk glides along the path (2.2 cm); foot locking
+    then pulled the pelvis 72 cm off it and the report called that 'final'. Now the raw motion is kept for
+    that sample and a warning names the objective and both values."""
+    spec = json.loads((EXAMPLES / "objectives" / "path_time_agnostic.json").read_text())
+    res = model.generate("A person walks forward.", seconds=5, objectives=spec["objectives"])
+    o = res.report.objectives["objectives"][0]
+    assert o["after"][0] < 0.05
+    assert o["final"][0] <= o["after"][0] + 0.02
+    assert any("post-processing moved objective 0 (path-time-agnostic)" in w for w in res.report.warnings)

@@ -206,9 +206,10 @@ class KinemaModel:
             motion, report = sample_plan.postprocess(motion) if postprocess else (motion, {})
             motions.append(motion)
             residuals.append(report)
+        obj_warnings: list[str] = []
         if bound:
-            obj_report = add_final(obj_report, bound, motions)
-        warnings = [m.warning() for m in matches if not m.known]
+            motions, obj_report, obj_warnings = add_final(obj_report, bound, motions, raw)
+        warnings = [m.warning() for m in matches if not m.known] + obj_warnings
         warnings += [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
             seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,

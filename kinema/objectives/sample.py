@@ -116,12 +116,34 @@ def _with_constraints(plan: SegmentPlan, rep, extra: list) -> SegmentPlan:
     return replace(plan, targets=UserTargets(x, m, wxz, wm), constraints=[*plan.constraints, *extra])
 
 
-def add_final(report: dict, bound: list[Bound], motions: list[Motion]) -> dict:
-    """``report`` with each objective's value on the final (post-processed) motions as ``"final"``."""
+#: post-processing may move an objective this much (metres) and this factor before the raw motion is kept
+WORSE_BY_M, WORSE_FACTOR = 0.02, 1.5
+
+
+def add_final(
+    report: dict, bound: list[Bound], motions: list[Motion], raw: list[Motion]
+) -> tuple[list[Motion], dict, list[str]]:
+    """(motions, report, warnings): each objective's value on the final motions as ``"final"``.
+
+    Post-processing knows explicit targets, not objectives: removing foot skate can pull a pelvis that
+    glided along a time-agnostic path 70 cm off it. Where it leaves an objective more than
+    ``WORSE_BY_M`` and ``WORSE_FACTOR`` times worse than on the raw motion, that sample's raw motion is
+    kept instead and a warning names the objective and both values."""
     P = torch.stack([m.positions.float() for m in motions])
-    final = errors(bound, P)
+    R = torch.stack([m.positions.float() for m in raw])
+    final, before = errors(bound, P), errors(bound, R)
+    out, warnings = list(motions), []
+    for i, (b, f_row, r_row) in enumerate(zip(bound, final, before, strict=True)):
+        for s, (f, r) in enumerate(zip(f_row, r_row, strict=True)):
+            if b.spec.kind != "realism" and f > r + WORSE_BY_M and f > WORSE_FACTOR * r and out[s] is not raw[s]:
+                out[s] = raw[s]
+                warnings.append(
+                    f"post-processing moved objective {i} ({b.spec.kind}) of sample {s} from {100 * r:.1f} cm "
+                    f"to {100 * f:.1f} cm; the raw motion is kept for that sample (not foot-locked)"
+                )
+    final = errors(bound, torch.stack([m.positions.float() for m in out]))
     objs = [dict(o, final=f) for o, f in zip(report["objectives"], final, strict=True)]
-    return dict(report, objectives=objs)
+    return out, dict(report, objectives=objs), warnings
 
 
 def objective_settings(settings: SampleSettings, steps_given: int | None, default_steps: int) -> SampleSettings:
