@@ -10,6 +10,7 @@ import torch
 
 from kinema.objectives import ObjectiveError, bind_objectives, load_objectives
 from kinema.objectives.path import PathTimeAgnostic, arc_resample
+from kinema.objectives.sample import worse_than_raw
 from kinema.objectives.terms import Avoid, JointDistance, Reach, StayWithin
 from kinema.skeleton import Skeleton
 
@@ -206,3 +207,11 @@ def test_snap_imposes_the_timing_the_motion_reached() -> None:
         3.0 * 20 / 39, abs=1e-4
     )  # the pace the motion took: uniform here
     assert snap_constraints([_bind(objs[3])], P, _skeleton(), root, paths=False) == []
+
+
+def test_an_objective_post_processing_made_worse_is_warned_of_with_both_values():
+    report = {"objectives": [{"type": "reach", "after": [0.396, 0.10], "final": [1.166, 0.105]}]}
+    assert worse_than_raw(report) == [
+        "objective 0 (reach), sample 0: post-processing made it worse, 39.6 cm raw -> 116.6 cm final"
+    ]
+    assert worse_than_raw({"objectives": [{"type": "reach", "after": [0.4], "final": [0.0]}]}) == []

@@ -47,7 +47,9 @@ def add_arguments(p) -> None:
 def _table(title: str, rows: dict, cols: list[tuple[str, str, str]]) -> str:
     lines = [f"### {title}", "", "| row | " + " | ".join(c[1] for c in cols) + " |", "|---|" + "---|" * len(cols)]
     for name, v in rows.items():
-        lines.append(f"| {name} | " + " | ".join(format(v[c[0]], c[2]) for c in cols) + " |")
+        lines.append(
+            f"| {name} | " + " | ".join("-" if v.get(c[0]) is None else format(v[c[0]], c[2]) for c in cols) + " |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -56,6 +58,9 @@ SPARSE_COLS = [
     ("skate", "skate (cm/s)", ".1f"),
     ("jerk", "jerk", ".0f"),
     ("seconds", "s / motion", ".1f"),
+    ("r3_whole", "R@3 (all cases)", ".3f"),
+    ("r3_batch32", "R@3 (batches of 32)", ".3f"),
+    ("fid", "FID", ".2f"),
 ]
 GOAL_COLS = [
     ("goal_cm", "dist. to goal (cm)", ".2f"),
@@ -73,6 +78,7 @@ TASK_COLS = [
 
 def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     from kinema.evaluate import sfcontrol as S
+    from kinema.evaluate.retrieval import default_retrieval_path, load_retrieval
     from kinema.generate.twostage import KeyjointPlanner
 
     rows, kj = list(args.sparse_rows), None
@@ -81,13 +87,17 @@ def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     else:
         rows = [r for r in rows if not r.startswith("two-stage")]
     cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
-    res = S.summarize(
-        S.evaluate_sparse(
-            model, cases, rows=rows, keyjoint=kj, steps=args.steps, objective_steps=args.objective_steps, seed=args.seed
-        )
+    raw = S.evaluate_sparse(
+        model, cases, rows=rows, keyjoint=kj, steps=args.steps, objective_steps=args.objective_steps, seed=args.seed
     )
+    res, warn = S.summarize(raw), []
+    text = S.text_scores(load_retrieval(default_retrieval_path()), cases, raw, seed=args.seed, warn=warn)
+    for row, v in res.items():
+        v.update(text[row])
+    res["ground truth"] = dict.fromkeys(("control_cm", "skate", "jerk", "seconds")) | text["ground_truth"]
     title = f"Sparse control ({len(cases)} test crops of 5 s, a target every 1.5 s on 3 of 6 keyjoints, raw)"
-    return res, [_table(title, res, SPARSE_COLS)]
+    notes = "".join(f"\n- {w}" for w in warn)
+    return res, [_table(title, res, SPARSE_COLS) + notes]
 
 
 EE_COLS = [

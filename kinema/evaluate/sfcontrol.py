@@ -27,6 +27,7 @@ import torch
 
 from kinema.data.dataset import MotionDataset
 from kinema.evaluate.metrics import foot_skate, jerk
+from kinema.evaluate.runner import text_metrics
 from kinema.evaluate.suite import ground_truth_motion
 from kinema.motion.core import Motion
 from kinema.representation.keyjoint import KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices, subsample_every
@@ -139,3 +140,13 @@ def summarize(result: dict) -> dict:
         for row, r in result.items()
         if r["scores"]
     }
+
+
+def text_scores(retrieval, cases: list[dict], result: dict, *, seed: int = 0, warn: list[str]) -> dict:
+    """Per row of ``result`` (evaluate_sparse): R@3 of its motions against the cases' captions (over the
+    whole set, and in batches of 32 when there are 32 cases or more) and FID against the ground-truth
+    crops, all in the retrieval model's embedding space (kinema.evaluate.runner.text_metrics; None where
+    undefined, with the reason in ``warn``)."""
+    motions = {"ground_truth": [c["gt"] for c in cases]} | {row: r["motions"] for row, r in result.items()}
+    m = text_metrics(retrieval, [c["prompt"] for c in cases], motions, {}, seed, warn)
+    return {row: {k: m[row][k] for k in ("r3_whole", "r3_batch32", "fid")} for row in m}

@@ -146,6 +146,24 @@ def add_final(
     return out, dict(report, objectives=objs), warnings
 
 
+#: a final (post-processed) objective value worse than the raw one by more than this (metres) is warned of
+WORSE_SLACK = 0.01
+
+
+def worse_than_raw(report: dict) -> list[str]:
+    """Warnings, one per objective and sample, where post-processing left the objective further off than
+    the raw motion (``report`` from add_final): post-processing must never make an objective worse silently."""
+    out = []
+    for k, o in enumerate(report.get("objectives", [])):
+        for i, (raw, final) in enumerate(zip(o.get("after", []), o.get("final", []), strict=False)):
+            if final > raw + WORSE_SLACK:
+                out.append(
+                    f"objective {k} ({o['type']}), sample {i}: post-processing made it worse, "
+                    f"{raw * 100:.1f} cm raw -> {final * 100:.1f} cm final"
+                )
+    return out
+
+
 def objective_settings(settings: SampleSettings, steps_given: int | None, default_steps: int) -> SampleSettings:
     """The chain's DDIM steps: the caller's ``steps`` when given, else ``default_steps``."""
     return replace(settings, steps=default_steps if steps_given is None else steps_given)
