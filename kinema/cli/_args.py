@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 
 def _int_at_least(text: str, low: int, what: str) -> int:
@@ -70,3 +71,13 @@ def seed(text: str) -> int:
     if not 0 <= n <= MAX_SEED:
         raise argparse.ArgumentTypeError(f"expected a seed in [0, 2**64 - 1], got {text!r}")
     return n
+
+
+def sample_paths(out: Path, n: int) -> list[Path]:
+    """Output files of ``n`` samples: ``out`` itself for one, else ``stem_00.ext``, ``stem_01.ext``, ...
+    (``.bvh.gz`` counts as one suffix)."""
+    if n == 1:
+        return [out]
+    name = out.name
+    stem, suffix = (name[: -len(".bvh.gz")], ".bvh.gz") if name.lower().endswith(".bvh.gz") else (out.stem, out.suffix)
+    return [out.with_name(f"{stem}_{i:02d}{suffix}") for i in range(n)]

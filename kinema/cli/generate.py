@@ -17,6 +17,7 @@ from kinema.cli._args import (
     non_negative_int,
     positive_float,
     positive_int,
+    sample_paths,
     seed,
 )
 
@@ -72,14 +73,6 @@ def register(sub) -> None:
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
-
-
-def _outputs(out: Path, n: int) -> list[Path]:
-    if n == 1:
-        return [out]
-    name = out.name
-    stem, suffix = (name[: -len(".bvh.gz")], ".bvh.gz") if name.lower().endswith(".bvh.gz") else (out.stem, out.suffix)
-    return [out.with_name(f"{stem}_{i:02d}{suffix}") for i in range(n)]
 
 
 def _from_kimodo_meta(args: argparse.Namespace):
@@ -166,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     configure_threads(args.threads)
     meta_path, filled = _from_kimodo_meta(args)
     samples = DEFAULT_SAMPLES if args.samples is None else args.samples
-    outputs = _outputs(args.out, samples)
+    outputs = sample_paths(args.out, samples)
     for path in outputs:  # before loading the model and generating: a bad --out costs nothing
         check_output_path(path)
     if filled:

@@ -13,6 +13,8 @@ import argparse
 import math
 from pathlib import Path
 
+from kinema.cli._args import sample_paths
+
 SUFFIXES = (".glb", ".bvh", ".bvh.gz", ".npz")
 
 
@@ -34,7 +36,7 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     if args.constraints is not None and not args.constraints.is_file():
         raise KinemaError(f"{args.constraints}: no such constraints file")
     samples = args.samples or 1
-    outputs = _outputs(args.out, samples)
+    outputs = sample_paths(args.out, samples)
     if args.rig is not None:
         for out in outputs:
             check_output_path(out)
@@ -106,9 +108,3 @@ def _generate(model, args: argparse.Namespace, what, samples: int):
     return model.generate(what, rig=rig, constraints=own, samples=samples, **kw), []
 
 
-def _outputs(out: Path, n: int) -> list[Path]:
-    if n == 1:
-        return [out]
-    name = out.name
-    stem, suffix = (name[: -len(".bvh.gz")], ".bvh.gz") if name.lower().endswith(".bvh.gz") else (out.stem, out.suffix)
-    return [out.with_name(f"{stem}_{i:02d}{suffix}") for i in range(n)]
