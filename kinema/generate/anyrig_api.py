@@ -38,6 +38,7 @@ from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
+from kinema.generate.results import MotionResults
 from kinema.generate.segments import segment_bounds
 from kinema.generate.timeline import parse_timeline
 from kinema.geometry.rotations import quat_inverse, quat_rotate
@@ -68,20 +69,10 @@ class AnyRigReport:
     warnings: list[str] = field(default_factory=list)
 
 
-class AnyRigResult(Sequence):
+class AnyRigResult(MotionResults):
     """The motions of one call (indexable like a list) and its report."""
 
-    def __init__(self, motions: list[Motion], report: AnyRigReport) -> None:
-        self.motions, self.report = list(motions), report
-
-    def __getitem__(self, index):
-        return self.motions[index]
-
-    def __len__(self) -> int:
-        return len(self.motions)
-
-    def __repr__(self) -> str:
-        return f"AnyRigResult({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
+    report: AnyRigReport
 
 
 class AnyRigModel:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -23,6 +22,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel
 from kinema.generate.progress import ProgressFn, StepProgress, split_progress
+from kinema.generate.results import MotionResults
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments, stack_targets
 from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
@@ -70,21 +70,10 @@ class GenerationReport:
     objectives: dict = field(default_factory=dict)
 
 
-class GenerationResult(Sequence):
+class GenerationResult(MotionResults):
     """The motions of one ``generate`` call (indexable like a list) and that call's own report."""
 
-    def __init__(self, motions: list[Motion], report: GenerationReport):
-        self.motions = list(motions)
-        self.report = report
-
-    def __getitem__(self, index):
-        return self.motions[index]
-
-    def __len__(self) -> int:
-        return len(self.motions)
-
-    def __repr__(self) -> str:
-        return f"GenerationResult({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
+    report: GenerationReport
 
 
 class KinemaModel:
