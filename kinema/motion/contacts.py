@@ -25,16 +25,21 @@ class ContactThresholds:
     speed: float = 0.30
 
 
+def side_contacts(roles: dict[str, int], side: str) -> tuple[int, int] | None:
+    """(heel, toe) joint indices of one side (the ankle stands in for a missing heel), or None."""
+    heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
+    toe = roles.get(f"{side}_toe")
+    return None if heel is None or toe is None else (heel, toe)
+
+
 def contact_joints(skeleton: Skeleton) -> list[int]:
     """Indices of [left heel, left toe, right heel, right toe] (ankles when the rig has no heels)."""
-    roles = skeleton.roles
-    out = []
+    out: list[int] = []
     for side in ("left", "right"):
-        heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
-        toe = roles.get(f"{side}_toe")
-        if heel is None or toe is None:
+        pair = side_contacts(skeleton.roles, side)
+        if pair is None:
             skeleton.require_roles([f"{side}_ankle", f"{side}_toe"])
-        out += [heel, toe]
+        out += pair
     return out
 
 

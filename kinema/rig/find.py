@@ -33,6 +33,7 @@ import re
 import torch
 
 from kinema.kinematics import forward_kinematics
+from kinema.motion.contacts import side_contacts
 from kinema.skeleton import Skeleton
 
 #: a foot lies in this fraction of the skeleton's height above its lowest joint
@@ -62,15 +63,9 @@ def named_contacts(skeleton: Skeleton) -> tuple[int, ...] | None:
     """[L heel, L toe, R heel, R toe] (ankles standing in for heels) when names give all four; [L ankle,
     R ankle] for a biped without toe joints; else None."""
     roles = skeleton.roles
-    out = []
-    for side in ("left", "right"):
-        heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
-        toe = roles.get(f"{side}_toe")
-        if heel is None or toe is None:
-            break
-        out += [heel, toe]
-    else:
-        return tuple(out)
+    left, right = side_contacts(roles, "left"), side_contacts(roles, "right")
+    if left is not None and right is not None:
+        return (*left, *right)
     if "left_ankle" in roles and "right_ankle" in roles and not skeleton.children[roles["left_ankle"]]:
         return (roles["left_ankle"], roles["right_ankle"])
     return None
