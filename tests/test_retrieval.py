@@ -38,24 +38,19 @@ def _one_thread():
     torch.set_num_threads(n)
 
 
+#: the brief training of the fixture, repeated by the determinism test
+TRAIN_SETTINGS = dict(
+    steps=80, batch_size=8, lr=3e-3, seed=0, text_encoder="hash-test-32", config=TINY, warmup=5, progress=False,
+    log_every=20,
+)
+
+
 @pytest.fixture(scope="module")
 def trained(tiny_data, tmp_path_factory):
     """A tiny model trained briefly on the tiny build's train clips (hash text encoder)."""
     out = tmp_path_factory.mktemp("retrieval") / "m"
     torch.manual_seed(0)
-    model = train_retrieval(
-        tiny_data,
-        out,
-        steps=80,
-        batch_size=8,
-        lr=3e-3,
-        seed=0,
-        text_encoder="hash-test-32",
-        config=TINY,
-        warmup=5,
-        progress=False,
-        log_every=20,
-    )
+    model = train_retrieval(tiny_data, out, **TRAIN_SETTINGS)
     return model, out
 
 
@@ -75,19 +70,7 @@ def test_beats_chance_on_train_clips(trained, tiny_data):
 
 def test_training_is_deterministic(trained, tiny_data, tmp_path):
     model, _ = trained
-    again = train_retrieval(
-        tiny_data,
-        tmp_path / "m",
-        steps=80,
-        batch_size=8,
-        lr=3e-3,
-        seed=0,
-        text_encoder="hash-test-32",
-        config=TINY,
-        warmup=5,
-        progress=False,
-        log_every=20,
-    )
+    again = train_retrieval(tiny_data, tmp_path / "m", **TRAIN_SETTINGS)
     for (k, a), b in zip(model.state_dict().items(), again.state_dict().values(), strict=True):
         assert torch.equal(a, b), k
 
