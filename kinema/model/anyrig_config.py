@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from kinema.errors import KinemaError
-from kinema.model.config import reject_unknown_keys
+from kinema.model.config import read_config_object, reject_unknown_keys
 from kinema.representation.joint import NUM_CHANNELS
 
 ANYRIG_PRESETS: dict[str, dict[str, Any]] = {
@@ -130,13 +130,7 @@ class AnyRigConfig:
 
     @classmethod
     def load_json(cls, path: str | Path) -> AnyRigConfig:
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError, RecursionError) as exc:
-            raise KinemaError(f"cannot read any-rig config {path}: {exc}") from None
-        if not isinstance(data, dict):
-            raise KinemaError(f"any-rig config {path} is not a JSON object")
-        return cls.from_dict(data)
+        return cls.from_dict(read_config_object(path, "any-rig config"))
 
 
 def get_anyrig_config(name: str, **overrides: Any) -> AnyRigConfig:

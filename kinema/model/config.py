@@ -56,6 +56,20 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 
+def read_config_object(path: str | Path, what: str) -> dict:
+    """The JSON object in the config file ``path``; unreadable, malformed, too deeply nested or non-object
+    files are a one-line `KinemaError` naming ``what`` and the path."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise KinemaError(f"cannot read {what} {path}: {exc}") from exc
+    except RecursionError:
+        raise KinemaError(f"cannot read {what} {path}: JSON nested too deeply") from None
+    if not isinstance(data, dict):
+        raise KinemaError(f"{what} {path} is not a JSON object")
+    return data
+
+
 def reject_unknown_keys(cls, data, what: str) -> None:
     """Raise ``KinemaError("unknown {what}: [...]")`` for keys of ``data`` that are not fields of the
     dataclass ``cls`` (every config saved as JSON next to weights is read strictly: a typo is an error)."""
@@ -162,15 +176,7 @@ class ModelConfig:
 
     @classmethod
     def load_json(cls, path: str | Path) -> ModelConfig:
-        try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise KinemaError(f"cannot read model config {path}: {exc}") from exc
-        except RecursionError:
-            raise KinemaError(f"cannot read model config {path}: JSON nested too deeply") from None
-        if not isinstance(data, dict):
-            raise KinemaError(f"model config {path} is not a JSON object")
-        return cls.from_dict(data)
+        return cls.from_dict(read_config_object(path, "model config"))
 
 
 def preset_names() -> list[str]:
