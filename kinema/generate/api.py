@@ -32,13 +32,7 @@ from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
 from kinema.objectives.optimize import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
-from kinema.objectives.sample import (
-    add_final,
-    collect_objectives,
-    objective_settings,
-    sample_with_objectives,
-    worse_than_raw,
-)
+from kinema.objectives.sample import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.representation.flat import FlatRepresentation
 from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
 
@@ -206,7 +200,6 @@ class KinemaModel:
             motions, obj_report, obj_warnings = add_final(obj_report, bound, motions, raw)
         warnings = [m.warning() for m in matches if not m.known] + obj_warnings
         warnings += [w for r in residuals for w in r.get("warnings", [])]
-        warnings += worse_than_raw(obj_report)
         report = GenerationReport(
             seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,

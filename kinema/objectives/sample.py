@@ -123,7 +123,8 @@ WORSE_BY_M, WORSE_FACTOR = 0.02, 1.5
 def add_final(
     report: dict, bound: list[Bound], motions: list[Motion], raw: list[Motion]
 ) -> tuple[list[Motion], dict, list[str]]:
-    """(motions, report, warnings): each objective's value on the final motions as ``"final"``.
+    """(motions, report, warnings): each objective's value on the final motions as ``"final"``, and the
+    warnings of `worse_than_raw` for what post-processing still left worse.
 
     Post-processing knows explicit targets, not objectives: removing foot skate can pull a pelvis that
     glided along a time-agnostic path 70 cm off it. Where it leaves an objective more than
@@ -143,7 +144,8 @@ def add_final(
                 )
     final = errors(bound, torch.stack([m.positions.float() for m in out]))
     objs = [dict(o, final=f) for o, f in zip(report["objectives"], final, strict=True)]
-    return out, dict(report, objectives=objs), warnings
+    report = dict(report, objectives=objs)
+    return out, report, warnings + worse_than_raw(report)
 
 
 #: a final (post-processed) objective value worse than the raw one by more than this (metres) is warned of
