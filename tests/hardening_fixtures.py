@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_bvh import GOOD
+from tests.test_bvh_errors import GOOD
 
 SHIPPED = Path(__file__).resolve().parents[1] / "kinema/assets/models/default"
 DEEP = "[" * 100000 + "]" * 100000

@@ -18,7 +18,7 @@ from kinema.io import load_motion
 from kinema.motion.core import Motion
 from tests import hardening_fixtures as fixtures
 from tests.hardening_fixtures import DEEP, FAST, SHIPPED, one_line_error
-from tests.test_bvh import GOOD
+from tests.test_bvh_errors import GOOD
 from tests.test_motion import random_motion
 
 bvh_file, no_model = fixtures.bvh_file, fixtures.no_model  # fixtures shared with the other hardening tests
