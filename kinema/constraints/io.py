@@ -1,4 +1,4 @@
-"""Constraint files: JSON <-> typed constraints (format in docs/constraints.md), and poses from BVH.
+"""Constraint files: JSON <-> typed constraints (format in docs/constraints.md).
 
 A constraints file is a JSON list of objects (or ``{"fps": 30, "constraints": [...]}`` when its
 ``frame_indices`` are at another fps than the model's, see kinema.constraints.fps), each with a
@@ -10,22 +10,25 @@ so are Kimodo's whole-pose end-effector constraints (kinema.constraints.kimodo).
 `load_constraints` validates everything against the model skeleton, fps and duration and raises
 `ConstraintError` naming the file, the constraint (counted from 0), the field and the reason.
 Keys starting with ``_`` (and ``comment``) are ignored, any other unknown key is an error (typos).
+Poses from BVH (``"bvh": ...``) are read by kinema.constraints.bvh_poses (`poses_from_bvh`,
+`fullbody_from_bvh`, re-exported here).
 """
 
 from __future__ import annotations
 
 import json
-import math
-import numbers
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 
+from kinema.constraints.bvh_poses import SCALE_RATIO_LIMIT as SCALE_RATIO_LIMIT
+from kinema.constraints.bvh_poses import fullbody_from_bvh as fullbody_from_bvh
+from kinema.constraints.bvh_poses import poses_from_bvh
 from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
+from kinema.constraints.json_values import int_list, time_list
 from kinema.constraints.kimodo import adapt_pose_form, warn_foreign
-from kinema.constraints.retarget import rest_alignment, retarget_globals
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -33,38 +36,39 @@ from kinema.constraints.types import (
     ConstraintError,
     EndEffectorConstraint,
     FullBodyConstraint,
-    frames_from_times,
     json_array,
 )
-from kinema.errors import KinemaError
-from kinema.geometry.rotations import quat_inverse, quat_mul, quat_normalize, quat_to_axis_angle
 from kinema.io.atomic import atomic_write_bytes
-from kinema.io.bvh import read_bvh
 from kinema.skeleton import Skeleton
 
 #: Per type: JSON key -> dataclass attribute (first key of each attribute is the one `save` writes).
 KEYS: dict[str, dict[str, str]] = {
-    "fullbody": {"local_joints_rot": "local_rotations", "local_rotations": "local_rotations",
-                 "root_positions": "root_positions", "smooth_root_2d": "smooth_root_2d"},
-    "end-effector": {"joint": "joint", "positions": "positions", "rotations": "rotations",
-                     "smooth_root_2d": "smooth_root_2d"},
-    "root2d": {"smooth_root_2d": "positions", "positions": "positions", "global_root_heading": "heading",
-               "heading": "heading", "dense": "dense"},
+    "fullbody": {
+        "local_joints_rot": "local_rotations",
+        "local_rotations": "local_rotations",
+        "root_positions": "root_positions",
+        "smooth_root_2d": "smooth_root_2d",
+    },
+    "end-effector": {
+        "joint": "joint",
+        "positions": "positions",
+        "rotations": "rotations",
+        "smooth_root_2d": "smooth_root_2d",
+    },
+    "root2d": {
+        "smooth_root_2d": "positions",
+        "positions": "positions",
+        "global_root_heading": "heading",
+        "heading": "heading",
+        "dense": "dense",
+    },
     "foot-contact": {"contacts": "contacts", "foot_contacts": "contacts"},
 }
 COMMON_KEYS = ("type", "frame_indices", "times")
 BVH_KEYS = ("bvh", "source_frames", "source_times", "scale", "recenter")
-#: Bone-length ratio (BVH / model) outside [1/LIMIT, LIMIT] means a wrong ``scale``.
-SCALE_RATIO_LIMIT = 4.0
 
 
 # ---------------------------------------------------------------------------- JSON values
-def _int_list(value, key: str) -> list[int]:
-    if not isinstance(value, list):
-        raise ConstraintError(f"expected a list of integers, got {json.dumps(value)}", field=key)
-    return value  # element checks (integers, range) happen in Constraint.frames
-
-
 def _resolve_file(path: str, base_dirs: Sequence[Path]) -> Path:
     """A relative path is looked up in each of ``base_dirs`` in turn (the constraints file's folder,
     then the current directory); an absolute one is used as is."""
@@ -77,97 +81,10 @@ def _resolve_file(path: str, base_dirs: Sequence[Path]) -> Path:
     raise ConstraintError(f"BVH file not found: {path} (looked for {tried})", field="bvh")
 
 
-# ---------------------------------------------------------------------------- poses from BVH
-def fullbody_from_bvh(path, source_frames: Sequence[int] | None, frames: Sequence[int] | None = None, *,
-                      skeleton: Skeleton, fps: float, scale: float = 1.0, times: Sequence[float] | None = None,
-                      source_times: Sequence[float] | None = None, recenter: bool = False) -> FullBodyConstraint:
-    """A `FullBodyConstraint` with poses taken from a BVH file (the in-betweening workflow).
-
-    ``source_frames`` index the clip *after* resampling to ``fps`` (or ``source_times``, seconds);
-    the poses go to ``frames`` (or ``times``; default: the same frames/times as the source). Joints
-    are matched by name; ``scale`` multiplies the file's lengths (0.01 for centimetres). See
-    :func:`poses_from_bvh`.
-    """
-    rots, root = poses_from_bvh(path, source_frames, skeleton=skeleton, fps=fps, scale=scale,
-                                recenter=recenter, source_times=source_times)
-    if frames is None and times is None:
-        frames = None if source_frames is None else list(source_frames)
-        times = None if source_times is None else list(source_times)
-    return FullBodyConstraint(frame_indices=frames, times=times, local_rotations=rots, root_positions=root)
-
-
-def poses_from_bvh(path, source_frames: Sequence[int] | None, *, skeleton: Skeleton, fps: float,
-                   scale: float = 1.0, recenter: bool = False,
-                   source_times: Sequence[float] | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """Poses of a BVH clip on the model skeleton: ``(local axis-angle (K, J, 3), root position (K, 3))``.
-
-    The file is read with `kinema.io.bvh.read_bvh` (lengths times ``scale``), joints the model lacks
-    are pruned (Bandai's static ``joint_Root`` above ``Hips`` included), the clip is resampled to
-    ``fps`` and ``source_frames`` index that resampled clip (or ``source_times``: seconds into the clip,
-    frame ``floor(t * fps + 0.5)``). Joints are matched by name; the model's
-    joints missing from the file are an error naming them. Global rotations are kept exactly (after a
-    rest-pose alignment where the file's bones point elsewhere at rest: kinema.constraints.retarget) and
-    turned into local rotations with the model's parents. ``recenter`` shifts the poses horizontally
-    so that the first one's root is above the origin (where the model's training clips start).
-    """
-    if isinstance(scale, bool) or not isinstance(scale, int | float) or not (math.isfinite(scale) and scale > 0):
-        raise ConstraintError(f"expected a positive number, got {scale!r}", field="scale")
-    if not Path(path).is_file():
-        raise ConstraintError(f"BVH file not found: {path}", field="bvh")
-    try:
-        motion = read_bvh(path, scale=float(scale))
-    except KinemaError as err:
-        raise ConstraintError(str(err), field="bvh") from None
-    names = motion.skeleton.names
-    missing = [n for n in skeleton.names if n not in names]
-    if missing:
-        raise ConstraintError(
-            f"{path}: joints of the model skeleton missing from the BVH (matched by name): {missing}", field="bvh")
-    extra = [n for n in names if n not in skeleton.names]
-    try:
-        motion = motion.prune(extra).resample(fps)
-    except KinemaError as err:
-        raise ConstraintError(f"{path}: cannot prune joints {extra}: {err}", field="bvh") from None
-    idx = [motion.skeleton.names.index(n) for n in skeleton.names]
-    model_len = float(skeleton.offsets.norm(dim=-1).sum())
-    clip_len = float(motion.skeleton.offsets[idx].norm(dim=-1).sum())
-    ratio = clip_len / max(model_len, 1e-12)
-    if not 1.0 / SCALE_RATIO_LIMIT <= ratio <= SCALE_RATIO_LIMIT:
-        raise ConstraintError(
-            f"the BVH skeleton is {ratio:.3g} times the model skeleton's size: wrong scale? "
-            "(use 0.01 for centimetre files such as Bandai Namco's)", field="scale")
-    if (source_frames is None) == (source_times is None):
-        raise ConstraintError("give exactly one of 'source_frames' and 'source_times'", field="source_frames")
-    if source_times is not None:
-        times = _time_list(list(source_times), "source_times")
-        if any(not math.isfinite(t) or t < 0 for t in times):
-            raise ConstraintError(f"times must be finite and not negative, got {times}", field="source_times")
-        source_frames = frames_from_times(times, fps)
-    frames = _int_list(list(source_frames), "source_frames")
-    T = motion.num_frames
-    frames = [int(f) if isinstance(f, numbers.Integral) and not isinstance(f, bool) else f for f in frames]
-    for f in frames:
-        if isinstance(f, bool) or not isinstance(f, numbers.Integral) or not 0 <= f < T:
-            raise ConstraintError(
-                f"source frame {f!r} is outside the clip ({T} frames at {fps:g} fps after resampling)",
-                field="source_frames")
-    if not frames:
-        raise ConstraintError("needs at least one frame", field="source_frames")
-    G, P = motion.global_transforms()
-    G, P = G[frames][:, idx], P[frames][:, idx]
-    G = retarget_globals(G, rest_alignment(skeleton, motion.skeleton.offsets[idx]))
-    parents = [max(p, 0) for p in skeleton.parents]
-    local = quat_mul(quat_inverse(G[:, parents]), G)
-    local[:, 0] = G[:, 0]
-    root = P[:, 0].clone()
-    if recenter:
-        root[:, [0, 2]] -= root[:1, [0, 2]].clone()
-    return quat_to_axis_angle(quat_normalize(local)), root
-
-
 # ---------------------------------------------------------------------------- parsing
-def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton | None = None,
-                     fps: float | None = None) -> Constraint:
+def parse_constraint(
+    obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton | None = None, fps: float | None = None
+) -> Constraint:
     """One JSON object -> constraint (not yet checked against skeleton/duration, except that a
     ``bvh`` source needs ``skeleton`` and ``fps``). Errors carry field names as written in JSON."""
     if not isinstance(obj, dict):
@@ -213,7 +130,7 @@ def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton 
         raise ConstraintError("missing required field", field="joint")
     for key in ("frame_indices", "times"):
         if key in obj:
-            kwargs[key] = _int_list(obj[key], key) if key == "frame_indices" else _time_list(obj[key])
+            kwargs[key] = int_list(obj[key], key) if key == "frame_indices" else time_list(obj[key])
     if canonical == "fullbody" and "bvh" in obj:
         return _fullbody_from_json(obj, kwargs, base_dirs, skeleton, fps)
     for key in BVH_KEYS[1:]:
@@ -222,32 +139,36 @@ def parse_constraint(obj, *, base_dirs: Sequence[Path] = (), skeleton: Skeleton 
     return CONSTRAINT_TYPES[canonical](**kwargs)
 
 
-def _time_list(value, key: str = "times") -> list[float]:
-    if not isinstance(value, list) or any(isinstance(t, bool) or not isinstance(t, numbers.Real) for t in value):
-        raise ConstraintError(f"expected a list of times in seconds, got {value!r}", field=key)
-    return [float(t) for t in value]
-
-
 def _fullbody_from_json(obj: dict, kwargs: dict, base_dirs, skeleton, fps) -> FullBodyConstraint:
     for key in ("local_joints_rot", "local_rotations", "root_positions"):
         if key in obj:
-            raise ConstraintError(f"give either 'bvh' or 'local_joints_rot' + 'root_positions', not both "
-                                  f"('{key}' given)", field="bvh")
+            raise ConstraintError(
+                f"give either 'bvh' or 'local_joints_rot' + 'root_positions', not both ('{key}' given)", field="bvh"
+            )
     if skeleton is None or fps is None:
         raise ConstraintError("reading poses from a BVH file needs the model skeleton and fps", field="bvh")
     if not isinstance(obj["bvh"], str):
         raise ConstraintError(f"expected a file path, got {json.dumps(obj['bvh'])}", field="bvh")
     if ("source_frames" in obj) == ("source_times" in obj):
-        raise ConstraintError("give exactly one of 'source_frames' and 'source_times' (the poses of the BVH "
-                              "clip to take)", field="source_frames")
-    source = _int_list(obj["source_frames"], "source_frames") if "source_frames" in obj else None
-    source_times = _time_list(obj["source_times"], "source_times") if "source_times" in obj else None
+        raise ConstraintError(
+            "give exactly one of 'source_frames' and 'source_times' (the poses of the BVH clip to take)",
+            field="source_frames",
+        )
+    source = int_list(obj["source_frames"], "source_frames") if "source_frames" in obj else None
+    source_times = time_list(obj["source_times"], "source_times") if "source_times" in obj else None
     recenter = obj.get("recenter", False)
     if not isinstance(recenter, bool):
         raise ConstraintError(f"expected true or false, got {json.dumps(recenter)}", field="recenter")
     path = _resolve_file(obj["bvh"], base_dirs)
-    rots, root = poses_from_bvh(path, source, skeleton=skeleton, fps=fps, scale=obj.get("scale", 1.0),
-                                recenter=recenter, source_times=source_times)
+    rots, root = poses_from_bvh(
+        path,
+        source,
+        skeleton=skeleton,
+        fps=fps,
+        scale=obj.get("scale", 1.0),
+        recenter=recenter,
+        source_times=source_times,
+    )
     if "frame_indices" not in kwargs and "times" not in kwargs:
         if source is not None:
             kwargs["frame_indices"] = source
@@ -256,9 +177,16 @@ def _fullbody_from_json(obj: dict, kwargs: dict, base_dirs, skeleton, fps) -> Fu
     return FullBodyConstraint(local_rotations=rots, root_positions=root, **kwargs)
 
 
-def load_constraints(path_or_obj, skeleton: Skeleton, fps: float, num_frames: int | None = None, *,
-                     base_dir: str | os.PathLike | None = None, source_fps: float | None = None,
-                     foreign_poses: str = "root") -> list[Constraint]:
+def load_constraints(
+    path_or_obj,
+    skeleton: Skeleton,
+    fps: float,
+    num_frames: int | None = None,
+    *,
+    base_dir: str | os.PathLike | None = None,
+    source_fps: float | None = None,
+    foreign_poses: str = "root",
+) -> list[Constraint]:
     """Read and validate constraints from a JSON file (path) or already parsed JSON (list or object).
 
     ``num_frames`` is the motion length at ``fps`` (None: no upper bound is checked). Relative
@@ -281,8 +209,9 @@ def load_constraints(path_or_obj, skeleton: Skeleton, fps: float, num_frames: in
             written, foreign_j = adapt_pose_form(obj, skeleton, foreign_poses)
             if foreign_j is not None:
                 foreign.append((i, kind, foreign_j))
-            c = parse_constraint(frames_to_source_times(written, src_fps, fps), base_dirs=base_dirs,
-                                 skeleton=skeleton, fps=fps)
+            c = parse_constraint(
+                frames_to_source_times(written, src_fps, fps), base_dirs=base_dirs, skeleton=skeleton, fps=fps
+            )
             c = convert_frames(c, src_fps, fps, num_frames)
             c.check(skeleton, fps, num_frames)
         except ConstraintError as err:

@@ -19,11 +19,7 @@ only once complete, so an interrupted build never leaves a half-written cache be
 
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
-import os
-import shutil
-import tempfile
 import time
 from collections import defaultdict
 from dataclasses import asdict
@@ -34,6 +30,7 @@ import numpy as np
 import torch
 
 from kinema.data.bandai import ClipInfo, list_clips, load_clip, min_toe_height
+from kinema.data.build_folder import write_build_folder
 from kinema.data.captions import captions_for, mirror_content
 from kinema.data.phrasings import extra_captions
 from kinema.data.split import SPLITS, assign_splits, group_of
@@ -174,8 +171,15 @@ def with_clean_rest_pose(skeleton: Skeleton, feats: list, records: list[dict], f
     f = torch.from_numpy(np.asarray(feats[order[0]])).double()
     motion = features_to_motion(f, skeleton, fps)
     rest = standing_rest_pose(motion, 0)
-    return Skeleton(skeleton.names, skeleton.parents, skeleton.offsets, rest, skeleton.end_sites,
-                    skeleton.role_overrides, skeleton.name)
+    return Skeleton(
+        skeleton.names,
+        skeleton.parents,
+        skeleton.offsets,
+        rest,
+        skeleton.end_sites,
+        skeleton.role_overrides,
+        skeleton.name,
+    )
 
 
 def _prepare_out(out_dir: Path) -> None:
@@ -186,10 +190,6 @@ def _prepare_out(out_dir: Path) -> None:
         if any(out_dir.iterdir()) and not (out_dir / "meta.json").is_file():
             raise DataError(f"{out_dir}: output directory is not empty and is not a kinema dataset build")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-
-
-def _write_json(path: Path, obj, indent: int | None = 1) -> None:
-    path.write_text(json.dumps(obj, indent=indent, ensure_ascii=False) + "\n", encoding="utf-8")
 
 
 def _split_counts(records: list[dict]) -> dict:
@@ -235,11 +235,36 @@ def build_dataset(
     clips = select_subset(all_clips, limit)
     _prepare_out(out_dir)
 
+    feats, records = _load_clips(clips, splits, float(fps), mirror, workers, progress)
+    skeleton, offset_spread = _shared_skeleton(records)
+    layout = FeatureLayout(skeleton.num_joints)
+    _assign_rows(feats, records, layout)
+    skeleton = with_clean_rest_pose(skeleton, feats, records, float(fps))
+    stats = _train_stats(feats, records, layout)
+    features = torch.from_numpy(np.concatenate(feats, axis=0))
+    del feats
+    if not torch.isfinite(features).all():
+        raise DataError("features contain NaN or inf")
+
+    meta = _meta(root, clips, records, features, layout, fps, mirror, limit, offset_spread)
+    files = {
+        "clips.json": [{k: r[k] for k in RECORD_KEYS} for r in records],
+        "skeleton.json": skeleton.to_dict(),
+        "stats.json": stats.to_dict(),
+    }
+    write_build_folder(out_dir, features, files, meta, fps=fps, dim=layout.dim, t0=t0)
+    return meta
+
+
+def _load_clips(
+    clips: list[ClipInfo], splits: dict, fps: float, mirror: bool, workers: int, progress: bool
+) -> tuple[list[np.ndarray], list[dict]]:
+    """Features and records of every clip (and mirror) in clip order, each record given its split."""
     from tqdm import tqdm
 
     feats: list[np.ndarray] = []
     records: list[dict] = []
-    tasks = [(c, float(fps), mirror) for c in clips]
+    tasks = [(c, fps, mirror) for c in clips]
     bar = tqdm(total=len(tasks), desc="bandai-namco", unit="clip", disable=not progress)
     try:
         for result in _iter_results(tasks, max(1, int(workers))):
@@ -250,29 +275,42 @@ def build_dataset(
             bar.update(1)
     finally:
         bar.close()
+    return feats, records
 
-    skeleton, offset_spread = _shared_skeleton(records)
-    layout = FeatureLayout(skeleton.num_joints)
+
+def _assign_rows(feats: list[np.ndarray], records: list[dict], layout: FeatureLayout) -> None:
+    """Check each clip's feature shape and give its record the first row it will have in the big tensor."""
     start = 0
     for f, rec in zip(feats, records, strict=True):
         if f.shape != (rec["length"], layout.dim):
             raise DataError(f"{rec['path']}: features of shape {f.shape}, expected (T, {layout.dim})")
         rec["start"] = start
         start += rec["length"]
-    skeleton = with_clean_rest_pose(skeleton, feats, records, float(fps))
+
+
+def _train_stats(feats: list[np.ndarray], records: list[dict], layout: FeatureLayout) -> NormStats:
+    """Normalisation statistics of the train split only, so that no test clip leaks into training."""
     train = [torch.from_numpy(f) for f, r in zip(feats, records, strict=True) if r["split"] == "train"]
     if not train:
         raise DataError("no clip of the selection is in the train split; use a larger --limit")
     # statistics of what training sees: first frame over the origin, any heading (see NormStats)
-    stats = NormStats.compute((canonicalize_start(f, layout) for f in train), xz_pairs=layout.xz_pairs())
-    features = torch.from_numpy(np.concatenate(feats, axis=0))
-    del feats, train
-    if not torch.isfinite(features).all():
-        raise DataError("features contain NaN or inf")
+    return NormStats.compute((canonicalize_start(f, layout) for f in train), xz_pairs=layout.xz_pairs())
 
-    table = [{k: r[k] for k in RECORD_KEYS} for r in records]
+
+def _meta(
+    root: Path,
+    clips: list[ClipInfo],
+    records: list[dict],
+    features: torch.Tensor,
+    layout: FeatureLayout,
+    fps: float,
+    mirror: bool,
+    limit: int | None,
+    offset_spread: float,
+) -> dict:
+    """The meta.json contents (``build_seconds`` is filled in just before writing)."""
     toe = [r["min_toe_height"] for r in records]
-    meta = {
+    return {
         "format_version": FORMAT_VERSION,
         "dataset": "bandai-namco",
         "fps": float(fps),
@@ -296,52 +334,6 @@ def build_dataset(
             "splits": _split_counts(records),
         },
     }
-
-    from safetensors.torch import save_file
-
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
-    try:
-        save_file(
-            {"features": features.contiguous()},
-            str(tmp / "features.safetensors"),
-            metadata={"format": "kinema-features", "fps": str(float(fps)), "dim": str(layout.dim)},
-        )
-        _write_json(tmp / "clips.json", table)
-        _write_json(tmp / "skeleton.json", skeleton.to_dict())
-        _write_json(tmp / "stats.json", stats.to_dict(), indent=None)
-        meta["build_seconds"] = round(time.time() - t0, 1)
-        _write_json(tmp / "meta.json", meta)
-        _default_permissions(tmp)
-        _swap_into_place(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return meta
-
-
-def _default_permissions(folder: Path) -> None:
-    """mkdtemp makes a private (0700) folder; give the build the usual umask-based permissions."""
-    mask = os.umask(0)
-    os.umask(mask)
-    folder.chmod(0o777 & ~mask)
-    for f in folder.iterdir():
-        f.chmod(0o666 & ~mask)
-
-
-def _swap_into_place(tmp: Path, out_dir: Path) -> None:
-    """Rename the finished ``tmp`` folder to ``out_dir``, replacing an earlier build only now."""
-    old = None
-    if out_dir.exists():
-        old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
-        out_dir.rename(old)
-    try:
-        tmp.rename(out_dir)
-    except BaseException:
-        if old is not None:
-            old.rename(out_dir)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def _version() -> str:

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from kinema.data.build import FORMAT_VERSION, _write_json, with_clean_rest_pose
+from kinema.data.build import FORMAT_VERSION, with_clean_rest_pose
+from kinema.data.build_folder import write_json
 from kinema.data.sources import SourceFile
 from kinema.errors import DataError, KinemaError
 from kinema.motion.contacts import ContactThresholds
@@ -80,8 +81,8 @@ def write_flat(tmp: Path, files: dict[str, SourceFile], records: list[dict], fps
         str(tmp / "features.safetensors"),
         metadata={"format": "kinema-features", "fps": str(float(fps)), "dim": str(layout.dim)},
     )
-    _write_json(tmp / "skeleton.json", skeleton.to_dict())
-    _write_json(tmp / "stats.json", stats.to_dict(), indent=None)
+    write_json(tmp / "skeleton.json", skeleton.to_dict())
+    write_json(tmp / "stats.json", stats.to_dict(), indent=None)
     return {
         "flat_format_version": FORMAT_VERSION,
         "layout": layout.to_dict(),

@@ -39,8 +39,9 @@ from kinema.train.optim import lr_at
 KS = (1, 3, 10)
 
 
-def contrastive_loss(motion: torch.Tensor, text: torch.Tensor, groups: torch.Tensor,
-                     temperature: float) -> torch.Tensor:
+def contrastive_loss(
+    motion: torch.Tensor, text: torch.Tensor, groups: torch.Tensor, temperature: float
+) -> torch.Tensor:
     """Symmetric InfoNCE over (B, E) unit embeddings; same-``groups`` pairs other than i<->i are masked."""
     logits = motion @ text.T / temperature
     same = groups[:, None] == groups[None, :]
@@ -53,8 +54,14 @@ def contrastive_loss(motion: torch.Tensor, text: torch.Tensor, groups: torch.Ten
 class _Sampler:
     """Group-first batches of random 2-10 s crops; a pure function of (seed, step)."""
 
-    def __init__(self, clips: list[torch.Tensor], groups: list[int], caption_ids: list[list[int]],
-                 min_frames: int, max_frames: int):
+    def __init__(
+        self,
+        clips: list[torch.Tensor],
+        groups: list[int],
+        caption_ids: list[list[int]],
+        min_frames: int,
+        max_frames: int,
+    ):
         self.clips, self.caption_ids = clips, caption_ids
         self.groups = torch.tensor(groups)
         self.members: list[list[int]] = [[] for _ in range(int(self.groups.max()) + 1)]
@@ -98,12 +105,25 @@ def _caption_tables(records: list[dict]) -> tuple[list[str], list[list[int]], li
     return list(texts), ids, groups
 
 
-def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000, batch_size: int = 128,
-                    lr: float = 5e-4, seed: int = 0, text_encoder: str = "minilm-l6-v2", *,
-                    config: RetrievalConfig | None = None, cache_dir: str | Path | None = None,
-                    warmup: int = 100, weight_decay: float = 0.01, half: bool = False, progress: bool = True,
-                    log_every: int = 50, max_seconds: float | None = None,
-                    command: str | None = None) -> RetrievalModel:
+def train_retrieval(
+    data_dir: str | Path,
+    out_dir: str | Path,
+    steps: int = 3000,
+    batch_size: int = 128,
+    lr: float = 5e-4,
+    seed: int = 0,
+    text_encoder: str = "minilm-l6-v2",
+    *,
+    config: RetrievalConfig | None = None,
+    cache_dir: str | Path | None = None,
+    warmup: int = 100,
+    weight_decay: float = 0.01,
+    half: bool = False,
+    progress: bool = True,
+    log_every: int = 50,
+    max_seconds: float | None = None,
+    command: str | None = None,
+) -> RetrievalModel:
     """Train on the ``train`` split of a build and save the model into ``out_dir``; returns the model.
 
     Deterministic for a seed (batches come from :func:`step_generator`, dropout from a seeded global
@@ -111,10 +131,45 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
     stop: training ends early (keeping the schedule planned for ``steps``) once it has run that long.
     The config's ``info`` records the settings, steps done, wall time and the loss curve (mean loss
     per ``log_every`` steps)."""
-    from tqdm.auto import tqdm
-
     if steps < 1 or batch_size < 2:
         raise KinemaError(f"need steps >= 1 and batch_size >= 2, got {steps} and {batch_size}")
+    ds, model, sampler, text_table = _setup(data_dir, text_encoder, cache_dir, config, seed)
+    schedule = {"seed": seed, "steps": steps, "batch_size": batch_size, "lr": lr, "warmup": warmup}
+    curve, done, wall = _fit(
+        model,
+        sampler,
+        text_table,
+        _optimizer(model, lr, weight_decay),
+        schedule,
+        log_every=log_every,
+        max_seconds=max_seconds,
+        progress=progress,
+    )
+    model.eval()
+    model.info = {
+        "data": str(data_dir),
+        "train_clips": len(ds),
+        "caption_groups": len(sampler.members),
+        "steps": steps,
+        "steps_done": done,
+        "batch_size": batch_size,
+        "lr": lr,
+        "warmup": warmup,
+        "weight_decay": weight_decay,
+        "seed": seed,
+        "torch_threads": torch.get_num_threads(),
+        "wall_seconds": round(wall, 1),
+        "loss_curve": curve,
+        "command": command,
+    }
+    model.save(out_dir, half=half)
+    return model
+
+
+def _setup(
+    data_dir: str | Path, text_encoder: str, cache_dir: str | Path | None, config: RetrievalConfig | None, seed: int
+) -> tuple[MotionDataset, RetrievalModel, _Sampler, torch.Tensor]:
+    """The train split, a freshly seeded model, its batch sampler and the caption embeddings (C, E)."""
     ds = MotionDataset(data_dir, "train")
     if len(ds) < 2:
         raise KinemaError(f"{data_dir}: the train split has {len(ds)} clips; retrieval training needs >= 2")
@@ -126,20 +181,47 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
     model = RetrievalModel(cfg, ds.layout, ds.stats, ds.fps, encoder.id)
     clips = [ds[i]["features"] for i in range(len(ds))]
     sampler = _Sampler(clips, groups, caption_ids, cfg.min_frames, cfg.max_frames)
+    return ds, model, sampler, text_table
+
+
+def _optimizer(model: RetrievalModel, lr: float, weight_decay: float) -> torch.optim.AdamW:
+    """AdamW with weight decay on matrices only (not on biases, norms or the ``cls`` token)."""
     decay = [p for n, p in model.named_parameters() if p.ndim >= 2 and n != "cls"]
     other = [p for n, p in model.named_parameters() if not (p.ndim >= 2 and n != "cls")]
-    opt = torch.optim.AdamW([{"params": decay, "weight_decay": weight_decay}, {"params": other, "weight_decay": 0.0}],
-                            lr=lr, betas=(0.9, 0.98))
+    return torch.optim.AdamW(
+        [{"params": decay, "weight_decay": weight_decay}, {"params": other, "weight_decay": 0.0}],
+        lr=lr,
+        betas=(0.9, 0.98),
+    )
+
+
+def _fit(
+    model: RetrievalModel,
+    sampler: _Sampler,
+    text_table: torch.Tensor,
+    opt: torch.optim.Optimizer,
+    schedule: dict,
+    *,
+    log_every: int,
+    max_seconds: float | None,
+    progress: bool,
+) -> tuple[list[list], int, float]:
+    """The training loop: ``(loss curve [[step, mean loss]], steps done, wall seconds)``; ``schedule``
+    holds seed, steps, batch_size, lr and warmup. Stops early once ``max_seconds`` have passed."""
+    from tqdm.auto import tqdm
+
+    seed, steps, batch_size = schedule["seed"], schedule["steps"], schedule["batch_size"]
     model.train()
     curve, window, t0, done = [], [], time.time(), 0
     bar = tqdm(range(steps), desc="retrieval", disable=not progress, dynamic_ncols=True)
     for step in bar:
         g = step_generator(seed, 0, step)
         feats, lengths, cap, grp = sampler.sample(batch_size, g)
-        loss = contrastive_loss(model.encode_motion(feats, lengths), model.encode_text(text_table[cap]),
-                                grp, cfg.temperature)
+        loss = contrastive_loss(
+            model.encode_motion(feats, lengths), model.encode_text(text_table[cap]), grp, model.config.temperature
+        )
         for group in opt.param_groups:
-            group["lr"] = lr_at(step, lr, warmup, steps)
+            group["lr"] = lr_at(step, schedule["lr"], schedule["warmup"], steps)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -154,16 +236,7 @@ def train_retrieval(data_dir: str | Path, out_dir: str | Path, steps: int = 3000
         if out_of_time:
             break
     bar.close()
-    wall = time.time() - t0
-    model.eval()
-    model.info = {
-        "data": str(data_dir), "train_clips": len(ds), "caption_groups": len(sampler.members),
-        "steps": steps, "steps_done": done, "batch_size": batch_size, "lr": lr, "warmup": warmup,
-        "weight_decay": weight_decay, "seed": seed, "torch_threads": torch.get_num_threads(),
-        "wall_seconds": round(wall, 1), "loss_curve": curve, "command": command,
-    }
-    model.save(out_dir, half=half)
-    return model
+    return curve, done, time.time() - t0
 
 
 # ---------------------------------------------------------------------------------------------- metrics
@@ -221,8 +294,15 @@ def _mean_dicts(ds: list[dict]) -> dict:
     return sum(ds) / len(ds)
 
 
-def evaluate_retrieval(model: RetrievalModel, data_dir: str | Path, split: str = "test", *,
-                       cache_dir: str | Path | None = None, batch: int = 32, seed: int = 0) -> dict:
+def evaluate_retrieval(
+    model: RetrievalModel,
+    data_dir: str | Path,
+    split: str = "test",
+    *,
+    cache_dir: str | Path | None = None,
+    batch: int = 32,
+    seed: int = 0,
+) -> dict:
     """Retrieval accuracy of ``model`` on ground-truth clips of ``split`` (see the module docstring).
 
     Returns ``{"split", "clips", "unique_captions", "full": ..., "batch32": ...}`` where each protocol
@@ -238,8 +318,12 @@ def evaluate_retrieval(model: RetrievalModel, data_dir: str | Path, split: str =
     labels = torch.tensor([ids.setdefault(c, len(ids)) for c in captions])
     motion = model.encode_clips([ds[i]["features"] for i in range(len(ds))])
     text = model.encode_captions(captions, cache_dir=cache_dir)
-    out = {"split": split, "clips": len(ds), "unique_captions": len(ids),
-           "full": retrieval_metrics(motion, text, labels)}
+    out = {
+        "split": split,
+        "clips": len(ds),
+        "unique_captions": len(ids),
+        "full": retrieval_metrics(motion, text, labels),
+    }
     if len(ds) >= batch:
         perm = torch.randperm(len(ds), generator=torch.Generator().manual_seed(seed))
         parts = [perm[k : k + batch] for k in range(0, len(ds) - batch + 1, batch)]
@@ -254,11 +338,18 @@ def format_metrics(res: dict) -> str:
     head = "| protocol | variant | direction | " + " | ".join(ks) + " |"
     lines = [head, "|" + "---|" * (3 + len(ks))]
     for proto in [p for p in res if p == "full" or p.startswith("batch")]:
-        name = f"whole {res['split']} split ({res['clips']} clips)" if proto == "full" else \
-            f"batches of {proto[5:]} ({res[proto]['batches']} batches)"
+        name = (
+            f"whole {res['split']} split ({res['clips']} clips)"
+            if proto == "full"
+            else f"batches of {proto[5:]} ({res[proto]['batches']} batches)"
+        )
         for kind in ("strict", "label_aware"):
-            for d, dname in (("t2m", "text->motion"), ("m2t", "motion->text"), ("ceiling", "best possible"),
-                             ("chance", "chance")):
+            for d, dname in (
+                ("t2m", "text->motion"),
+                ("m2t", "motion->text"),
+                ("ceiling", "best possible"),
+                ("chance", "chance"),
+            ):
                 if d not in res[proto][kind]:
                     continue
                 vals = " | ".join(f"{100 * res[proto][kind][d][k]:.1f}" for k in ks)

@@ -133,16 +133,44 @@ def two_bone_ik(
     D = d.norm(dim=-1, keepdim=True)
     dhat = torch.where(D > 1e-9, d / D.clamp_min(1e-12), _unit(pc - pa))
     Dc = D.clamp(abs(l1 - l2), l1 + l2)
+    bend = _bend_side(pa, pb, dhat, pole, fallback_bend)
+    q_knee = _knee_rotation(pa, pb, pc, bend, Dc, l1, l2)  # 1. knee angle about the current hinge axis
+    q_a = _swing_twist(pa, pb, pb + quat_rotate(q_knee, pc - pb), dhat, bend, l1)
+    if end_rotation is not None:
+        Gc_new = quat_slerp(G[:, c], torch.as_tensor(end_rotation).to(torch.float64), w)
+    elif keep_end_rotation:
+        Gc_new = G[:, c]
+    else:
+        Gc_new = quat_mul(q_a, quat_mul(q_knee, G[:, c]))
+    Ga_new, Gb_new = quat_mul(q_a, G[:, a]), quat_mul(q_a, quat_mul(q_knee, G[:, b]))
+    out = _chain_locals(L, G, skeleton.parents[a], chain, Ga_new, Gb_new, Gc_new)
+    active = (w > 0)[:, None, None]
+    return torch.where(active, out, L).to(dtype)
 
-    # bend side: perpendicular part of the pole (current middle joint by default)
+
+def _bend_side(
+    pa: torch.Tensor,
+    pb: torch.Tensor,
+    dhat: torch.Tensor,
+    pole: torch.Tensor | None,
+    fallback_bend: torch.Tensor | None,
+) -> torch.Tensor:
+    """Unit (T, 3) direction, perpendicular to the target line, the middle joint should point to:
+    the pole's (default: the current middle joint's) perpendicular part, the fallback where it vanishes."""
     hint = (pb if pole is None else torch.as_tensor(pole).to(torch.float64)) - pa
     fb = _any_perpendicular(dhat) if fallback_bend is None else torch.as_tensor(fallback_bend).to(torch.float64)
     fb = fb.expand_as(dhat)
     fb_perp = _unit(fb - _dot(fb, dhat) * dhat)
     perp = hint - _dot(hint, dhat) * dhat
-    bend = _unit(perp + 1e-10 * fb_perp)  # the fallback only decides where perp vanishes
+    return _unit(perp + 1e-10 * fb_perp)  # the fallback only decides where perp vanishes
 
-    # 1. knee angle about the current hinge axis (theta = angle between ab and bc, 0 when straight)
+
+def _knee_rotation(
+    pa: torch.Tensor, pb: torch.Tensor, pc: torch.Tensor, bend: torch.Tensor, Dc: torch.Tensor, l1: float, l2: float
+) -> torch.Tensor:
+    """Step 1: (T, 4) world rotation of the middle joint about its current hinge axis that makes
+    ``|c - a|`` equal ``Dc`` (law of cosines); a straight limb bends towards ``bend``."""
+    # theta = angle between ab and bc, 0 when straight
     ab, bc = pb - pa, pc - pb
     n0 = torch.linalg.cross(ab, bc, dim=-1)
     s0 = n0.norm(dim=-1, keepdim=True)
@@ -151,37 +179,40 @@ def two_bone_ik(
     n0 = torch.where(s0 > 1e-9 * l1 * l2, n0, straight_axis)
     theta0 = torch.atan2(s0, _dot(ab, bc))
     cos1 = ((Dc**2 - l1 * l1 - l2 * l2) / (2 * l1 * l2)).clamp(-1.0, 1.0)
-    q_knee = _axis_angle_quat(n0, torch.acos(cos1) - theta0)
-    c1 = pb + quat_rotate(q_knee, bc)
+    return _axis_angle_quat(n0, torch.acos(cos1) - theta0)
 
-    # 2. swing at a so that c lies along the target direction
+
+def _swing_twist(
+    pa: torch.Tensor, pb: torch.Tensor, c1: torch.Tensor, dhat: torch.Tensor, bend: torch.Tensor, l1: float
+) -> torch.Tensor:
+    """Steps 2 and 3: (T, 4) world rotation at ``a`` that swings the bent chain (end at ``c1``) onto
+    the target line ``dhat``, then twists it about that line so the middle joint points to ``bend``."""
     q_swing = quat_between(c1 - pa, dhat)
-    # 3. twist about the target line so the middle joint points to the bend side
-    kb = quat_rotate(q_swing, ab)
+    kb = quat_rotate(q_swing, pb - pa)
     kperp = kb - _dot(kb, dhat) * dhat
     kn = kperp.norm(dim=-1, keepdim=True)
     phi = torch.atan2(_dot(dhat, torch.linalg.cross(kperp, bend, dim=-1)), _dot(kperp, bend))
     phi = phi * (kn / (0.01 * l1)).clamp(max=1.0)  # undefined when the solved limb is straight: fade it out
-    q_twist = _axis_angle_quat(dhat, phi)
+    return quat_mul(_axis_angle_quat(dhat, phi), q_swing)
 
-    q_a = quat_mul(q_twist, q_swing)
-    Ga_new = quat_mul(q_a, G[:, a])
-    Gb_new = quat_mul(q_a, quat_mul(q_knee, G[:, b]))
-    if end_rotation is not None:
-        Gc_new = quat_slerp(G[:, c], torch.as_tensor(end_rotation).to(torch.float64), w)
-    elif keep_end_rotation:
-        Gc_new = G[:, c]
-    else:
-        Gc_new = quat_mul(q_a, quat_mul(q_knee, G[:, c]))
-    pa_idx = skeleton.parents[a]
-    Gpa = G[:, pa_idx] if pa_idx >= 0 else quat_identity(T, dtype=torch.float64)
 
+def _chain_locals(
+    L: torch.Tensor,
+    G: torch.Tensor,
+    parent_a: int,
+    chain: Sequence[int],
+    Ga_new: torch.Tensor,
+    Gb_new: torch.Tensor,
+    Gc_new: torch.Tensor,
+) -> torch.Tensor:
+    """Copy of the local rotations ``L`` with the chain's new global rotations turned back into locals."""
+    a, b, c = chain
+    Gpa = G[:, parent_a] if parent_a >= 0 else quat_identity(L.shape[0], dtype=torch.float64)
     out = L.clone()
     out[:, a] = quat_normalize(quat_mul(quat_inverse(Gpa), Ga_new))
     out[:, b] = quat_normalize(quat_mul(quat_inverse(Ga_new), Gb_new))
     out[:, c] = quat_normalize(quat_mul(quat_inverse(Gb_new), Gc_new))
-    active = (w > 0)[:, None, None]
-    return torch.where(active, out, L).to(dtype)
+    return out
 
 
 def forward_direction(motion: Motion) -> torch.Tensor:
@@ -221,8 +252,16 @@ def solve_ik(
     fwd = forward_direction(motion)
     fallback = -fwd if (chain[2] in hands or chain[1] in elbows) else fwd
     rots = two_bone_ik(
-        motion.local_rotations, motion.root_translation, skel, chain, target, weight, pole, fallback,
-        end_rotation, keep_end_rotation,
+        motion.local_rotations,
+        motion.root_translation,
+        skel,
+        chain,
+        target,
+        weight,
+        pole,
+        fallback,
+        end_rotation,
+        keep_end_rotation,
     )
     return Motion(skel, motion.fps, motion.root_translation, rots, motion.foot_contacts)
 

@@ -72,8 +72,13 @@ def _masked_mean(elementwise: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 def foot_contact_term(
-    pred_m: torch.Tensor, target_m: torch.Tensor, mask: torch.Tensor, layout: FeatureLayout, skeleton: Skeleton,
-    fps: float, weights: LossWeights,
+    pred_m: torch.Tensor,
+    target_m: torch.Tensor,
+    mask: torch.Tensor,
+    layout: FeatureLayout,
+    skeleton: Skeleton,
+    fps: float,
+    weights: LossWeights,
 ) -> torch.Tensor:
     """Foot-contact consistency (MDM's foot loss) on *unnormalised* features ``(B, T, D)``.
 
@@ -133,14 +138,7 @@ def motion_loss(
     Foot-contact term (not in the paper): with ``weights.foot_contact > 0`` the dict gains
     ``"foot_contact"`` (:func:`foot_contact_term`), added with that weight; it needs ``fps``.
     """
-    if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != layout.dim:
-        raise ValueError(
-            f"pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, T, {layout.dim})"
-        )
-    if pad_mask.shape != pred.shape[:2]:
-        raise ValueError(f"pad_mask has shape {tuple(pad_mask.shape)}, expected {tuple(pred.shape[:2])}")
-    if skeleton.num_joints != layout.num_joints:
-        raise ValueError(f"skeleton has {skeleton.num_joints} joints, layout {layout.num_joints}")
+    _check_shapes(pred, target, pad_mask, layout, skeleton)
     mask = pad_mask.to(device=pred.device, dtype=torch.bool)
     # Zero padded frames first: garbage (even NaN) there cannot leak into values or gradients.
     keep = mask[..., None]
@@ -151,7 +149,44 @@ def motion_loss(
     for name, sl in layout.slices.items():
         err = F.smooth_l1_loss(pred[..., sl], target[..., sl], reduction="none", beta=weights.beta)
         terms[name] = _masked_mean(err, mask)
+    terms.update(_metre_terms(pred, target, mask, layout, skeleton, stats, weights, fps))
 
+    total = sum(getattr(weights, name) * terms[name] for name in TERMS)
+    if "foot_contact" in terms:
+        total = total + weights.foot_contact * terms["foot_contact"]
+    logged = {name: term.detach() for name, term in terms.items()}
+    if constraint_mask is not None:
+        term = _constraint_term(pred, target, keep, constraint_mask, weights)
+        total = total + weights.constraint * term
+        logged["constraint"] = term.detach()
+    return total, logged
+
+
+def _check_shapes(
+    pred: torch.Tensor, target: torch.Tensor, pad_mask: torch.Tensor, layout: FeatureLayout, skeleton: Skeleton
+) -> None:
+    """Reject mismatched inputs with a message naming the shapes, before any arithmetic broadcasts them."""
+    if pred.shape != target.shape or pred.ndim != 3 or pred.shape[-1] != layout.dim:
+        raise ValueError(f"pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, T, {layout.dim})")
+    if pad_mask.shape != pred.shape[:2]:
+        raise ValueError(f"pad_mask has shape {tuple(pad_mask.shape)}, expected {tuple(pred.shape[:2])}")
+    if skeleton.num_joints != layout.num_joints:
+        raise ValueError(f"skeleton has {skeleton.num_joints} joints, layout {layout.num_joints}")
+
+
+def _metre_terms(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    mask: torch.Tensor,
+    layout: FeatureLayout,
+    skeleton: Skeleton,
+    stats: NormStats,
+    weights: LossWeights,
+    fps: float | None,
+) -> dict[str, torch.Tensor]:
+    """The terms computed on denormalised features (``"fk"``, and ``"foot_contact"`` when weighted),
+    in float32 with autocast off so that FK keeps its precision under mixed precision."""
+    terms: dict[str, torch.Tensor] = {}
     with torch.autocast(device_type=pred.device.type, enabled=False):
         pred_m = stats.denormalize(pred.float())
         target_m = stats.denormalize(target.float())
@@ -168,17 +203,15 @@ def motion_loss(
             if fps is None or not fps > 0:
                 raise ValueError(f"the foot-contact term needs the motion's fps, got {fps}")
             terms["foot_contact"] = foot_contact_term(pred_m, target_m, mask, layout, skeleton, fps, weights)
+    return terms
 
-    total = sum(getattr(weights, name) * terms[name] for name in TERMS)
-    if "foot_contact" in terms:
-        total = total + weights.foot_contact * terms["foot_contact"]
-    logged = {name: term.detach() for name, term in terms.items()}
-    if constraint_mask is not None:
-        if constraint_mask.shape != pred.shape:
-            raise ValueError(f"constraint_mask has shape {tuple(constraint_mask.shape)}, expected {tuple(pred.shape)}")
-        m = torch.where(keep, constraint_mask.to(pred.dtype), torch.zeros_like(pred))
-        err = F.smooth_l1_loss(pred, target, reduction="none", beta=weights.constraint_beta)
-        term = (err * m).sum() / m.sum().clamp_min(1.0)
-        total = total + weights.constraint * term
-        logged["constraint"] = term.detach()
-    return total, logged
+
+def _constraint_term(
+    pred: torch.Tensor, target: torch.Tensor, keep: torch.Tensor, constraint_mask: torch.Tensor, weights: LossWeights
+) -> torch.Tensor:
+    """Smooth L1 with the small ``constraint_beta`` averaged over the constrained, valid entries only."""
+    if constraint_mask.shape != pred.shape:
+        raise ValueError(f"constraint_mask has shape {tuple(constraint_mask.shape)}, expected {tuple(pred.shape)}")
+    m = torch.where(keep, constraint_mask.to(pred.dtype), torch.zeros_like(pred))
+    err = F.smooth_l1_loss(pred, target, reduction="none", beta=weights.constraint_beta)
+    return (err * m).sum() / m.sum().clamp_min(1.0)
