@@ -2,58 +2,220 @@
 
 Many game rigs drive each foot with an IK bone parented to a static armature joint on the floor and
 animate that bone's *translation*; the leg chain follows it in the engine, not in the skeleton, so
-kinema's leg IK (kinema.postprocess.footlock) cannot lock it. Here such a foot is locked directly:
-where it is planted (within ``GROUND`` of the floor, slower than ``SPEED``, at least ``MIN_FRAMES``
-frames) its ground position is held at the segment's mean, blended in and out over ``BLEND`` frames,
-and written back as the bone's local translation. Lengths are rig units scaled by the rig's size
-(rest-pose extent), so thresholds mean the same on a fish and a T-rex. Shapes ``(T, J, 3)``.
+kinema's leg IK (kinema.postprocess.footlock) cannot lock it. Here such a foot (`TranslatedFoot`: the
+bone and the rig's contact joints it carries, its *soles*) is cleaned up directly:
+
+- **jitter**: its world path is low-passed (Gaussian, ``SMOOTH_SECONDS``): the model's x0 prediction
+  shakes these bones frame to frame, and post-processing's rotation smoothing does not reach them;
+- **planted** where a sole is within ``GROUND`` of its rest height (where it stands), or where the
+  model's contact channel says so (> 0.5) and the sole is within ``BELIEVE`` of it. No speed test: a
+  foot the model slides along the floor is exactly the one to lock (the former 0.6 size/s rule let
+  those through: measured on the shipped model, 0 of 4 feet of the husky were ever locked);
+- **locked**: on a planted run the foot is held at one ground point with its sole on the floor. When
+  the model's own foot wanders more than ``REACH`` from that point (its body drifts) the foot takes a
+  step: over ``STEP_FRAMES`` frames it moves to where the model has it, lifted by ``STEP_HEIGHT`` at
+  mid-step, and is planted again there. Locks blend in and out over ``BLEND`` frames;
+- **above the floor** elsewhere: a sole never ends below its rest height;
+- frames with a joint target on the foot (``hold``) keep the foot exactly as generated.
+
+The result is written back as the bone's local translation, so no bone of the body changes length.
+Lengths are in rig units scaled by the rig's size (rest-pose extent), so the thresholds mean the same
+on a fish and a T-rex. Shapes: positions ``(T, J, 3)``, contacts ``(T, C)`` in the rig's contact order.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import torch
 
 from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
 from kinema.postprocess.footlock import contact_segments
+from kinema.rig import Rig
+from kinema.rig.find import rest_positions
+from kinema.skeleton import Skeleton
 
-GROUND = 0.04  # x rig size: planted when this close to the floor ...
-SPEED = 0.6  # x rig size per second: ... and slower than this
+GROUND = 0.04  # x rig size: a sole this close to its rest height is planted ...
+BELIEVE = 0.15  # ... and so is one the model flags as in contact this close to it
+REACH = 0.15  # x rig size: a planted foot steps when the model's foot is further than this from the lock
+STEP_FRAMES = 4
+STEP_HEIGHT = 0.05  # x rig size, at mid-step
+SMOOTH_SECONDS = 0.05
 MIN_FRAMES = 2
 BLEND = 3
 
 
-def lock_translated_feet(motion: Motion, joints: list[int], size: float) -> tuple[Motion, int]:
-    """``motion`` with the planted segments of ``joints`` (bones animated by translation, children of
-    joint 0) held in place; returns the motion and the number of locked segments."""
-    if not joints or motion.local_translations is None or motion.num_frames < 3:
-        return motion, 0
+@dataclass(frozen=True)
+class TranslatedFoot:
+    """A bone moved by translation under a floor-level armature that carries contact joints: ``soles``
+    (the bone itself and/or its descendants), their ``channels`` in the rig's contact order (empty when
+    the rig layer names none) and their ``rest`` heights above the rig's lowest rest joint."""
+
+    joint: int
+    soles: tuple[int, ...]
+    channels: tuple[int, ...]
+    rest: tuple[float, ...]
+
+
+def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
+    """Children of joint 0 when joint 0 is an armature helper on the floor (its rest height within
+    ``band`` of the lowest joint, relative to the rig's size) with several children: Quaternius rigs
+    move their body and IK-driven feet by animating these bones' translations, not rotations."""
+    P = rest_positions(skeleton)
+    extent = float((P.max(0).values - P.min(0).values).max())
+    kids = skeleton.children[0]
+    if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
+        return []
+    return list(kids)
+
+
+def rest_extent(skeleton: Skeleton) -> float:
+    """Largest side of the rest pose's bounding box (skeleton units): the unit the model works in, as
+    the data builds normalise every rig to it (kinema.data.motion_cache.rest_extent)."""
+    P = rest_positions(skeleton)
+    return float((P.max(0).values - P.min(0).values).max())
+
+
+def floor_height(skeleton: Skeleton, joint: int) -> float:
+    """Rest height of ``joint`` above the skeleton's lowest joint (skeleton units)."""
+    P = rest_positions(skeleton)
+    return float(P[joint, 1] - P[:, 1].min())
+
+
+def translated_feet(rig: Rig, root: int) -> list[TranslatedFoot]:
+    """The feet of ``rig`` moved by translation: bones under a floor-level armature, off the path to
+    ``root``, that carry contact joints of the rig, or (a rig layer that names none there) sit within
+    ``GROUND`` of the floor at rest (the bone is then its own sole)."""
+    skel = rig.skeleton
+    size = rest_extent(skel)
+    path = set(skel.path_from_root(root))
+    out = []
+    for j in floor_root_children(skel):
+        if j in path:
+            continue
+        below, stack = [], [j]
+        while stack:
+            k = stack.pop()
+            below.append(k)
+            stack.extend(skel.children[k])
+        soles = tuple(k for k in sorted(below) if k in rig.contacts)
+        if not soles and floor_height(skel, j) < GROUND * size:
+            soles = (j,)
+        if soles:
+            channels = tuple(rig.contacts.index(k) for k in soles if k in rig.contacts)
+            out.append(TranslatedFoot(j, soles, channels, tuple(floor_height(skel, k) for k in soles)))
+    return out
+
+
+def lock_translated_feet(
+    motion: Motion,
+    feet: list[TranslatedFoot],
+    size: float,
+    *,
+    contacts: torch.Tensor | None = None,
+    hold: dict[int, list[int]] | None = None,
+) -> tuple[Motion, dict]:
+    """``motion`` with ``feet`` de-jittered, planted feet locked (stepping after a drifting body) and
+    kept above the floor (see the module docstring). ``contacts (T, C)``: the model's contact channel;
+    ``hold``: joint -> frames of joint targets (a foot carrying one keeps its generated path there).
+    Returns the motion and ``{"translated_feet_segments", "translated_feet_steps"}``."""
+    report = {"translated_feet_segments": 0, "translated_feet_steps": 0}
+    if not feet or motion.local_translations is None or motion.num_frames < 3:
+        return motion, report
     G, P = motion.global_transforms()
-    floor = float(P[:, joints, 1].min())  # the feet themselves: joint 0 may ride along with the root
-    speed = torch.zeros(P.shape[:2], dtype=P.dtype)
-    speed[1:] = (P[1:, :, [0, 2]] - P[:-1, :, [0, 2]]).norm(dim=-1) * motion.fps
     new = P.clone()
-    count = 0
-    for j in joints:
-        planted = (P[:, j, 1] < floor + GROUND * size) & (speed[:, j] < SPEED * size)
-        for a, b in contact_segments(planted):
-            if b - a < MIN_FRAMES:
-                continue
-            count += 1
-            target = P[a:b, j, [0, 2]].mean(0)
-            w = torch.zeros(motion.num_frames, dtype=P.dtype)
-            w[a:b] = 1.0
-            for k in range(1, BLEND + 1):
-                if a - k >= 0:
-                    w[a - k] = torch.maximum(w[a - k], torch.tensor(1.0 - k / (BLEND + 1), dtype=P.dtype))
-                if b - 1 + k < motion.num_frames:
-                    w[b - 1 + k] = torch.maximum(w[b - 1 + k], torch.tensor(1.0 - k / (BLEND + 1), dtype=P.dtype))
-            new[:, j, 0] = (1 - w) * new[:, j, 0] + w * target[0]
-            new[:, j, 2] = (1 - w) * new[:, j, 2] + w * target[1]
+    for foot in feet:
+        path, segs, steps = _foot_path(P, foot, size, motion.fps, contacts)
+        keep = _hold_weights(foot, hold or {}, motion.skeleton, motion.num_frames).to(P.dtype)
+        new[:, foot.joint] = keep[:, None] * P[:, foot.joint] + (1 - keep[:, None]) * path
+        report["translated_feet_segments"] += segs
+        report["translated_feet_steps"] += steps
     lt = motion.local_translations.clone()
     inv = quat_inverse(G[:, 0])
-    for j in joints:
-        lt[:, j] = quat_rotate(inv, new[:, j] - P[:, 0])
-    return Motion(
-        motion.skeleton, motion.fps, motion.root_translation, motion.local_rotations, motion.foot_contacts, lt
-    ), count
+    for foot in feet:
+        lt[:, foot.joint] = quat_rotate(inv, new[:, foot.joint] - P[:, 0])
+    out = Motion(motion.skeleton, motion.fps, motion.root_translation, motion.local_rotations, motion.foot_contacts, lt)
+    return out, report
+
+
+def _foot_path(
+    P: torch.Tensor, foot: TranslatedFoot, size: float, fps: float, contacts: torch.Tensor | None
+) -> tuple[torch.Tensor, int, int]:
+    """The foot bone's new world path ``(T, 3)`` (the floor is y = 0), its planted runs and its steps."""
+    j = foot.joint
+    pos = smooth_time(P[:, j], SMOOTH_SECONDS * fps)
+    rest = torch.tensor(foot.rest, dtype=P.dtype)
+    clear = (P[:, list(foot.soles), 1] - rest).amin(1) + (pos[:, 1] - P[:, j, 1])  # lowest sole above its stand
+    planted = clear < GROUND * size
+    if contacts is not None and foot.channels:
+        said = torch.as_tensor(contacts)[:, list(foot.channels)].to(P.dtype).amax(1) > 0.5
+        planted |= said & (clear < BELIEVE * size)
+    lifted = pos.clone()
+    lifted[:, 1] += (-clear).clamp_min(0.0)  # never below the floor
+    out, segs, steps = lifted.clone(), 0, 0
+    T = P.shape[0]
+    for a, b in contact_segments(planted):
+        if b - a < MIN_FRAMES:
+            continue
+        target, n = _planted_target(pos[a:b], clear[a:b], size)
+        segs, steps = segs + 1, steps + n
+        w = _ramp(a, b, T, P.dtype)
+        full = lifted.clone()
+        full[a:b] = target
+        full[:a, [0, 2]] = target[0, [0, 2]]
+        full[b:, [0, 2]] = target[-1, [0, 2]]
+        out = (1 - w[:, None]) * out + w[:, None] * full
+    return out, segs, steps
+
+
+def _planted_target(pos: torch.Tensor, clear: torch.Tensor, size: float) -> tuple[torch.Tensor, int]:
+    """Where a planted foot is over its run ``pos (n, 3)``: sole on the floor, held at one ground point
+    until the model's foot is ``REACH`` away, then a lifted step to where the model has it; and the
+    number of steps."""
+    n = pos.shape[0]
+    out = pos.clone()
+    out[:, 1] = pos[:, 1] - clear  # the lowest sole exactly at its rest height
+    anchor, starts = pos[0, [0, 2]], []
+    xz = torch.empty(n, 2, dtype=pos.dtype)
+    for t in range(n):
+        if float((pos[t, [0, 2]] - anchor).norm()) > REACH * size:
+            anchor = pos[min(t + STEP_FRAMES // 2, n - 1), [0, 2]]
+            starts.append(t)
+        xz[t] = anchor
+    for s in starts:  # the step: from the old anchor to the new one, lifted in the middle
+        a, b = max(s - STEP_FRAMES // 2, 0), min(s + STEP_FRAMES - STEP_FRAMES // 2, n)
+        old, new = xz[max(a - 1, 0)].clone(), xz[s].clone()
+        for t in range(a, b):
+            u = (t - a + 1) / (b - a + 1)
+            xz[t] = old + (new - old) * (3 * u**2 - 2 * u**3)
+            out[t, 1] += STEP_HEIGHT * size * math.sin(math.pi * u)
+    out[:, 0], out[:, 2] = xz[:, 0], xz[:, 1]
+    return out, len(starts)
+
+
+def _ramp(a: int, b: int, T: int, dtype) -> torch.Tensor:
+    """``(T,)`` weight: 1 on frames ``[a, b)``, falling linearly to 0 over ``BLEND`` frames each side."""
+    w = torch.zeros(T, dtype=dtype)
+    w[a:b] = 1.0
+    for k in range(1, BLEND + 1):
+        v = 1.0 - k / (BLEND + 1)
+        if a - k >= 0:
+            w[a - k] = v
+        if b - 1 + k < T:
+            w[b - 1 + k] = v
+    return w
+
+
+def _hold_weights(foot: TranslatedFoot, hold: dict[int, list[int]], skeleton: Skeleton, T: int) -> torch.Tensor:
+    """``(T,)`` weight of the generated path: 1 on frames with a joint target on the foot or a joint it
+    carries (so the exact pass's result stands), falling to 0 over ``BLEND`` frames."""
+    w = torch.zeros(T, dtype=torch.float64)
+    for j, frames in hold.items():
+        if foot.joint not in skeleton.path_from_root(j):
+            continue
+        for f in frames:
+            w = torch.maximum(w, _ramp(int(f), int(f) + 1, T, torch.float64))
+    return w

@@ -1,0 +1,65 @@
+"""Putting a generated any-rig motion on the floor: one vertical offset per frame.
+
+The any-rig model predicts the root's height and the joints' positions relative to the root
+separately, and on small CPU-trained weights the two disagree: on the shipped ``creatures`` model a
+husky standing idle had its feet 0.3-0.5 rig sizes *below* the floor (root at 0.3 instead of 0.58),
+so every foot counted as planted and slid with the body. The rig's rest pose says where each contact
+joint stands (its height above the lowest rest joint); ``ground_offsets`` lifts or lowers the whole
+motion so that, on frames where the model's contact channel says a foot is down, the lowest contact
+joint stands exactly there, interpolates the offset across airborne frames (a jump keeps its arc),
+never leaves a contact joint below its stand, and low-passes the result (``SIGMA_SECONDS``) so the
+body does not shake with the feet. Heights in the motion's units; shapes ``(T, C)``; y up.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
+
+SIGMA_SECONDS = 0.1
+
+
+def ground_offsets(clearance: torch.Tensor, down: torch.Tensor, fps: float) -> torch.Tensor:
+    """``(T,)`` vertical offsets from ``clearance (T,)`` (the lowest contact joint's height above its
+    stand) and ``down (T,)`` (the model says some foot is on the floor): ``-clearance`` on ``down`` frames,
+    linear in between (held before the first and after the last), at least ``-clearance`` everywhere,
+    smoothed. No ``down`` frame at all: only lifted out of the floor."""
+    T = clearance.shape[0]
+    want = torch.zeros(T, dtype=clearance.dtype)
+    idx = torch.nonzero(down).flatten()
+    if idx.numel():
+        t = torch.arange(T, dtype=clearance.dtype)
+        x, y = idx.to(clearance.dtype), -clearance[idx]
+        k = torch.searchsorted(x, t).clamp(1, max(idx.numel() - 1, 1))
+        if idx.numel() == 1:
+            want[:] = y[0]
+        else:
+            x0, x1, y0, y1 = x[k - 1], x[k], y[k - 1], y[k]
+            want = y0 + (y1 - y0) * ((t - x0) / (x1 - x0)).clamp(0.0, 1.0)
+    want = torch.maximum(want, -clearance)
+    return smooth_time(want[:, None], SIGMA_SECONDS * fps)[:, 0]
+
+
+def ground_motion(motion: Motion, probe: Motion, joints: list[int], rest: list[float]) -> tuple[Motion, float]:
+    """``motion`` moved vertically so the contact ``joints`` (rest heights ``rest``) stand on the floor
+    as measured on ``probe`` (the same motion with every bone where it will end up: with the
+    translations of bones under a floor armature) and decided by ``motion.foot_contacts`` (one column per
+    joint, > 0.5 = down). Returns the motion and the largest offset."""
+    if not joints or motion.num_frames < 2:
+        return motion, 0.0
+    P = probe.positions
+    clearance = (P[:, joints, 1] - torch.tensor(rest, dtype=P.dtype)).amin(1)
+    fc = motion.foot_contacts
+    down = (
+        (fc > 0.5).any(1)
+        if fc is not None and fc.shape[1] == len(joints)
+        else torch.zeros_like(clearance, dtype=torch.bool)
+    )
+    off = ground_offsets(clearance, down, motion.fps).to(motion.root_translation.dtype)
+    root = motion.root_translation.clone()
+    root[:, 1] += off
+    lt = motion.local_translations
+    out = Motion(motion.skeleton, motion.fps, root, motion.local_rotations, motion.foot_contacts, lt)
+    return out, float(off.abs().max())
