@@ -13,8 +13,9 @@ bone and the rig's contact joints it carries, its *soles*) is cleaned up directl
   those through: measured on the shipped model, 0 of 4 feet of the husky were ever locked);
 - **locked**: on a planted run the foot is held at one ground point with its sole on the floor. When
   the model's own foot wanders more than ``REACH`` from that point (its body drifts) the foot takes a
-  step: over ``STEP_FRAMES`` frames it moves to where the model has it, lifted by ``STEP_HEIGHT`` at
-  mid-step, and is planted again there. Locks blend in and out over ``BLEND`` frames;
+  step: over ``STEP_FRAMES`` frames it moves to where the model has it plus half ``REACH`` further the
+  same way (feet land ahead of a moving body), lifted by ``STEP_HEIGHT`` at mid-step, and is planted
+  again there. Locks blend in and out over ``BLEND`` frames;
 - **above the floor** elsewhere: a sole never ends below its rest height;
 - frames with a joint target on the foot (``hold``) keep the foot exactly as generated.
 
@@ -182,7 +183,9 @@ def _planted_target(pos: torch.Tensor, clear: torch.Tensor, size: float) -> tupl
     xz = torch.empty(n, 2, dtype=pos.dtype)
     for t in range(n):
         if float((pos[t, [0, 2]] - anchor).norm()) > REACH * size:
-            anchor = pos[min(t + STEP_FRAMES // 2, n - 1), [0, 2]]
+            land = pos[min(t + STEP_FRAMES // 2, n - 1), [0, 2]]
+            ahead = land - anchor
+            anchor = land + 0.5 * REACH * size * ahead / ahead.norm().clamp_min(1e-12)  # lands ahead, as feet do
             starts.append(t)
         xz[t] = anchor
     for s in starts:  # the step: from the old anchor to the new one, lifted in the middle

@@ -7,8 +7,8 @@ so every foot counted as planted and slid with the body. The rig's rest pose say
 joint stands (its height above the lowest rest joint); ``ground_offsets`` lifts or lowers the whole
 motion so that, on frames where the model's contact channel says a foot is down, the lowest contact
 joint stands exactly there, interpolates the offset across airborne frames (a jump keeps its arc),
-never leaves a contact joint below its stand, and low-passes the result (``SIGMA_SECONDS``) so the
-body does not shake with the feet. Heights in the motion's units; shapes ``(T, C)``; y up.
+low-passes the result (``SIGMA_SECONDS``) so the body does not shake with the feet, and never leaves
+a contact joint below its stand. Heights in the motion's units; shapes ``(T, C)``; y up.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ SIGMA_SECONDS = 0.1
 def ground_offsets(clearance: torch.Tensor, down: torch.Tensor, fps: float) -> torch.Tensor:
     """``(T,)`` vertical offsets from ``clearance (T,)`` (the lowest contact joint's height above its
     stand) and ``down (T,)`` (the model says some foot is on the floor): ``-clearance`` on ``down`` frames,
-    linear in between (held before the first and after the last), at least ``-clearance`` everywhere,
-    smoothed. No ``down`` frame at all: only lifted out of the floor."""
+    linear in between (held before the first and after the last), smoothed, and at least ``-clearance``
+    everywhere. No ``down`` frame at all: only lifted out of the floor."""
     T = clearance.shape[0]
     want = torch.zeros(T, dtype=clearance.dtype)
     idx = torch.nonzero(down).flatten()
@@ -39,7 +39,10 @@ def ground_offsets(clearance: torch.Tensor, down: torch.Tensor, fps: float) -> t
             x0, x1, y0, y1 = x[k - 1], x[k], y[k - 1], y[k]
             want = y0 + (y1 - y0) * ((t - x0) / (x1 - x0)).clamp(0.0, 1.0)
     want = torch.maximum(want, -clearance)
-    return smooth_time(want[:, None], SIGMA_SECONDS * fps)[:, 0]
+    r = int(3 * SIGMA_SECONDS * fps) + 1  # ends held (not point-reflected): an offset is not a path
+    padded = torch.cat([want[:1].expand(r), want, want[-1:].expand(r)])
+    smooth = smooth_time(padded[:, None], SIGMA_SECONDS * fps)[r:-r, 0]
+    return torch.maximum(smooth, -clearance)  # smoothing must not put a foot back into the floor
 
 
 def ground_motion(motion: Motion, probe: Motion, joints: list[int], rest: list[float]) -> tuple[Motion, float]:

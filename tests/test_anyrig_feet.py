@@ -1,0 +1,130 @@
+"""Any-rig foot clean-up: grounding by contact joints, locking of feet moved by translation (synthetic rigs)."""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.evaluate.metrics import position_jerk
+from kinema.generate.anyrig_feet import REACH, lock_translated_feet, translated_feet
+from kinema.generate.anyrig_ground import ground_motion, ground_offsets
+from kinema.motion.core import Motion
+from kinema.rig import Rig
+from kinema.skeleton import Skeleton
+
+FPS = 20.0
+
+
+def _biped(frames: int, foot_x: torch.Tensor, foot_y: torch.Tensor, lift: float = 0.0) -> Motion:
+    """A game rig 1 unit tall: a floor-level armature, a body and two IK feet (with toes) moved by
+    translation. Foot 1 follows ``foot_x``/``foot_y`` (x, height of its toe); the whole motion is raised
+    by ``lift`` (negative: sunk into the floor)."""
+    skel = Skeleton(
+        ["Armature", "Body", "Head", "IK.L", "Toe.L", "IK.R", "Toe.R"],
+        [-1, 0, 1, 0, 3, 0, 5],
+        [[0, 0, 0], [0, 0.6, 0], [0, 0.4, 0], [0.1, 0.05, 0], [0, -0.03, 0.1], [-0.1, 0.05, 0], [0, -0.03, 0.1]],
+        name="biped",
+    )
+    lt = skel.offsets[None].repeat(frames, 1, 1).clone()
+    lt[:, 3, 0] += foot_x
+    lt[:, 3, 1] += foot_y
+    root = torch.zeros(frames, 3, dtype=torch.float64)
+    root[:, 1] = lift
+    rots = torch.zeros(frames, 7, 4, dtype=torch.float64)
+    rots[..., 0] = 1.0
+    return Motion(skel, FPS, root, rots, None, lt)
+
+
+def _rig(m: Motion) -> Rig:
+    d = Rig.from_skeleton(m.skeleton).to_dict()
+    d["contacts"] = [4, 6]  # the toes
+    return Rig.from_dict({k: v for k, v in d.items() if k != "skeleton"}, skeleton=m.skeleton)
+
+
+def _floor_speed(P: torch.Tensor, j: int, below: float) -> torch.Tensor:
+    """Horizontal speeds (units/s) of joint ``j`` between consecutive frames both lower than ``below``."""
+    low = P[:, j, 1] < below
+    both = low[1:] & low[:-1]
+    speed = (P[1:, j, [0, 2]] - P[:-1, j, [0, 2]]).norm(dim=-1) * FPS
+    return speed[both]
+
+
+def test_a_foot_sliding_fast_along_the_floor_is_locked_and_steps_after_the_body() -> None:
+    T = 40
+    slide = torch.arange(T, dtype=torch.float64) * 1.0 / FPS  # 1 rig size per second, on the floor
+    m = _biped(T, slide, torch.zeros(T))
+    rig = _rig(m)
+    feet = translated_feet(rig, rig.root)
+    assert [(f.joint, f.soles) for f in feet] == [(3, (4,)), (5, (6,))]
+    before = _floor_speed(m.positions, 4, 0.03)
+    assert before.numel() > 30 and float(before.mean()) > 0.99  # skates at full speed
+    out, rep = lock_translated_feet(m, feet, 1.0)
+    P = out.positions
+    on_floor = _floor_speed(P, 4, 0.03)
+    assert float(on_floor.max()) < 1e-9  # wherever the toe touches the floor, it stands still
+    assert rep["translated_feet_steps"] >= 4  # it keeps up with the body by stepping ...
+    assert float((P[:, 4, 0] - m.positions[:, 4, 0]).abs().max()) < REACH + 0.3  # ... never far behind
+    assert float(P[:, 4, 1].max()) > 0.04  # ... lifted off the floor to step
+    assert float(P[:, 4, 1].min()) > 0.02 - 1e-9  # and never below its stand (rest height 0.02)
+
+
+def test_a_sunk_motion_is_grounded_by_its_contact_joints_and_keeps_a_jump_arc() -> None:
+    T = 30
+    t = torch.arange(T, dtype=torch.float64)
+    jump = torch.where((t >= 10) & (t < 20), 0.3 * torch.sin(torch.pi * (t - 9) / 11), torch.zeros(T))
+    m = _biped(T, torch.zeros(T), torch.zeros(T), lift=-0.4)
+    m = Motion(
+        m.skeleton,
+        FPS,
+        m.root_translation + torch.stack([0 * t, jump, 0 * t], 1),
+        m.local_rotations,
+        None,
+        m.local_translations,
+    )
+    down = torch.ones(T, 2)
+    down[10:20] = 0.0  # the model says: airborne during the jump
+    m = Motion(m.skeleton, FPS, m.root_translation, m.local_rotations, down, m.local_translations)
+    out, off = ground_motion(m, m, [4, 6], [0.02, 0.02])
+    P = out.positions
+    assert abs(off - 0.4) < 1e-6
+    assert torch.allclose(P[:, 4, 1], 0.02 + jump, atol=1e-6)  # on the floor where down, the arc kept
+    assert torch.allclose(P[:, 2] - P[:, 0], m.positions[:, 2] - m.positions[:, 0])  # a rigid shift
+
+
+def test_grounding_offsets_lift_out_of_the_floor_without_any_contact() -> None:
+    clear = torch.tensor([0.2, -0.1, -0.1, 0.3, 0.3])
+    off = ground_offsets(clear, torch.zeros(5, dtype=torch.bool), FPS)
+    assert float(off.min()) >= 0 and torch.all(off[1:3] >= 0.1)  # lifted out of the dip, never lowered
+    assert torch.equal(ground_offsets(torch.full((5,), 0.2), torch.zeros(5, dtype=torch.bool), FPS), torch.zeros(5))
+
+
+def test_foot_jitter_is_filtered_but_joint_targets_on_the_foot_stay_exact() -> None:
+    T = 40
+    g = torch.Generator().manual_seed(0)
+    swing = 0.2 * torch.sin(torch.arange(T, dtype=torch.float64) / 4)
+    jitter = 0.01 * torch.randn(T, generator=g, dtype=torch.float64)
+    m = _biped(T, swing + jitter, torch.full((T,), 0.2) + jitter)  # in the air: never planted
+    rig = _rig(m)
+    feet = translated_feet(rig, rig.root)
+    out, rep = lock_translated_feet(m, feet, 1.0, hold={4: [15]})
+    assert rep["translated_feet_segments"] == 1  # the right foot, standing still
+    jerk_before, jerk_after = (position_jerk(x.positions[:, [3, 4]], FPS) for x in (m, out))
+    assert jerk_after < 0.5 * jerk_before
+    assert torch.allclose(out.positions[15], m.positions[15], atol=1e-12)  # the constrained frame is kept
+    assert float((out.positions[:, 3] - m.positions[:, 3]).norm(dim=-1).max()) < 0.03  # a filter, not a move
+    assert torch.allclose(out.positions[:, [0, 1, 2, 5, 6]], m.positions[:, [0, 1, 2, 5, 6]])  # the rest stays
+
+
+def test_model_contact_channel_locks_a_foot_a_little_above_the_floor() -> None:
+    T = 20
+    slide = torch.arange(T, dtype=torch.float64) * 0.1 / FPS
+    m = _biped(T, slide, torch.full((T,), 0.08))  # hovers 0.08 above its stand, sliding
+    rig = _rig(m)
+    feet = translated_feet(rig, rig.root)
+    free, rep = lock_translated_feet(m, feet, 1.0)
+    assert rep["translated_feet_segments"] == 1  # only the right foot, standing at rest; the left is in the air
+    said = torch.zeros(T, 2)
+    said[:, 0] = 0.9
+    out, rep = lock_translated_feet(m, feet, 1.0, contacts=said)
+    assert rep["translated_feet_segments"] == 2
+    assert torch.allclose(out.positions[:, 4, 1], torch.full((T,), 0.02, dtype=torch.float64))  # put down
+    assert float((out.positions[1:, 4, [0, 2]] - out.positions[:-1, 4, [0, 2]]).abs().max()) < 1e-9
