@@ -70,7 +70,7 @@ def test_a_foot_sliding_fast_along_the_floor_is_locked_and_steps_after_the_body(
 def test_a_sunk_motion_is_grounded_by_its_contact_joints_and_keeps_a_jump_arc() -> None:
     T = 30
     t = torch.arange(T, dtype=torch.float64)
-    jump = torch.where((t >= 10) & (t < 20), 0.3 * torch.sin(torch.pi * (t - 9) / 11), torch.zeros(T))
+    jump = torch.where((t >= 10) & (t < 20), 0.3 + 0.2 * torch.sin(torch.pi * (t - 9) / 11), torch.zeros(T))
     m = _biped(T, torch.zeros(T), torch.zeros(T), lift=-0.4)
     m = Motion(
         m.skeleton,
@@ -81,7 +81,7 @@ def test_a_sunk_motion_is_grounded_by_its_contact_joints_and_keeps_a_jump_arc() 
         m.local_translations,
     )
     down = torch.ones(T, 2)
-    down[10:20] = 0.0  # the model says: airborne during the jump
+    down[10:20] = 0.0  # the model says: airborne during the jump (and it is higher than HOVER)
     m = Motion(m.skeleton, FPS, m.root_translation, m.local_rotations, down, m.local_translations)
     out, off = ground_motion(m, m, [4, 6], [0.02, 0.02])
     P = out.positions
