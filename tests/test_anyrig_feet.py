@@ -114,17 +114,28 @@ def test_foot_jitter_is_filtered_but_joint_targets_on_the_foot_stay_exact() -> N
     assert torch.allclose(out.positions[:, [0, 1, 2, 5, 6]], m.positions[:, [0, 1, 2, 5, 6]])  # the rest stays
 
 
-def test_model_contact_channel_locks_a_foot_a_little_above_the_floor() -> None:
+def test_a_foot_hovering_steadily_above_the_floor_is_put_down_and_locked() -> None:
     T = 20
     slide = torch.arange(T, dtype=torch.float64) * 0.1 / FPS
-    m = _biped(T, slide, torch.full((T,), 0.08))  # hovers 0.08 above its stand, sliding
+    m = _biped(T, slide, torch.full((T,), 0.08))  # hovers 0.08 above its stand at a steady height, sliding
     rig = _rig(m)
-    feet = translated_feet(rig, rig.root)
-    free, rep = lock_translated_feet(m, feet, 1.0)
-    assert rep["translated_feet_segments"] == 1  # only the right foot, standing at rest; the left is in the air
-    said = torch.zeros(T, 2)
-    said[:, 0] = 0.9
-    out, rep = lock_translated_feet(m, feet, 1.0, contacts=said)
+    out, rep = lock_translated_feet(m, translated_feet(rig, rig.root), 1.0)
     assert rep["translated_feet_segments"] == 2
     assert torch.allclose(out.positions[:, 4, 1], torch.full((T,), 0.02, dtype=torch.float64))  # put down
     assert float((out.positions[1:, 4, [0, 2]] - out.positions[:-1, 4, [0, 2]]).abs().max()) < 1e-9
+
+
+def test_model_contact_channel_locks_a_bobbing_foot_where_it_says_so() -> None:
+    T = 20
+    t = torch.arange(T, dtype=torch.float64)
+    bob = 0.09 + 0.05 * torch.cos(2 * torch.pi * t / 10)  # 0.04 .. 0.14 above its stand
+    m = _biped(T, torch.zeros(T), bob)
+    rig = _rig(m)
+    feet = translated_feet(rig, rig.root)
+    free, _ = lock_translated_feet(m, feet, 1.0)
+    down = free.positions[:, 4, 1] < 0.02 + 1e-9
+    assert 0 < int(down.sum()) < T  # only near the bottom of each bob
+    said = torch.zeros(T, 2)
+    said[:, 0] = 0.9
+    out, rep = lock_translated_feet(m, feet, 1.0, contacts=said)
+    assert torch.allclose(out.positions[:, 4, 1], torch.full((T,), 0.02, dtype=torch.float64))  # down throughout

@@ -7,10 +7,13 @@ bone and the rig's contact joints it carries, its *soles*) is cleaned up directl
 
 - **jitter**: its world path is low-passed (Gaussian, ``SMOOTH_SECONDS``): the model's x0 prediction
   shakes these bones frame to frame, and post-processing's rotation smoothing does not reach them;
-- **planted** where a sole is within ``GROUND`` of its rest height (where it stands), or where the
-  model's contact channel says so (> 0.5) and the sole is within ``BELIEVE`` of it. No speed test: a
-  foot the model slides along the floor is exactly the one to lock (the former 0.6 size/s rule let
-  those through: measured on the shipped model, 0 of 4 feet of the husky were ever locked);
+- **planted** where a sole is within ``GROUND`` of its rest height (where it stands), or within
+  ``BELIEVE`` of it and either flagged by the model's contact channel (> 0.5) or within ``GROUND`` of
+  the lowest it comes within ``BASELINE_SECONDS`` (a foot that hovers a little above the floor at a
+  steady height is a standing foot the model put too high: the gun robot's left foot in an attack).
+  No speed test: a foot the model slides along the floor is exactly the one to lock (the former
+  0.6 size/s rule let those through: measured on the shipped model, 0 of 4 feet of the husky were ever
+  locked);
 - **locked**: on a planted run the foot is held at one ground point with its sole on the floor. When
   the model's own foot wanders more than ``REACH`` from that point (its body drifts) the foot takes a
   step: over ``STEP_FRAMES`` frames it moves to where the model has it plus half ``REACH`` further the
@@ -40,7 +43,8 @@ from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
 
 GROUND = 0.04  # x rig size: a sole this close to its rest height is planted ...
-BELIEVE = 0.15  # ... and so is one the model flags as in contact this close to it
+BELIEVE = 0.15  # ... and so is one this close to it that the model flags as in contact or that is at
+BASELINE_SECONDS = 1.0  # its lowest within a window this long (give or take GROUND)
 REACH = 0.15  # x rig size: a planted foot steps when the model's foot is further than this from the lock
 STEP_FRAMES = 4
 STEP_HEIGHT = 0.05  # x rig size, at mid-step
@@ -150,7 +154,9 @@ def _foot_path(
     pos = smooth_time(P[:, j], SMOOTH_SECONDS * fps)
     rest = torch.tensor(foot.rest, dtype=P.dtype)
     clear = (P[:, list(foot.soles), 1] - rest).amin(1) + (pos[:, 1] - P[:, j, 1])  # lowest sole above its stand
-    planted = clear < GROUND * size
+    w = max(1, round(BASELINE_SECONDS * fps / 2))
+    baseline = -torch.nn.functional.max_pool1d(-clear[None, None], 2 * w + 1, stride=1, padding=w)[0, 0]
+    planted = (clear < GROUND * size) | ((clear - baseline < GROUND * size) & (clear < BELIEVE * size))
     if contacts is not None and foot.channels:
         said = torch.as_tensor(contacts)[:, list(foot.channels)].to(P.dtype).amax(1) > 0.5
         planted |= said & (clear < BELIEVE * size)
