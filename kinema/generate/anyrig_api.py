@@ -271,7 +271,8 @@ class AnyRigModel:
             return m
         skel = rig.skeleton
         probe = with_floor_translations(m, f, rep_n)
-        rest = [floor_height(skel, j) for j in rig.contacts]
+        stands = {k: h for foot in translated_feet(rig, rig.root) for k, h in zip(foot.soles, foot.rest, strict=True)}
+        rest = [stands.get(j, floor_height(skel, j)) for j in rig.contacts]
         m, off = ground_motion(m, probe, list(rig.contacts), rest, rest_extent(skel))
         report.grounded = max(report.grounded, off)
         return m

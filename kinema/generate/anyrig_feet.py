@@ -30,7 +30,7 @@ on a fish and a T-rex. Shapes: positions ``(T, J, 3)``, contacts ``(T, C)`` in t
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -57,7 +57,10 @@ BLEND = 3
 class TranslatedFoot:
     """A bone moved by translation under a floor-level armature that carries contact joints: ``soles``
     (the bone itself and/or its descendants), their ``channels`` in the rig's contact order (empty when
-    the rig layer names none) and their ``rest`` heights above the rig's lowest rest joint."""
+    the rig layer names none) and the heights they stand at (``rest``): their rest heights above the
+    rig's lowest rest joint, lowered together so the lowest stands as low as the lowest sole of any foot
+    (rest poses of game rigs may hold a foot up: the two-legged robot's right foot is 0.066 up, its left
+    0.017, and both stand at 0.017 in its clips)."""
 
     joint: int
     soles: tuple[int, ...]
@@ -112,7 +115,8 @@ def translated_feet(rig: Rig, root: int) -> list[TranslatedFoot]:
         if soles:
             channels = tuple(rig.contacts.index(k) for k in soles if k in rig.contacts)
             out.append(TranslatedFoot(j, soles, channels, tuple(floor_height(skel, k) for k in soles)))
-    return out
+    low = min((min(f.rest) for f in out), default=0.0)
+    return [replace(f, rest=tuple(r - (min(f.rest) - low) for r in f.rest)) for f in out]
 
 
 def lock_translated_feet(
