@@ -139,3 +139,17 @@ def test_model_contact_channel_locks_a_bobbing_foot_where_it_says_so() -> None:
     said[:, 0] = 0.9
     out, rep = lock_translated_feet(m, feet, 1.0, contacts=said)
     assert torch.allclose(out.positions[:, 4, 1], torch.full((T,), 0.02, dtype=torch.float64))  # down throughout
+
+
+def test_a_planted_foot_holds_its_rotation_so_its_toe_stands_still() -> None:
+    T = 20
+    m = _biped(T, torch.zeros(T), torch.zeros(T))
+    angle = 0.3 * torch.sin(torch.arange(T, dtype=torch.float64))  # the IK bone shakes about the vertical
+    rots = m.local_rotations.clone()
+    rots[:, 3, 0], rots[:, 3, 2] = torch.cos(angle / 2), torch.sin(angle / 2)
+    m = Motion(m.skeleton, FPS, m.root_translation, rots, None, m.local_translations)
+    assert float(_floor_speed(m.positions, 4, 0.03).mean()) > 0.3  # the toe swings along the floor
+    rig = _rig(m)
+    out, _ = lock_translated_feet(m, translated_feet(rig, rig.root), 1.0)
+    assert float(_floor_speed(out.positions, 4, 0.03).max()) < 1e-9
+    assert torch.allclose(out.local_rotations[:, [0, 1, 2, 4, 5, 6]], m.local_rotations[:, [0, 1, 2, 4, 5, 6]])

@@ -133,7 +133,7 @@ def _armature_motion(frames: int = 20) -> Motion:
     lt = skel.offsets[None].repeat(frames, 1, 1)
     lt[:, 1, 1] += 0.05 * torch.sin(2 * torch.pi * t)  # the body bobs
     lt[:, 3, 2] += 0.01 * t  # foot 1 creeps forward on the floor (skates)
-    lt[:, 4, 1] += 0.1 + 0.05 * torch.sin(2 * torch.pi * t)  # foot 2 is in the air
+    lt[:, 4, 1] += 0.2 + 0.05 * torch.sin(2 * torch.pi * t)  # foot 2 is in the air
     rots = torch.zeros(frames, 5, 4, dtype=torch.float64)
     rots[..., 0] = 1.0
     return Motion(skel, 20.0, torch.zeros(frames, 3, dtype=torch.float64), rots, None, lt)

@@ -14,11 +14,15 @@ bone and the rig's contact joints it carries, its *soles*) is cleaned up directl
   No speed test: a foot the model slides along the floor is exactly the one to lock (the former
   0.6 size/s rule let those through: measured on the shipped model, 0 of 4 feet of the husky were ever
   locked);
-- **locked**: on a planted run the foot is held at one ground point with its sole on the floor. When
+- **locked**: on a planted run the foot is held at one ground point with its sole on the floor (and
+  its rotation held, so the toes it carries stand still too). When
   the model's own foot wanders more than ``REACH`` from that point (its body drifts) the foot takes a
   step: over ``STEP_FRAMES`` frames it moves to where the model has it plus half ``REACH`` further the
   same way (feet land ahead of a moving body), lifted by ``STEP_HEIGHT`` at mid-step, and is planted
-  again there. Locks blend in and out over ``BLEND`` frames;
+  again there. Both decisions look through the shaking of the model's feet (planted on heights smoothed
+  over ``DETECT_SECONDS``, steps on the ground path smoothed over ``DRIFT_SECONDS``): on the robots the
+  raw feet jump 0.1 rig sizes from frame to frame, which otherwise makes them step every few frames
+  and hover between steps. Locks blend in and out over ``BLEND`` frames;
 - **above the floor** elsewhere: a sole never ends below its rest height;
 - frames with a joint target on the foot (``hold``) keep the foot exactly as generated.
 
@@ -49,6 +53,8 @@ REACH = 0.15  # x rig size: a planted foot steps when the model's foot is furthe
 STEP_FRAMES = 4
 STEP_HEIGHT = 0.05  # x rig size, at mid-step
 SMOOTH_SECONDS = 0.05
+DETECT_SECONDS = 0.1  # heights are smoothed this much more to decide where a foot is planted ...
+DRIFT_SECONDS = 0.25  # ... and the ground path this much to decide when it steps
 MIN_FRAMES = 2
 BLEND = 3
 
@@ -135,44 +141,62 @@ def lock_translated_feet(
     if not feet or motion.local_translations is None or motion.num_frames < 3:
         return motion, report
     G, P = motion.global_transforms()
-    new = P.clone()
+    new, rots = P.clone(), motion.local_rotations.clone()
     for foot in feet:
         path, segs, steps = _foot_path(P, foot, size, motion.fps, contacts)
         keep = _hold_weights(foot, hold or {}, motion.skeleton, motion.num_frames).to(P.dtype)
         new[:, foot.joint] = keep[:, None] * P[:, foot.joint] + (1 - keep[:, None]) * path
-        report["translated_feet_segments"] += segs
+        q = rots[:, foot.joint]
+        rots[:, foot.joint] = _nlerp(_held_rotation(q, segs), q, keep.to(q.dtype))
+        report["translated_feet_segments"] += len(segs)
         report["translated_feet_steps"] += steps
     lt = motion.local_translations.clone()
     inv = quat_inverse(G[:, 0])
     for foot in feet:
         lt[:, foot.joint] = quat_rotate(inv, new[:, foot.joint] - P[:, 0])
-    out = Motion(motion.skeleton, motion.fps, motion.root_translation, motion.local_rotations, motion.foot_contacts, lt)
+    out = Motion(motion.skeleton, motion.fps, motion.root_translation, rots, motion.foot_contacts, lt)
     return out, report
+
+
+def _nlerp(a: torch.Tensor, b: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """Per frame, quaternions ``a (T, 4)`` turned towards ``b`` by weight ``w (T,)`` (normalised lerp)."""
+    b = torch.where(((a * b).sum(-1, keepdim=True) < 0), -b, b)
+    q = (1 - w[:, None]) * a + w[:, None] * b
+    return q / q.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def _held_rotation(q: torch.Tensor, segments: list[tuple[int, int]]) -> torch.Tensor:
+    """The foot bone's local rotations ``q (T, 4)`` held at the middle frame's over each planted run
+    (blended in and out like the position): its rotation swings the toes it carries, which would
+    otherwise slide while the bone stands still. The bone hangs from the static armature joint, so a
+    held local rotation is a held world rotation."""
+    out = q.clone()
+    for a, b in segments:
+        w = _ramp(a, b, q.shape[0], q.dtype)
+        out = _nlerp(out, q[(a + b - 1) // 2].expand_as(q), w)
+    return out
 
 
 def _foot_path(
     P: torch.Tensor, foot: TranslatedFoot, size: float, fps: float, contacts: torch.Tensor | None
-) -> tuple[torch.Tensor, int, int]:
-    """The foot bone's new world path ``(T, 3)`` (the floor is y = 0), its planted runs and its steps."""
+) -> tuple[torch.Tensor, list[tuple[int, int]], int]:
+    """The foot bone's new world path ``(T, 3)`` (the floor is y = 0), its planted runs ``[a, b)`` and
+    its number of steps."""
     j = foot.joint
     pos = smooth_time(P[:, j], SMOOTH_SECONDS * fps)
     rest = torch.tensor(foot.rest, dtype=P.dtype)
     clear = (P[:, list(foot.soles), 1] - rest).amin(1) + (pos[:, 1] - P[:, j, 1])  # lowest sole above its stand
-    w = max(1, round(BASELINE_SECONDS * fps / 2))
-    baseline = -torch.nn.functional.max_pool1d(-clear[None, None], 2 * w + 1, stride=1, padding=w)[0, 0]
-    planted = (clear < GROUND * size) | ((clear - baseline < GROUND * size) & (clear < BELIEVE * size))
-    if contacts is not None and foot.channels:
-        said = torch.as_tensor(contacts)[:, list(foot.channels)].to(P.dtype).amax(1) > 0.5
-        planted |= said & (clear < BELIEVE * size)
+    planted = _planted(smooth_time(clear[:, None], DETECT_SECONDS * fps)[:, 0], foot, size, fps, contacts)
+    slow = smooth_time(P[:, j], DRIFT_SECONDS * fps)  # where the body takes the foot, without the shaking
     lifted = pos.clone()
     lifted[:, 1] += (-clear).clamp_min(0.0)  # never below the floor
-    out, segs, steps = lifted.clone(), 0, 0
+    out, segs, steps = lifted.clone(), [], 0
     T = P.shape[0]
     for a, b in contact_segments(planted):
         if b - a < MIN_FRAMES:
             continue
-        target, n = _planted_target(pos[a:b], clear[a:b], size)
-        segs, steps = segs + 1, steps + n
+        target, n = _planted_target(pos[a:b], slow[a:b], clear[a:b], size)
+        segs, steps = [*segs, (a, b)], steps + n
         w = _ramp(a, b, T, P.dtype)
         full = lifted.clone()
         full[a:b] = target
@@ -182,18 +206,31 @@ def _foot_path(
     return out, segs, steps
 
 
-def _planted_target(pos: torch.Tensor, clear: torch.Tensor, size: float) -> tuple[torch.Tensor, int]:
+def _planted(clear: torch.Tensor, foot: TranslatedFoot, size: float, fps: float, contacts) -> torch.Tensor:
+    """``(T,)`` planted flags of a foot from its (smoothed) clearance and the model's contact channel."""
+    w = max(1, round(BASELINE_SECONDS * fps / 2))
+    baseline = -torch.nn.functional.max_pool1d(-clear[None, None], 2 * w + 1, stride=1, padding=w)[0, 0]
+    planted = (clear < GROUND * size) | ((clear - baseline < GROUND * size) & (clear < BELIEVE * size))
+    if contacts is not None and foot.channels:
+        said = torch.as_tensor(contacts)[:, list(foot.channels)].to(clear.dtype).amax(1) > 0.5
+        planted |= said & (clear < BELIEVE * size)
+    return planted
+
+
+def _planted_target(
+    pos: torch.Tensor, slow: torch.Tensor, clear: torch.Tensor, size: float
+) -> tuple[torch.Tensor, int]:
     """Where a planted foot is over its run ``pos (n, 3)``: sole on the floor, held at one ground point
-    until the model's foot is ``REACH`` away, then a lifted step to where the model has it; and the
-    number of steps."""
+    until the model's foot, followed without its shaking (``slow``), is ``REACH`` away, then a lifted
+    step to where it goes; and the number of steps."""
     n = pos.shape[0]
     out = pos.clone()
     out[:, 1] = pos[:, 1] - clear  # the lowest sole exactly at its rest height
-    anchor, starts = pos[0, [0, 2]], []
+    anchor, starts = slow[0, [0, 2]], []
     xz = torch.empty(n, 2, dtype=pos.dtype)
     for t in range(n):
-        if float((pos[t, [0, 2]] - anchor).norm()) > REACH * size:
-            land = pos[min(t + STEP_FRAMES // 2, n - 1), [0, 2]]
+        if float((slow[t, [0, 2]] - anchor).norm()) > REACH * size:
+            land = slow[min(t + STEP_FRAMES // 2, n - 1), [0, 2]]
             ahead = land - anchor
             anchor = land + 0.5 * REACH * size * ahead / ahead.norm().clamp_min(1e-12)  # lands ahead, as feet do
             starts.append(t)
