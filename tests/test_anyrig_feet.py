@@ -6,7 +6,7 @@ import torch
 
 from kinema.evaluate.metrics import position_jerk
 from kinema.generate.anyrig_feet import REACH, lock_translated_feet, translated_feet
-from kinema.generate.anyrig_ground import ground_motion, ground_offsets
+from kinema.generate.anyrig_ground import ground_motion, ground_offsets, steady_height
 from kinema.motion.core import Motion
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
@@ -153,3 +153,23 @@ def test_a_planted_foot_holds_its_rotation_so_its_toe_stands_still() -> None:
     out, _ = lock_translated_feet(m, translated_feet(rig, rig.root), 1.0)
     assert float(_floor_speed(out.positions, 4, 0.03).max()) < 1e-9
     assert torch.allclose(out.local_rotations[:, [0, 1, 2, 4, 5, 6]], m.local_rotations[:, [0, 1, 2, 4, 5, 6]])
+
+
+def test_steady_height_removes_root_height_shaking_and_keeps_slow_motion() -> None:
+    T = 40
+    g = torch.Generator().manual_seed(1)
+    t = torch.arange(T, dtype=torch.float64) / FPS
+    slow = 0.1 * torch.sin(2 * torch.pi * 0.5 * t)  # a slow crouch
+    m = _biped(T, torch.zeros(T), torch.zeros(T))
+    root = m.root_translation.clone()
+    root[:, 1] = 0.5 + slow + 0.02 * torch.randn(T, generator=g, dtype=torch.float64)
+    m = Motion(m.skeleton, FPS, root, m.local_rotations, None, m.local_translations)
+    out, change = steady_height(m)
+    assert 0 < change < 0.05
+    assert position_jerk(out.positions, FPS) < 0.5 * position_jerk(m.positions, FPS)
+    assert float((out.root_translation[:, 1] - 0.5 - slow).abs().mean()) < 0.02  # the crouch stays
+    assert torch.equal(out.root_translation[:, [0, 2]], m.root_translation[:, [0, 2]])
+    flat = Motion(
+        m.skeleton, FPS, torch.zeros(T, 3, dtype=torch.float64), m.local_rotations, None, m.local_translations
+    )
+    assert torch.equal(steady_height(flat)[0].root_translation, flat.root_translation)

@@ -40,7 +40,7 @@ from kinema.generate.anyrig_feet import (
     rest_extent,
     translated_feet,
 )
-from kinema.generate.anyrig_ground import ground_motion
+from kinema.generate.anyrig_ground import ground_motion, steady_height
 from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
@@ -64,7 +64,8 @@ from kinema.skeleton import Skeleton
 @dataclass
 class AnyRigReport:
     """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
-    warnings."""
+    foot locking, the largest vertical change of de-jittering the root height and of putting the motion
+    on the floor (rig sizes: ``height_smoothed``, ``grounded``), warnings."""
 
     seconds: float = 0.0
     steps: int = 0
@@ -74,6 +75,7 @@ class AnyRigReport:
     residuals_cm: list[float] = field(default_factory=list)
     foot_lock: list[dict] = field(default_factory=list)
     grounded: float = 0.0
+    height_smoothed: float = 0.0
     warnings: list[str] = field(default_factory=list)
 
 
@@ -264,10 +266,14 @@ class AnyRigModel:
 
     @staticmethod
     def _ground(m: Motion, f, rep_n, constraints, report) -> Motion:
-        """``m`` put on the floor by its contact joints (kinema.generate.anyrig_ground), unless a keyframe or
-        a copied root motion decides where the root is."""
+        """``m`` with a steadied root height, put on the floor by its contact joints
+        (kinema.generate.anyrig_ground), unless a keyframe or a copied root motion decides where the root is."""
         rig = rep_n.rig
-        if not rig.contacts or any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
+        if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
+            return m
+        m, change = steady_height(m)
+        report.height_smoothed = max(report.height_smoothed, change)
+        if not rig.contacts:
             return m
         skel = rig.skeleton
         probe = with_floor_translations(m, f, rep_n)

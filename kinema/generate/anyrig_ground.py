@@ -24,6 +24,7 @@ from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 
 SIGMA_SECONDS = 0.1
+HEIGHT_SIGMA_SECONDS = 0.05  # the root height's own de-jittering (``steady_height``)
 HOVER = 0.15  # x rig size: a lowest contact joint this close to its lowest level nearby is meant to be down
 BASELINE_SECONDS = 1.0  # "nearby": a window this long (longer than a jump)
 
@@ -77,3 +78,24 @@ def ground_motion(
     lt = motion.local_translations
     out = Motion(motion.skeleton, motion.fps, root, motion.local_rotations, motion.foot_contacts, lt)
     return out, float(off.abs().max())
+
+
+def steady_height(motion: Motion, sigma_s: float = HEIGHT_SIGMA_SECONDS) -> tuple[Motion, float]:
+    """``motion`` with its root height low-passed (Gaussian of ``sigma_s`` seconds, ends held); returns
+    it and the largest change. Post-processing smooths the root's x/z and the rotations but leaves the
+    height alone (a human run's bounce is detail); the any-rig model's height shakes instead: on the
+    two-legged gun robot's attack, the vertical part was 70 % of every leg joint's jerk. Measured on
+    232 training clips of the Quaternius build, 0.05 s moves the root height by 0.4 cm (median; 90th
+    percentile 5 cm) of a 1-m rig."""
+    if sigma_s <= 0 or motion.num_frames < 3:
+        return motion, 0.0
+    y = motion.root_translation[:, 1]
+    r = int(3 * sigma_s * motion.fps) + 1
+    padded = torch.cat([y[:1].expand(r), y, y[-1:].expand(r)])
+    smooth = smooth_time(padded[:, None], sigma_s * motion.fps)[r:-r, 0]
+    root = motion.root_translation.clone()
+    root[:, 1] = smooth
+    out = Motion(
+        motion.skeleton, motion.fps, root, motion.local_rotations, motion.foot_contacts, motion.local_translations
+    )
+    return out, float((smooth - y).abs().max())
