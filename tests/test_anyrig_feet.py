@@ -7,7 +7,9 @@ import torch
 from kinema.evaluate.metrics import position_jerk
 from kinema.generate.anyrig_feet import REACH, lock_translated_feet, translated_feet
 from kinema.generate.anyrig_ground import ground_motion, ground_offsets, steady_height
+from kinema.generate.anyrig_post import dejitter
 from kinema.motion.core import Motion
+from kinema.postprocess import postprocess
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -173,3 +175,17 @@ def test_steady_height_removes_root_height_shaking_and_keeps_slow_motion() -> No
         m.skeleton, FPS, torch.zeros(T, 3, dtype=torch.float64), m.local_rotations, None, m.local_translations
     )
     assert torch.equal(steady_height(flat)[0].root_translation, flat.root_translation)
+
+
+def test_dejitter_keeps_smoothing_a_shaking_pelvis_that_the_shared_guard_would_undo() -> None:
+    T = 40
+    g = torch.Generator().manual_seed(2)
+    m = _biped(T, torch.zeros(T), torch.zeros(T))
+    root = m.root_translation.clone()
+    root[:, [0, 2]] += 0.3 * torch.randn(T, 2, generator=g, dtype=torch.float64)  # shakes at ~6 units/s
+    m = Motion(m.skeleton, FPS, root, m.local_rotations, None, m.local_translations)
+    _, shared = postprocess(m, foot_lock=False, exact=False)
+    assert "undone" in shared["smooth"]  # the shared guard calls this dragging the pelvis
+    out, report, warnings = dejitter(m)
+    assert not warnings and "undone" not in report
+    assert position_jerk(out.positions, FPS) < 0.5 * position_jerk(m.positions, FPS)

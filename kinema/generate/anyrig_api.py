@@ -41,7 +41,7 @@ from kinema.generate.anyrig_feet import (
     translated_feet,
 )
 from kinema.generate.anyrig_ground import ground_motion, steady_height
-from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
+from kinema.generate.anyrig_post import dejitter, pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
@@ -243,7 +243,10 @@ class AnyRigModel:
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
-            m, post = run_postprocess(m, targets, rig=rep_n.rig)
+            m, smoothed, warned = dejitter(m)
+            m, post = run_postprocess(m, targets, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0)
+            post["smooth"] = smoothed
+            report.warnings += [w for w in warned if w not in report.warnings]
             m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
             # unmet constraints are said once, measured on the finished motion in metres (below)
             news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
