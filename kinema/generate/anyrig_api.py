@@ -244,7 +244,7 @@ class AnyRigModel:
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
             m, smoothed, warned = dejitter(m)
-            m, post = run_postprocess(m, targets, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0)
+            m, post = run_postprocess(m, targets, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0, raw=before)
             post["smooth"] = smoothed
             report.warnings += [w for w in warned if w not in report.warnings]
             m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
