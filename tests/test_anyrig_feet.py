@@ -189,3 +189,16 @@ def test_dejitter_keeps_smoothing_a_shaking_pelvis_that_the_shared_guard_would_u
     out, report, warnings = dejitter(m)
     assert not warnings and "undone" not in report
     assert position_jerk(out.positions, FPS) < 0.5 * position_jerk(m.positions, FPS)
+
+
+def test_a_planted_foot_stands_still_when_the_armature_turns_with_the_body() -> None:
+    T = 20
+    m = _biped(T, torch.zeros(T), torch.zeros(T))
+    angle = 0.2 * torch.sin(torch.arange(T, dtype=torch.float64) / 2)  # joint 0 turns with the body
+    rots = m.local_rotations.clone()
+    rots[:, 0, 0], rots[:, 0, 2] = torch.cos(angle / 2), torch.sin(angle / 2)
+    m = Motion(m.skeleton, FPS, m.root_translation, rots, None, m.local_translations)
+    assert float(_floor_speed(m.positions, 4, 0.03).mean()) > 0.1
+    rig = _rig(m)
+    out, _ = lock_translated_feet(m, translated_feet(rig, rig.root), 1.0)
+    assert float(_floor_speed(out.positions, 4, 0.03).max()) < 1e-9

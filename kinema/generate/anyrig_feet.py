@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from kinema.geometry.rotations import quat_inverse, quat_rotate
+from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess.footlock import contact_segments
@@ -146,8 +146,9 @@ def lock_translated_feet(
         path, segs, steps = _foot_path(P, foot, size, motion.fps, contacts)
         keep = _hold_weights(foot, hold or {}, motion.skeleton, motion.num_frames).to(P.dtype)
         new[:, foot.joint] = keep[:, None] * P[:, foot.joint] + (1 - keep[:, None]) * path
-        q = rots[:, foot.joint]
-        rots[:, foot.joint] = _nlerp(_held_rotation(q, segs), q, keep.to(q.dtype))
+        world = G[:, foot.joint]  # held in the world: joint 0 may turn with the body
+        held = _nlerp(_held_rotation(world, segs), world, keep.to(world.dtype))
+        rots[:, foot.joint] = quat_mul(quat_inverse(G[:, 0]), held).to(rots.dtype)
         report["translated_feet_segments"] += len(segs)
         report["translated_feet_steps"] += steps
     lt = motion.local_translations.clone()
@@ -166,10 +167,9 @@ def _nlerp(a: torch.Tensor, b: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
 
 
 def _held_rotation(q: torch.Tensor, segments: list[tuple[int, int]]) -> torch.Tensor:
-    """The foot bone's local rotations ``q (T, 4)`` held at the middle frame's over each planted run
+    """The foot bone's world rotations ``q (T, 4)`` held at the middle frame's over each planted run
     (blended in and out like the position): its rotation swings the toes it carries, which would
-    otherwise slide while the bone stands still. The bone hangs from the static armature joint, so a
-    held local rotation is a held world rotation."""
+    otherwise slide while the bone stands still."""
     out = q.clone()
     for a, b in segments:
         w = _ramp(a, b, q.shape[0], q.dtype)
