@@ -34,13 +34,14 @@ from kinema.generate.anyrig_constraints import (
 )
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
 from kinema.generate.anyrig_feet import (
+    descendants,
     floor_height,
     floor_root_children,
     lock_translated_feet,
     rest_extent,
     translated_feet,
 )
-from kinema.generate.anyrig_ground import ground_motion, steady_height
+from kinema.generate.anyrig_ground import ground_motion, leg_ends, settle_offsets, steady_height
 from kinema.generate.anyrig_post import dejitter, pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
@@ -64,8 +65,9 @@ from kinema.skeleton import Skeleton
 @dataclass
 class AnyRigReport:
     """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
-    foot locking, the largest vertical change of de-jittering the root height and of putting the motion
-    on the floor (rig sizes: ``height_smoothed``, ``grounded``), warnings."""
+    foot locking, the largest vertical change of de-jittering the root height, of putting the motion on
+    the floor and of settling the body onto its legs (rig sizes: ``height_smoothed``, ``grounded``,
+    ``settled``), warnings."""
 
     seconds: float = 0.0
     steps: int = 0
@@ -76,6 +78,7 @@ class AnyRigReport:
     foot_lock: list[dict] = field(default_factory=list)
     grounded: float = 0.0
     height_smoothed: float = 0.0
+    settled: float = 0.0
     warnings: list[str] = field(default_factory=list)
 
 
@@ -239,7 +242,7 @@ class AnyRigModel:
         m = rep_n.to_motion(f)
         targets = None
         if postprocess:
-            m = self._ground(m, f, rep_n, constraints, report)
+            m, f = self._ground(m, f, rep_n, constraints, report)
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
@@ -268,23 +271,44 @@ class AnyRigModel:
         return motion
 
     @staticmethod
-    def _ground(m: Motion, f, rep_n, constraints, report) -> Motion:
-        """``m`` with a steadied root height, put on the floor by its contact joints
-        (kinema.generate.anyrig_ground), unless a keyframe or a copied root motion decides where the root is."""
+    def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:
+        """``m`` with a steadied root height, put on the floor by its contact joints and settled onto its
+        legs (kinema.generate.anyrig_ground), unless a keyframe or a copied root motion decides where the
+        root is; and the features ``f`` (the translated feet's moved to keep their world heights)."""
         rig = rep_n.rig
         if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
-            return m
+            return m, f
         m, change = steady_height(m)
         report.height_smoothed = max(report.height_smoothed, change)
         if not rig.contacts:
-            return m
+            return m, f
         skel = rig.skeleton
         probe = with_floor_translations(m, f, rep_n)
         stands = {k: h for foot in translated_feet(rig, rig.root) for k, h in zip(foot.soles, foot.rest, strict=True)}
         rest = [stands.get(j, floor_height(skel, j)) for j in rig.contacts]
         m, off = ground_motion(m, probe, list(rig.contacts), rest, rest_extent(skel))
         report.grounded = max(report.grounded, off)
-        return m
+        return AnyRigModel._settle(m, f, rep_n, report)
+
+    @staticmethod
+    def _settle(m: Motion, f, rep_n, report) -> tuple[Motion, torch.Tensor]:
+        """The body lowered (or raised) onto its legs where the model put its translated feet too far from
+        them (kinema.generate.anyrig_ground.settle_offsets); the feet keep their world heights (their
+        root-relative features are moved the other way). Returns the motion and the features."""
+        skel = rep_n.rig.skeleton
+        kids = [j for j in floor_root_children(skel) if j not in skel.path_from_root(rep_n.rig.root)]
+        feet = [foot.joint for foot in translated_feet(rep_n.rig, rep_n.rig.root)]
+        legs = leg_ends(skel, feet, descendants(skel, kids), rest_extent(skel))
+        if not legs:
+            return m, f
+        probe = with_floor_translations(m, f, rep_n)
+        g = settle_offsets(probe.positions, legs, m.fps, rest_extent(skel))
+        root = m.root_translation.clone()
+        root[:, 1] -= g.to(root.dtype)
+        f = f.clone()
+        f[:, kids, 1] += g.to(f.dtype)[:, None]
+        report.settled = max(report.settled, float(g.abs().max()))
+        return Motion(m.skeleton, m.fps, root, m.local_rotations, m.foot_contacts, m.local_translations), f
 
     @staticmethod
     def _lock_feet(m: Motion, rep_n, targets, report) -> tuple[Motion, dict]:

@@ -99,6 +99,16 @@ def floor_height(skeleton: Skeleton, joint: int) -> float:
     return float(P[joint, 1] - P[:, 1].min())
 
 
+def descendants(skeleton: Skeleton, joints: list[int]) -> list[int]:
+    """``joints`` and every joint below them."""
+    out, stack = [], list(joints)
+    while stack:
+        k = stack.pop()
+        out.append(k)
+        stack.extend(skeleton.children[k])
+    return out
+
+
 def translated_feet(rig: Rig, root: int) -> list[TranslatedFoot]:
     """The feet of ``rig`` moved by translation: bones under a floor-level armature, off the path to
     ``root``, that carry contact joints of the rig, or (a rig layer that names none there) sit within
@@ -110,12 +120,7 @@ def translated_feet(rig: Rig, root: int) -> list[TranslatedFoot]:
     for j in floor_root_children(skel):
         if j in path:
             continue
-        below, stack = [], [j]
-        while stack:
-            k = stack.pop()
-            below.append(k)
-            stack.extend(skel.children[k])
-        soles = tuple(k for k in sorted(below) if k in rig.contacts)
+        soles = tuple(k for k in sorted(descendants(skel, [j])) if k in rig.contacts)
         if not soles and floor_height(skel, j) < GROUND * size:
             soles = (j,)
         if soles:
