@@ -5,8 +5,8 @@ from __future__ import annotations
 import torch
 
 from kinema.evaluate.metrics import position_jerk
-from kinema.generate.anyrig_feet import REACH, lock_translated_feet, translated_feet
-from kinema.generate.anyrig_ground import ground_motion, ground_offsets, steady_height
+from kinema.generate.anyrig_feet import REACH, descendants, lock_translated_feet, translated_feet
+from kinema.generate.anyrig_ground import ground_motion, ground_offsets, leg_ends, settle_offsets, steady_height
 from kinema.generate.anyrig_post import dejitter
 from kinema.motion.core import Motion
 from kinema.postprocess import postprocess
@@ -202,3 +202,27 @@ def test_a_planted_foot_stands_still_when_the_armature_turns_with_the_body() -> 
     rig = _rig(m)
     out, _ = lock_translated_feet(m, translated_feet(rig, rig.root), 1.0)
     assert float(_floor_speed(out.positions, 4, 0.03).max()) < 1e-9
+
+
+def test_settle_offsets_measure_how_far_the_body_floats_above_its_feet() -> None:
+    skel = Skeleton(
+        ["Armature", "Body", "Knee.L", "Shin.L", "IK.L", "Head"],
+        [-1, 0, 1, 2, 0, 1],
+        [[0, 0, 0], [0, 0.6, 0], [0.1, -0.2, 0], [0, -0.3, 0], [0.1, 0.05, 0], [0, 0.4, 0]],
+        name="legged",
+    )
+    legs = leg_ends(skel, [4], descendants(skel, [4]), 1.0)  # only IK.L moves by translation
+    assert [(h, e) for h, e, _ in legs] == [(4, 3)]  # the shin's end is the foot's leg
+    assert abs(legs[0][2] - 0.05) < 1e-9  # at rest the shin ends 0.05 above the IK foot
+    T = 30
+    lift = torch.where(torch.arange(T) < 15, 0.2, 0.0).double()  # the body floats 0.2 up, then stands
+    lt = skel.offsets[None].repeat(T, 1, 1).clone()
+    lt[:, 1, 1] += lift
+    rots = torch.zeros(T, 6, 4, dtype=torch.float64)
+    rots[..., 0] = 1.0
+    m = Motion(skel, FPS, torch.zeros(T, 3, dtype=torch.float64), rots, None, lt)
+    g = settle_offsets(m.positions, legs, FPS, 1.0)
+    assert abs(float(g[0]) - 0.2) < 1e-3 and abs(float(g[-1])) < 1e-3  # held at the ends
+    assert float(g[13]) > float(g[16])  # smoothed across the change, not a jump
+    far = leg_ends(skel, [4], [4], 0.1)  # a rig 0.1 across: the shin is beyond LEG_REACH
+    assert far == []
