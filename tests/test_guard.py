@@ -117,3 +117,23 @@ def test_foot_locking_that_moves_the_body_off_its_targets_is_undone_for_the_exac
     assert float((out.positions[T - 1, hand] - goal[0]).norm()) < 0.01
     assert float((out.positions[0] - P[0]).norm(dim=-1).max()) < 0.01
     assert report["foot_lock"]["undone"] and any("foot locking undone" in w for w in report["warnings"])
+
+
+def test_a_caller_that_de_jitters_itself_hands_the_raw_motion_as_the_bound():
+    raw = glide()
+    T = raw.num_frames
+    g = torch.Generator().manual_seed(3)
+    shaky_root = raw.root_translation.clone()
+    shaky_root[:, 1] += 0.03 * torch.randn(T, generator=g, dtype=torch.float64)  # the generated motion shakes
+    shaky = Motion(raw.skeleton, FPS, shaky_root, raw.local_rotations)
+    # the same motion smoothed by the caller, and a stage (joint target) that adds a sharp reach
+    frames = torch.tensor([50])
+    hand = raw.skeleton.roles["right_wrist"] if "right_wrist" in raw.skeleton.roles else raw.num_joints - 1
+    target = raw.positions[50, hand] + torch.tensor([0.0, 0.25, 0.0], dtype=torch.float64)
+    targets = PostTargets(joint_positions={hand: (frames, target[None])})
+    _, alone = postprocess(raw, targets, smooth=0, smooth_rotations=0, foot_lock=False)
+    _, bounded = postprocess(raw, targets, smooth=0, smooth_rotations=0, foot_lock=False, raw=shaky)
+    assert plausibility(shaky).joint_accel > plausibility(raw).joint_accel + 30
+    assert "undone" not in bounded["exact"]
+    assert bounded["plausibility"]["raw"] == plausibility(shaky).as_dict()
+    assert alone["plausibility"]["raw"] == plausibility(raw).as_dict()

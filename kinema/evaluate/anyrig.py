@@ -7,6 +7,8 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
 - ``skate``: mean horizontal speed (units/s x 100, i.e. cm/s for a 1-m creature) of the rig's
   contact joints (`ground_joints`) over consecutive frames where they are within ``GROUND`` of the
   floor, for generated and reference clips alike; ``skate_ratio`` = generated / reference;
+- ``planted`` / ``planted_ref``: the share of those joints' frames within ``GROUND`` of the floor,
+  generated and reference: a motion whose feet float has no skate to measure, and this says so;
 - ``jerk``: mean third difference of joint positions (units/s^3), generated and reference;
 - ``stretch``: largest relative change of any bone length (bones moved by translation under a floor
   armature excepted: they are IK handles, not body bones; the others are FK of rotations, so this
@@ -62,6 +64,13 @@ def _skate(m: Motion, joints: list[int]) -> float | None:
         return None
     planted = m.positions[:, joints, 1] < GROUND
     return foot_skate(m, planted, joints)
+
+
+def _planted(m: Motion, joints: list[int]) -> float | None:
+    """Share of the frames of ``joints`` within ``GROUND`` of the floor (None without joints)."""
+    if not joints:
+        return None
+    return float((m.positions[:, joints, 1] < GROUND).double().mean())
 
 
 def _stretch(m: Motion) -> float:
@@ -152,6 +161,8 @@ def evaluate_rig(
         "skate": skate_gen,
         "skate_ref": skate_ref,
         "skate_ratio": None if not skate_ref or skate_gen is None else skate_gen / skate_ref,
+        "planted": _mean([_planted(m, feet) for m in gen]),
+        "planted_ref": _mean([_planted(m, feet) for m in motions]),
         "jerk": _mean([position_jerk(m.positions, m.fps) for m in gen]),
         "jerk_ref": _mean([position_jerk(m.positions, m.fps) for m in motions]),
         "stretch": max(_stretch(m) for m in gen),
@@ -223,12 +234,14 @@ def format_row(r: dict) -> str:
     retrieval = f"{r['retrieval_hits']}/{r['retrieval_n']}" if r.get("retrieval_n") else "-"
     return (
         f"| {r['rig']} | {r['split']} | {similarity} | {r['joints']} | {r['contacts']} | {_f(r['skate'])} "
-        f"| {_f(r['skate_ref'])} | {_f(r['skate_ratio'])} | {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} "
+        f"| {_f(r['skate_ref'])} | {_f(r['skate_ratio'])} | {_f(r.get('planted'))} | {_f(r.get('planted_ref'))} "
+        f"| {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} "
         f"| {r['stretch']:.1e} | {_f(r['constraint_cm'])} | {_f(r['coverage'])} | {_f(r['novelty'])} | {retrieval} |"
     )
 
 
 TABLE_HEADER = (
-    "| rig | split | similarity (nearest training rig) | joints | contacts | skate | skate (own clips) | ratio | jerk "
-    "| jerk (own clips) | stretch | constraint cm | coverage AUC | novelty AUC | retrieval |\n|" + "---|" * 15
+    "| rig | split | similarity (nearest training rig) | joints | contacts | skate | skate (own clips) | ratio "
+    "| planted | planted (own clips) | jerk | jerk (own clips) | stretch | constraint cm | coverage AUC | novelty AUC "
+    "| retrieval |\n|" + "---|" * 17
 )

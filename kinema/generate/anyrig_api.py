@@ -33,8 +33,16 @@ from kinema.generate.anyrig_constraints import (
     encode_constraints,
 )
 from kinema.generate.anyrig_constraints import post_targets as make_post_targets
-from kinema.generate.anyrig_feet import GROUND, lock_translated_feet
-from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
+from kinema.generate.anyrig_feet import (
+    descendants,
+    floor_height,
+    floor_root_children,
+    lock_translated_feet,
+    rest_extent,
+    translated_feet,
+)
+from kinema.generate.anyrig_ground import ground_motion, leg_ends, settle_offsets, steady_height
+from kinema.generate.anyrig_post import dejitter, pin_root, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
@@ -48,16 +56,18 @@ from kinema.model.anyrig_loading import LoadedAnyRig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
 from kinema.postprocess import postprocess as run_postprocess
+from kinema.postprocess.guard import plausibility, violations
 from kinema.representation.joint import JointRepresentation, yaw_quat
 from kinema.rig import Rig
-from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
 
 
 @dataclass
 class AnyRigReport:
     """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
-    warnings."""
+    foot locking, the largest vertical change of de-jittering the root height, of putting the motion on
+    the floor and of settling the body onto its legs (rig sizes: ``height_smoothed``, ``grounded``,
+    ``settled``), warnings."""
 
     seconds: float = 0.0
     steps: int = 0
@@ -66,6 +76,9 @@ class AnyRigReport:
     segments: int = 1
     residuals_cm: list[float] = field(default_factory=list)
     foot_lock: list[dict] = field(default_factory=list)
+    grounded: float = 0.0
+    height_smoothed: float = 0.0
+    settled: float = 0.0
     warnings: list[str] = field(default_factory=list)
 
 
@@ -222,25 +235,29 @@ class AnyRigModel:
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
         """Features -> motion, post-processed in rig units (rest pose 1 across, so the human-tuned
         thresholds of kinema.postprocess mean the same on a fish and a T-rex), then scaled to metres.
-        Bones under a floor-level armature get their translations after post-processing (which works on
-        rotations) and their feet are locked directly (kinema.generate.anyrig_feet)."""
+        The motion is first put on the floor (kinema.generate.anyrig_ground; not when a keyframe or a
+        copied root motion fixes the root). Bones under a floor-level armature get their translations after
+        post-processing (which works on rotations) and their feet are cleaned up and locked directly
+        (kinema.generate.anyrig_feet)."""
         m = rep_n.to_motion(f)
         targets = None
         if postprocess:
+            m, f = self._ground(m, f, rep_n, constraints, report)
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
-            m, post = run_postprocess(m, targets, rig=rep_n.rig)
+            m, smoothed, warned = dejitter(m)
+            m, post = run_postprocess(m, targets, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0, raw=before)
+            post["smooth"] = smoothed
+            report.warnings += [w for w in warned if w not in report.warnings]
             m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
             # unmet constraints are said once, measured on the finished motion in metres (below)
             news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
             report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
         if postprocess:
-            skel = rep_n.rig.skeleton
-            feet = [j for j in floor_root_children(skel) if floor_height(skel, j) < GROUND * rest_extent(skel)]
-            m, locked = lock_translated_feet(m, feet, rest_extent(skel))
-            report.foot_lock.append({**post.get("foot_lock", {}), "translated_feet_segments": locked})
+            m, locked = self._lock_feet(m, rep_n, targets, report)
+            report.foot_lock.append({**post.get("foot_lock", {}), **locked})
         lt = None if m.local_translations is None else m.local_translations / scale
         motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if targets is not None:
@@ -253,30 +270,63 @@ class AnyRigModel:
             report.warnings += unmet_warnings(worst, self.fps, report.warnings)
         return motion
 
+    @staticmethod
+    def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:
+        """``m`` with a steadied root height, put on the floor by its contact joints and settled onto its
+        legs (kinema.generate.anyrig_ground), unless a keyframe or a copied root motion decides where the
+        root is; and the features ``f`` (the translated feet's moved to keep their world heights)."""
+        rig = rep_n.rig
+        if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
+            return m, f
+        m, change = steady_height(m)
+        report.height_smoothed = max(report.height_smoothed, change)
+        if not rig.contacts:
+            return m, f
+        skel = rig.skeleton
+        probe = with_floor_translations(m, f, rep_n)
+        stands = {k: h for foot in translated_feet(rig, rig.root) for k, h in zip(foot.soles, foot.rest, strict=True)}
+        rest = [stands.get(j, floor_height(skel, j)) for j in rig.contacts]
+        m, off = ground_motion(m, probe, list(rig.contacts), rest, rest_extent(skel))
+        report.grounded = max(report.grounded, off)
+        return AnyRigModel._settle(m, f, rep_n, report)
 
-def floor_root_children(skeleton: Skeleton, band: float = 0.05) -> list[int]:
-    """Children of joint 0 when joint 0 is an armature helper on the floor (its rest height within
-    ``band`` of the lowest joint, relative to the rig's size) with several children: Quaternius rigs
-    move their body and IK-driven feet by animating these bones' translations, not rotations."""
-    P = rest_positions(skeleton)
-    extent = float((P.max(0).values - P.min(0).values).max())
-    kids = skeleton.children[0]
-    if extent <= 0 or len(kids) < 2 or float(P[0, 1] - P[:, 1].min()) > band * extent:
-        return []
-    return list(kids)
+    @staticmethod
+    def _settle(m: Motion, f, rep_n, report) -> tuple[Motion, torch.Tensor]:
+        """The body lowered (or raised) onto its legs where the model put its translated feet too far from
+        them (kinema.generate.anyrig_ground.settle_offsets); the feet keep their world heights (their
+        root-relative features are moved the other way). Returns the motion and the features."""
+        skel = rep_n.rig.skeleton
+        kids = [j for j in floor_root_children(skel) if j not in skel.path_from_root(rep_n.rig.root)]
+        feet = [foot.joint for foot in translated_feet(rep_n.rig, rep_n.rig.root)]
+        legs = leg_ends(skel, feet, descendants(skel, kids), rest_extent(skel))
+        if not legs:
+            return m, f
+        probe = with_floor_translations(m, f, rep_n)
+        g = settle_offsets(probe.positions, legs, m.fps, rest_extent(skel))
+        root = m.root_translation.clone()
+        root[:, 1] -= g.to(root.dtype)
+        f = f.clone()
+        f[:, kids, 1] += g.to(f.dtype)[:, None]
+        report.settled = max(report.settled, float(g.abs().max()))
+        return Motion(m.skeleton, m.fps, root, m.local_rotations, m.foot_contacts, m.local_translations), f
 
-
-def rest_extent(skeleton: Skeleton) -> float:
-    """Largest side of the rest pose's bounding box (skeleton units): the unit the model works in, as
-    the data builds normalise every rig to it (kinema.data.motion_cache.rest_extent)."""
-    P = rest_positions(skeleton)
-    return float((P.max(0).values - P.min(0).values).max())
-
-
-def floor_height(skeleton: Skeleton, joint: int) -> float:
-    """Rest height of ``joint`` above the skeleton's lowest joint (skeleton units)."""
-    P = rest_positions(skeleton)
-    return float(P[joint, 1] - P[:, 1].min())
+    @staticmethod
+    def _lock_feet(m: Motion, rep_n, targets, report) -> tuple[Motion, dict]:
+        """Translated feet locked (kinema.generate.anyrig_feet), undone with a warning when that makes
+        the motion less plausible than before by the post-processing guard's bounds."""
+        skel = rep_n.rig.skeleton
+        feet = translated_feet(rep_n.rig, rep_n.rig.root)
+        hold = {} if targets is None else {j: fr.tolist() for j, (fr, _) in targets.joint_positions.items()}
+        new, locked = lock_translated_feet(m, feet, rest_extent(skel), contacts=m.foot_contacts, hold=hold)
+        if new is m:
+            return m, locked
+        was = plausibility(m)
+        problems = violations(was, was, plausibility(new))
+        if problems:
+            why = "; ".join(problems)
+            report.warnings.append(f"post-processing: translated foot locking undone, it made the motion worse: {why}")
+            return m, {**locked, "undone": problems}
+        return new, locked
 
 
 def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
@@ -323,4 +373,15 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     return out
 
 
-__all__ = ["AnyRigModel", "AnyRigReport", "AnyRigResult", "JointTarget", "Keyframe", "RootMotion", "RootPath"]
+__all__ = [
+    "AnyRigModel",
+    "AnyRigReport",
+    "AnyRigResult",
+    "JointTarget",
+    "Keyframe",
+    "RootMotion",
+    "RootPath",
+    "floor_height",
+    "floor_root_children",
+    "rest_extent",
+]

@@ -37,6 +37,7 @@ def postprocess(
     smooth_rotations: float = DEFAULT_ROT_SIGMA_SECONDS,
     bounds: GuardBounds = DEFAULT_BOUNDS,
     rig: Rig | None = None,
+    raw: Motion | None = None,
     **exact_kwargs,
 ) -> tuple[Motion, dict]:
     """De-jittering (Gaussians of ``smooth`` seconds on the root x/z and ``smooth_rotations`` seconds on
@@ -46,10 +47,14 @@ def postprocess(
     ``bounds`` is undone. Returns the motion and ``{"smooth", "foot_lock", "exact", "plausibility",
     "warnings"}``; ``warnings`` lists undone stages and constraints left unmet, in words. ``rig`` names the
     contact joints and legs foot locking works on (default: found from the motion's skeleton,
-    kinema.rig); a rig without contacts (a fish) skips foot locking."""
+    kinema.rig); a rig without contacts (a fish) skips foot locking. ``raw``: the motion as generated when
+    the caller already de-jittered ``motion`` itself (the any-rig model): the stages are bounded by its
+    plausibility, as they would be had de-jittering run here (default: ``motion``)."""
     report: dict = {"warnings": []}
     targets = None if targets is None else targets.validate(motion)
-    guard = _Guard(plausibility(motion), bounds, report)
+    guard = _Guard(plausibility(motion if raw is None else raw), bounds, report)
+    if raw is not None:
+        guard.before = plausibility(motion)
     if smooth > 0 or smooth_rotations > 0:
         new, report["smooth"] = smooth_motion(motion, smooth, smooth_rotations)
         motion = guard.accept("de-jittering", motion, new, report["smooth"])
