@@ -159,8 +159,14 @@ class DDIMSampler:
         init_noise: torch.Tensor | None = None,
         num_inference_steps: int | None = None,
         on_step: Callable[[int, int], None] | None = None,
+        start_x0: torch.Tensor | None = None,
+        strength: float = 1.0,
     ) -> torch.Tensor:
         """Run the whole reverse process and return the final x0 (shape ``shape``).
+
+        With ``start_x0`` (shape ``shape``, normalised), only the last ``strength`` share of the steps
+        runs (at least one), starting from ``start_x0`` noised to the first of them (SDEdit): the result
+        keeps the start's large-scale shape and redraws its details.
 
         ``num_inference_steps`` (default: the sampler's own setting) applies to this call only: the
         sampler is not changed, so calls from several threads with different step counts do not interfere.
@@ -183,6 +189,10 @@ class DDIMSampler:
             steps = self.timesteps.tolist()
         else:
             steps = spaced_timesteps(self.num_train_steps, num_inference_steps, self.timestep_spacing)
+        if start_x0 is not None:
+            steps = steps[len(steps) - max(1, round(strength * len(steps))) :]
+            t0 = torch.full((x.shape[0],), steps[0], dtype=torch.long, device=x.device)
+            x = self.add_noise(start_x0.to(device=x.device, dtype=x.dtype), x, t0)
         pairs = list(zip(steps, steps[1:] + [-1], strict=True))
         if progress:
             from tqdm.auto import tqdm

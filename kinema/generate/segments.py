@@ -35,23 +35,45 @@ from kinema.generate.targets import UserTargets, encode_user_constraints, run_po
 from kinema.motion.core import Motion
 from kinema.representation.flat import FlatRepresentation
 
-#: seconds of the previous motion each later segment re-plays and cross-fades over
-OVERLAP_SECONDS = 0.5
-#: seconds at the start of that overlap imposed as full-body context (at least one frame)
-IMPOSED_SECONDS = 0.15
+#: seconds of each side of a join that its transition window regenerates
+JOIN_SECONDS = 0.5
+#: seconds at each end of a join's window imposed as full-body keyframes of the motion around it
+JOIN_CONTEXT_SECONDS = 0.15
+#: seconds at each end of a join's window over which it is cross-faded into the motion around it
+JOIN_FADE_SECONDS = 0.5
+#: share of the DDIM steps a join's window runs, starting from the hard cut noised to that level (SDEdit)
+JOIN_STRENGTH = 0.6
 
 
 @dataclass
 class PlannedSegment:
     prompt: str
-    start: int  # first new output frame
+    start: int  # first output frame
     end: int  # one past the last output frame
-    overlap: int  # leading frames shared with the previous segment (cross-faded)
-    imposed: int = 0  # the first frames of the overlap given as full-body context
 
     @property
     def num_frames(self) -> int:
-        return self.end - self.start + self.overlap
+        return self.end - self.start
+
+
+@dataclass
+class PlannedJoin:
+    """The transition window of one join: output frames ``[lo, hi)`` regenerated with ``prompt`` (the
+    later segment's), the first ``head`` and last ``tail`` of them imposed as keyframes of the motion
+    around the window (context every guidance branch sees); the window is cross-faded into that motion
+    over its first ``fade_in`` and last ``fade_out`` frames."""
+
+    prompt: str
+    lo: int
+    hi: int
+    head: int
+    tail: int
+    fade_in: int
+    fade_out: int
+
+    @property
+    def num_frames(self) -> int:
+        return self.hi - self.lo
 
 
 @dataclass(frozen=True)
@@ -68,6 +90,7 @@ class SegmentTargets:
     c_dir: torch.Tensor
     shift: torch.Tensor
     join: torch.Tensor | None = None
+    start: torch.Tensor | None = None
 
 
 def stack_targets(rows: list[SegmentTargets]) -> tuple[SampleTargets, torch.Tensor]:
@@ -78,7 +101,7 @@ def stack_targets(rows: list[SegmentTargets]) -> tuple[SampleTargets, torch.Tens
         return None if values[0] is None else torch.stack(values)
 
     return SampleTargets(stack("c_dir"), stack("x_tgt"), stack("mask"), stack("world_xz"),
-                         stack("world_mask"), stack("join")), stack("shift")
+                         stack("world_mask"), stack("join"), stack("start")), stack("shift")
 
 
 @dataclass
@@ -90,35 +113,53 @@ class SegmentPlan:
     total_frames: int
     targets: UserTargets
     constraints: list = field(default_factory=list)
+    joins: list[PlannedJoin] = field(default_factory=list)
+
+    def _user(self, lo: int, hi: int):
+        """Copies of the user targets on output frames ``[lo, hi)``."""
+        user = self.targets
+        wxz = None if user.world_xz is None else user.world_xz[lo:hi].clone()
+        wm = None if user.world_mask is None else user.world_mask[lo:hi].clone()
+        return user.x_tgt[lo:hi].clone(), user.mask[lo:hi].clone(), wxz, wm
 
     def segment_targets(self, k: int, motion: Motion | None, heading: float) -> SegmentTargets:
-        """Segment k's targets in its local frame; ``motion`` is the sample's motion so far (None for
-        the first segment, whose first frame faces ``heading`` unless a heading constraint says otherwise)."""
-        seg, rep, user = self.segments[k], self.rep, self.targets
-        lo = seg.start - seg.overlap
-        join = None
-        x_tgt = user.x_tgt[lo : seg.end].clone()
-        mask = user.mask[lo : seg.end].clone()
-        wxz = None if user.world_xz is None else user.world_xz[lo : seg.end].clone()
-        wm = None if user.world_mask is None else user.world_mask[lo : seg.end].clone()
+        """Segment k's own targets (its user constraints, no context) in its local frame: it starts
+        where ``motion`` (the sample's motion so far; None for the first segment) ends, facing its last
+        heading; the first segment faces ``heading`` unless a heading constraint on frame 0 says otherwise."""
+        seg, rep = self.segments[k], self.rep
+        x_tgt, mask, wxz, wm = self._user(seg.start, seg.end)
         if motion is None:
             shift = torch.zeros(2)
             c_dir = torch.tensor([math.cos(heading), math.sin(heading)])
             if bool(mask[0, rep.heading].all()):  # a heading constraint on the first frame wins
                 c_dir = x_tgt[0, rep.heading].float()
         else:
-            prev_end = rep.from_motion(motion).float()[motion.num_frames - seg.overlap :]
-            shift = prev_end[0, rep.root_xz].clone()
-            c_dir = prev_end[0, rep.heading].clone()
-            channels, n = rep.motion_channels, seg.imposed
-            x_tgt[:n, channels] = prev_end[:n, channels]
-            mask[:n, channels] = 1.0
-            join = torch.zeros_like(mask)
-            join[:n, channels] = 1.0
+            last = rep.from_motion(motion).float()[-1]
+            shift, c_dir = last[rep.root_xz].clone(), last[rep.heading].clone()
         rep.shift_root_xz(x_tgt, -shift)
         if wxz is not None:
             wxz = wxz - shift
-        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift, join)
+        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift)
+
+    def join_targets(self, j: int, features: torch.Tensor) -> SegmentTargets:
+        """Join j's window targets in its local frame: ``features (T, D)`` (unnormalised, the sample's
+        assembled motion) imposed on the window's first ``head`` and last ``tail`` frames, as context
+        (``join``), over the user constraints of the window's frames."""
+        jn, rep = self.joins[j], self.rep
+        x_tgt, mask, wxz, wm = self._user(jn.lo, jn.hi)
+        around = torch.zeros(jn.num_frames, dtype=torch.bool)
+        around[: jn.head] = True
+        around[jn.num_frames - jn.tail :] = True
+        ch = around[:, None] & rep.motion_channels[None, :]
+        x_tgt = torch.where(ch, features[jn.lo : jn.hi].float(), x_tgt)
+        mask = torch.where(ch, torch.ones_like(mask), mask)
+        shift = features[jn.lo, rep.root_xz].float().clone()
+        c_dir = features[jn.lo, rep.heading].float().clone()
+        start = rep.shift_root_xz(features[jn.lo : jn.hi].float().clone(), -shift)
+        rep.shift_root_xz(x_tgt, -shift)
+        if wxz is not None:
+            wxz = wxz - shift
+        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift, ch.float(), start)
 
     def postprocess(self, motion: Motion) -> tuple[Motion, dict]:
         """Guarded post-processing of one finished motion; returns it with its own report."""
@@ -140,16 +181,35 @@ def segment_bounds(segments, fps: float) -> list[int]:
     return bounds
 
 
+def plan_joins(segments: list[PlannedSegment], fps: float) -> list[PlannedJoin]:
+    """The transition window of every join: ``JOIN_SECONDS`` of each side regenerated plus
+    ``JOIN_CONTEXT_SECONDS`` of keyframes at each end, all within the half of each neighbouring
+    segment that faces the join (the whole segment at the timeline's ends), so windows never overlap.
+    A side with no frame to spare (a one-frame middle segment) gets no window: a plain cut."""
+    side, context = round(JOIN_SECONDS * fps), max(1, round(JOIN_CONTEXT_SECONDS * fps))
+    fade = max(1, round(JOIN_FADE_SECONDS * fps))
+    n, joins = len(segments), []
+    for k in range(n - 1):
+        before, after = segments[k], segments[k + 1]
+        room_before = before.num_frames if k == 0 else before.num_frames // 2
+        room_after = after.num_frames if k + 1 == n - 1 else after.num_frames // 2
+        if room_before < 1 or room_after < 1:
+            continue
+        head, tail = min(context, room_before), min(context, room_after)
+        lo = before.end - head - min(side, room_before - head)
+        hi = after.start + tail + min(side, room_after - tail)
+        fade_in, fade_out = max(head, min(fade, before.end - lo)), max(tail, min(fade, hi - after.start))
+        joins.append(PlannedJoin(after.prompt, lo, hi, head, tail, fade_in, fade_out))
+    return joins
+
+
 def plan_segments(rep: FlatRepresentation, segments, constraints,
                   constraints_fps: float | None = None) -> SegmentPlan:
-    """Frame ranges for every segment (at ``rep.fps``) and the encoded user constraints for the whole output."""
-    overlap = max(1, round(OVERLAP_SECONDS * rep.fps))
-    imposed = max(1, round(IMPOSED_SECONDS * rep.fps))
+    """Frame ranges for every segment and join window (at ``rep.fps``) and the encoded user
+    constraints for the whole output."""
     bounds = segment_bounds(segments, rep.fps)
-    planned = []
-    for i, (s, start, end) in enumerate(zip(segments, bounds[:-1], bounds[1:], strict=True)):
-        ov = 0 if i == 0 else min(overlap, start)
-        planned.append(PlannedSegment(s.prompt, start, end, ov, min(imposed, ov)))
+    planned = [PlannedSegment(s.prompt, start, end)
+               for s, start, end in zip(segments, bounds[:-1], bounds[1:], strict=True)]
     total_frames = bounds[-1]
     cons, targets = encode_user_constraints(rep, constraints, total_frames, constraints_fps)
-    return SegmentPlan(rep, planned, total_frames, targets, cons)
+    return SegmentPlan(rep, planned, total_frames, targets, cons, plan_joins(planned, rep.fps))

@@ -110,3 +110,11 @@ def crossfade(prev: Motion, new: Motion, overlap: int) -> Motion:
     if new.num_frames > overlap:
         out = out.concatenate(new.crop(overlap))
     return out
+
+
+def splice(motion: Motion, window: Motion, lo: int, fade_in: int, fade_out: int) -> Motion:
+    """``motion`` with frames ``[lo, lo + window.num_frames)`` replaced by ``window``: its first
+    ``fade_in`` frames blend from ``motion`` to the window, its last ``fade_out`` back to ``motion``."""
+    hi = lo + window.num_frames
+    out = crossfade(motion.crop(0, lo + fade_in), window, fade_in)
+    return crossfade(out, motion.crop(hi - fade_out), fade_out)

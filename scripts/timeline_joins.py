@@ -1,0 +1,75 @@
+"""Measure how multi-prompt timelines follow their prompts and how smooth their joins are.
+
+For each timeline (walk -> bow -> wave and bow -> wave -> walk, 4 s per segment) and seed, raw and
+post-processed: the bow segment's largest trunk lean (pelvis -> head from vertical, degrees), the wave
+segment's highest right hand over the head (m), the walk segment's mean pelvis ground speed (m/s), and
+the joins: the largest joint speed (m/s) and acceleration (m/s^2) on frames within ``JOIN`` s of a
+segment boundary against the 99th percentile of the same per-frame maxima elsewhere, plus the peak
+pelvis speed at the joins. Usage (from the repository root):
+
+    OMP_NUM_THREADS=1 python scripts/timeline_joins.py --seeds 0 1 2 3 [--steps N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import torch
+
+import kinema
+from kinema.generate.targets import run_postprocess
+
+WALK, BOW, WAVE = "A person walks forward.", "A person bows.", "A person waves their right hand."
+TIMELINES = {"walk_bow_wave": [WALK, BOW, WAVE], "bow_wave_walk": [BOW, WAVE, WALK]}
+SECONDS = 4.0
+JOIN = 0.75  # seconds either side of a boundary that count as the join
+
+
+def measures(motion, prompts: list[str]) -> dict[str, float]:
+    names, p, fps = list(motion.skeleton.names), motion.positions.double(), motion.fps
+    n = round(SECONDS * fps)
+    seg = {prompt: slice(i * n, (i + 1) * n) for i, prompt in enumerate(prompts)}
+    up = p[:, names.index("Head")] - p[:, 0]
+    lean = torch.rad2deg(torch.acos(up[:, 1] / up.norm(dim=-1)))
+    over = p[:, names.index("Hand_R"), 1] - p[:, names.index("Head"), 1]
+    ground = (p[1:, 0, [0, 2]] - p[:-1, 0, [0, 2]]).norm(dim=-1) * fps
+    vel = (p[1:] - p[:-1]) * fps
+    speed = vel.norm(dim=-1).amax(-1)  # (T-1,) fastest joint per frame
+    acc = ((vel[1:] - vel[:-1]) * fps).norm(dim=-1).amax(-1)  # (T-2,)
+    near = torch.zeros(p.shape[0], dtype=torch.bool)
+    for i in range(1, len(prompts)):
+        near[max(0, i * n - round(JOIN * fps)) : i * n + round(JOIN * fps)] = True
+    pelvis = vel[:, 0].norm(dim=-1)
+    return {
+        "bow_lean_deg": float(lean[seg[BOW]].max()),
+        "wave_hand_over_head_m": float(over[seg[WAVE]].max()),
+        "walk_speed_ms": float(ground[seg[WALK]][: n - 1].mean()),
+        "join_speed_peak": float(speed[near[1:]].max()),
+        "inside_speed_p99": float(torch.quantile(speed[~near[1:]], 0.99)),
+        "join_acc_peak": float(acc[near[2:]].max()),
+        "inside_acc_p99": float(torch.quantile(acc[~near[2:]], 0.99)),
+        "join_pelvis_speed_peak": float(pelvis[near[1:]].max()),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
+    ap.add_argument("--steps", type=int, default=None)
+    ap.add_argument("--timelines", nargs="+", default=list(TIMELINES))
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    model = kinema.load_model("default")
+    for name in args.timelines:
+        prompts = TIMELINES[name]
+        for seed in args.seeds:
+            raw = model.generate([(p, SECONDS) for p in prompts], seed=seed, steps=args.steps, postprocess=False)[0]
+            post, _ = run_postprocess(raw, [], model.representation)  # what generate(postprocess=True) does
+            for mode, motion in (("raw", raw), ("post", post)):
+                row = {k: round(v, 3) for k, v in measures(motion, prompts).items()}
+                print(json.dumps({"timeline": name, "seed": seed, "mode": mode, **row}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
