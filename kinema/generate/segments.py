@@ -33,6 +33,7 @@ from kinema.errors import KinemaError
 from kinema.generate.sampling import SampleTargets
 from kinema.generate.targets import UserTargets, encode_user_constraints, run_postprocess
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
 from kinema.representation.flat import FlatRepresentation
 
 #: seconds of each side of a join that its transition window regenerates
@@ -43,6 +44,8 @@ JOIN_CONTEXT_SECONDS = 0.15
 JOIN_FADE_SECONDS = 0.5
 #: share of the DDIM steps a join's window runs, starting from the hard cut noised to that level (SDEdit)
 JOIN_STRENGTH = 0.6
+#: frames (Gaussian sigma) the hard cut is smoothed over before it is noised
+JOIN_START_SMOOTHING = 5.0
 
 
 @dataclass
@@ -155,7 +158,7 @@ class SegmentPlan:
         mask = torch.where(ch, torch.ones_like(mask), mask)
         shift = features[jn.lo, rep.root_xz].float().clone()
         c_dir = features[jn.lo, rep.heading].float().clone()
-        start = rep.shift_root_xz(features[jn.lo : jn.hi].float().clone(), -shift)
+        start = smooth_time(rep.shift_root_xz(features[jn.lo : jn.hi].float().clone(), -shift), JOIN_START_SMOOTHING)
         rep.shift_root_xz(x_tgt, -shift)
         if wxz is not None:
             wxz = wxz - shift
