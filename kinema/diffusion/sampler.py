@@ -28,6 +28,11 @@ TIMESTEP_SPACINGS = ("trailing", "leading")
 DenoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 
+def kept_steps(num_steps: int, strength: float) -> int:
+    """How many of ``num_steps`` DDIM steps a start at ``strength`` (0, 1] runs: at least one."""
+    return max(1, round(strength * num_steps))
+
+
 def spaced_timesteps(num_train_steps: int, num_inference_steps: int, spacing: str = "trailing") -> list[int]:
     """``num_inference_steps`` evenly spaced, strictly descending 0-based steps out of ``num_train_steps``.
 
@@ -190,7 +195,7 @@ class DDIMSampler:
         else:
             steps = spaced_timesteps(self.num_train_steps, num_inference_steps, self.timestep_spacing)
         if start_x0 is not None:
-            steps = steps[len(steps) - max(1, round(strength * len(steps))) :]
+            steps = steps[len(steps) - kept_steps(len(steps), strength) :]
             t0 = torch.full((x.shape[0],), steps[0], dtype=torch.long, device=x.device)
             x = self.add_noise(start_x0.to(device=x.device, dtype=x.dtype), x, t0)
         pairs = list(zip(steps, steps[1:] + [-1], strict=True))

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 
 from kinema.diffusion.guidance import Guidance
+from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel
 from kinema.generate.progress import ProgressFn, StepProgress, split_progress
@@ -291,8 +292,8 @@ class KinemaModel:
         """
         motions: list[Motion] = []
         bar, callback = split_progress(progress)
-        passes = len(plan.segments) + len(plan.joins)
-        counter = None if callback is None else StepProgress(callback, segments=passes, steps=steps)
+        passes = [steps] * len(plan.segments) + [kept_steps(steps, JOIN_STRENGTH)] * len(plan.joins)
+        counter = None if callback is None else StepProgress(callback, steps=passes)
         run = partial(self._sample_pass, guide=guide, steps=steps, g=g, bar=bar, planner=planner)
         for k, seg in enumerate(plan.segments):
             rows = [plan.segment_targets(k, m if k else None, heading) for m in motions or [None] * samples]
