@@ -75,7 +75,8 @@ def test_timeline_meets_root_waypoints_in_segments_and_in_a_join_window(model):
     for post in (False, True):
         m = model.generate(timeline, constraints=cons, steps=5, seed=0, postprocess=post)[0]
         root = rep.from_motion(m)[:, rep.root_xz]
-        misses[post] = [float((root[round(t * model.fps)] - torch.tensor(p)).norm()) for t, p in zip(times, points)]
+        frames = [round(t * model.fps) for t in times]
+        misses[post] = [float((root[f] - torch.tensor(p)).norm()) for f, p in zip(frames, points, strict=True)]
     assert max(misses[True]) < 0.01, misses
     assert max(misses[False]) < 0.15 and misses[False][1] < 0.06, misses
 

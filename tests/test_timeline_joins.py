@@ -24,7 +24,9 @@ def _segments(lengths: list[int]) -> list[PlannedSegment]:
 def test_windows_cover_half_a_second_plus_keyframes_each_side() -> None:
     joins = plan_joins(_segments([80, 80, 80]), FPS)
     assert [(j.lo, j.hi, j.head, j.tail, j.fade_in, j.fade_out) for j in joins] == [
-        (67, 93, 3, 3, 10, 10), (147, 173, 3, 3, 10, 10)]
+        (67, 93, 3, 3, 10, 10),
+        (147, 173, 3, 3, 10, 10),
+    ]
     assert [j.prompt for j in joins] == ["prompt 1", "prompt 2"]  # the later segment's text
 
 
@@ -32,9 +34,9 @@ def test_short_segments_shrink_the_windows_which_never_overlap() -> None:
     segs = _segments([80, 7, 5, 80])
     joins = plan_joins(segs, FPS)
     assert len(joins) == 3
-    for a, b in zip(joins, joins[1:]):
+    for a, b in zip(joins, joins[1:], strict=False):
         assert a.hi <= b.lo, (a, b)
-    for j, (before, after) in zip(joins, zip(segs, segs[1:])):
+    for j, (before, after) in zip(joins, zip(segs, segs[1:], strict=False), strict=True):
         assert j.lo < before.end < j.hi and j.head >= 1 and j.tail >= 1
         assert j.fade_in <= before.end - j.lo and j.fade_out <= j.hi - after.start
 
