@@ -271,7 +271,7 @@ class KinemaModel:
         return [self.known_prompts.match(p, self.encode_text(p)[0]) for p in distinct]
 
     def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
-        """One motion (all segments, cross-faded) and its post-processing report ({} when off)."""
+        """One motion (all segments and their regenerated joins) and its post-processing report ({} when off)."""
         motion = self._sample_batch(plan, guide, steps, g, heading, 1, progress)[0]
         return plan.postprocess(motion) if postprocess else (motion, {})
 

@@ -1,25 +1,35 @@
-"""Per-segment targets for generation: user constraints split over a timeline plus the joins.
+"""Per-segment and per-join targets of a timeline: user constraints split over segments and join windows.
 
-Frames of user constraints refer to the whole output. Segment k covers output frames
-``[start_k, end_k)`` and is generated with ``overlap`` extra leading frames that re-play the end of the
-motion so far; the first ``imposed`` of them are full-body keyframes of that motion (positions,
-velocities, rotations, root and heading), given to the model as *context* that every guidance branch
-sees (``join`` mask; kinema.model.denoiser.Denoiser.forward_guided), and the whole overlap is
-cross-faded afterwards (kinema.generate.timeline.crossfade).
+Frames of user constraints refer to the whole output. The joins follow PriorMDM's DoubleTake (Shafir
+et al., sequential composition): a first take samples every segment ``[start_k, end_k)`` on its own
+prompt, with no context from the previous one, starting where the motion so far ends and facing its last
+heading; a second take regenerates each join: output frames ``[lo, hi)`` (``JOIN_SECONDS`` each side of
+the boundary plus ``JOIN_CONTEXT_SECONDS`` of full-body keyframes of the first take at each end, given
+as *context* every guidance branch sees, ``join`` mask; kinema.model.denoiser.Denoiser.forward_guided),
+with the later segment's prompt, over the last ``JOIN_STRENGTH`` of the DDIM steps starting from the
+first take's hard cut (Gaussian-smoothed over ``JOIN_START_SMOOTHING`` frames, then noised: SDEdit);
+the window is cross-faded into the motion over ``JOIN_FADE_SECONDS`` at each edge
+(kinema.generate.timeline.splice).
 
-Why so few frames, and why as context (issue 18; Kimodo Sec. 4.4 imposes 5 transition frames): with
-all 10 overlap frames imposed as constraints under separated guidance (w_constr = 2), every segment
-after the first kept doing what the first did (walk -> bow -> wave walked throughout: wave hand 0.3 m
-*below* the head). Measured on walk -> bow -> wave and bow -> wave -> walk, seeds 0-1, 50 steps, raw:
-3 of 10 frames imposed as context gives the wave hand 0.23-0.32 m above the head and the closing walk
-1.07 m/s (before: 0.16-0.29 m/s), peak join accelerations 41-119 m/s^2 (inside, p99: 76-186);
-5 imposed frames followed the prompts less (wave 0.0-0.32 m) with rougher joins (up to 185 m/s^2);
-constraints only at high noise (t >= 800) gave slower walks (0.56-0.66 m/s). On the 8 timeline cases of
-`kinema evaluate` (test split, 26 segments) per-segment R@3 went 50.0 -> 73.1 % (R@1 38.5 -> 57.7 %).
+Why (issue 18): the former joins re-played 0.5 s of the previous motion at the start of each segment
+with its first 0.15 s as context, and that context outweighed the new text: after a walk the bow
+segment kept shuffling forward at 0.3-0.5 m/s and leaned 8-9 degrees. Measured with the shipped model,
+raw, 50 steps (scripts/timeline_joins.py, walk -> bow -> wave and bow -> wave -> walk, seeds 0-3):
+the bow after a walk leans 14/12/25/19 degrees (former joins 9/8/23/9; the lone prompt 35/18/7/13;
+over seeds 0-7 the timeline's bow and the lone prompt average 18 and 16 degrees); the closing walk of
+bow -> wave -> walk 1.0-1.2 m/s (former 0.66-1.27). Window choices on the same cases and on the 8
+timeline cases of `kinema evaluate` (test split, 26 segments): windows sampled from pure noise jumped
+(the model snaps from the first keyframes to the later pose within 2 frames: join acceleration peaks
+170-590 m/s^2, whatever the text, guidance, keyframe count or constraint-vs-context); starting from
+the hard cut at 40/50/60/70 % of the steps gave evaluation join peaks 188/174/159/138 m/s^2, smoothing
+that start over 3/5 frames 119/104 (inside p99 117); 0.75-s sides gave peaks 60 but raw skate 15.2 cm/s
+(0.5-s: 12.9; former joins 11.9). Evaluation row with these settings: per-segment R@3 69.2 -> 92.3 %,
+R@1 50.0 -> 80.8 %, mean join acceleration 6.2 -> 3.5 m/s^2 (4.4 inside).
 
-Every segment is sampled in a local frame whose first root sits over the origin, as in training; the
-shift is added back afterwards. Shapes: ``x_tgt``/``mask``/``join`` ``(T, D)``, ``world_xz (T, J, 2)``.
-The plan works on an explicit representation (kinema.representation.flat), never on a model object.
+Every pass is sampled in a local frame whose first root sits over the origin, as in training; the
+shift is added back afterwards. Shapes: ``x_tgt``/``mask``/``join``/``start`` ``(T, D)``,
+``world_xz (T, J, 2)``. The plan works on an explicit representation (kinema.representation.flat),
+never on a model object.
 """
 
 from __future__ import annotations
@@ -81,10 +91,11 @@ class PlannedJoin:
 
 @dataclass(frozen=True)
 class SegmentTargets:
-    """One sample's conditions for one segment, in the segment's local frame: unnormalised
+    """One sample's conditions for one segment or join window, in its local frame: unnormalised
     ``x_tgt``/``mask (T, D)``, ``world_xz (T, J, 2)``/``world_mask (T, J)`` (or None), first-frame
-    heading ``c_dir (2,)``, the ground ``shift (2,)`` metres to add back to the sampled root, and ``join
-    (T, D)`` (None for the first segment): the imposed overlap entries, which ``mask`` holds too."""
+    heading ``c_dir (2,)``, the ground ``shift (2,)`` metres to add back to the sampled root; for a join
+    window only, ``join (T, D)``: the imposed keyframe entries, which ``mask`` holds too, and ``start
+    (T, D)``: the unnormalised features the window's sampling starts from."""
 
     x_tgt: torch.Tensor
     mask: torch.Tensor
