@@ -272,3 +272,21 @@ def test_guided_sampling_single_batched_forward() -> None:
     result = sampler.sample(denoise, SHAPE, torch.Generator().manual_seed(0))
     assert calls == [3 * SHAPE[0]] * 5
     assert torch.isfinite(result).all()
+
+
+@pytest.mark.parametrize("strength, kept", [(1.0, 10), (0.6, 6), (0.01, 1)])
+def test_start_x0_runs_the_last_share_of_the_steps_from_the_noised_start(strength: float, kept: int) -> None:
+    """SDEdit: the chain starts at the first kept step, from ``start_x0`` noised to it with the draw."""
+    sampler = DDIMSampler(num_inference_steps=10)
+    start, noise = _x0(3), _x0(4)
+    seen: list[tuple[int, torch.Tensor]] = []
+
+    def denoise(x, t):
+        seen.append((int(t[0]), x.clone()))
+        return start
+
+    out = sampler.sample(denoise, SHAPE, init_noise=noise, start_x0=start, strength=strength)
+    assert [t for t, _ in seen] == sampler.timesteps.tolist()[10 - kept :]
+    t0 = torch.full((SHAPE[0],), seen[0][0], dtype=torch.long)
+    assert torch.allclose(seen[0][1], sampler.add_noise(start, noise, t0))
+    assert torch.allclose(out, start, atol=1e-4)  # an oracle denoiser ends at its clean estimate

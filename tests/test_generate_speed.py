@@ -52,8 +52,9 @@ def test_branches_per_step(model, batch_sizes, constraints, samples, per_step):
 
 def test_timeline_join_is_context_not_a_constraint_branch(model, batch_sizes):
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], steps=3, postprocess=False)
-    # the second segment's join frames are context every branch sees: text CFG alone, two branches
-    assert batch_sizes == [2] * 3 + [2] * 3
+    # two segments of 3 steps on their own prompts, then the join's window: the last 60 % of the steps
+    # (2 of 3), its keyframes context every branch sees: text CFG alone, two branches
+    assert batch_sizes == [2] * 3 + [2] * 3 + [2] * 2
 
 
 def test_empty_prompt_without_constraints_runs_one_branch(model, batch_sizes):
@@ -110,24 +111,29 @@ def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constr
     assert not torch.allclose(batched[1].positions, batched[2].positions, atol=1e-3)
 
 
-def test_later_segments_follow_each_samples_own_motion(model, monkeypatch):
+def test_segments_on_their_own_then_each_samples_join_window(model, monkeypatch):
     seen, joins = [], []
     real = api.sample_features
 
     def spy(denoiser, sampler, rep, text, targets, settings, **kw):
-        seen.append((targets.x_tgt.clone(), targets.mask.clone(), targets.c_dir.clone()))
+        seen.append((targets.x_tgt.clone(), targets.mask.clone(), targets.c_dir.clone(), targets.start))
         joins.append(targets.context_mask)
         return real(denoiser, sampler, rep, text, targets, settings, **kw)
 
     monkeypatch.setattr(api, "sample_features", spy)
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=2, steps=3, seed=1, postprocess=False)
-    (x0, m0, c0), (x1, m1, c1) = seen
+    (x0, m0, c0, s0), (x1, m1, c1, s1), (xw, mw, cw, sw) = seen
     assert torch.equal(x0[0], x0[1]) and torch.equal(c0[0], c0[1])  # shared first-segment targets
-    ov = int(m1[0].amax(-1).gt(0).sum())
-    assert ov == 3 and torch.equal(m1[0], m1[1])  # the first 0.15 s of the 0.5-s overlap are imposed
-    assert joins[0] is None and torch.equal(joins[1], m1)  # ... as context (Denoiser.forward_guided)
-    assert not torch.allclose(x1[0, :ov], x1[1, :ov], atol=1e-4)  # each sample's own join
-
+    assert not bool(m1.any()) and s0 is None and s1 is None  # segment 1: its own prompt, no context
+    assert not torch.equal(c1[0], c1[1])  # ... facing where each sample's segment 0 ended
+    # the join's window: 0.5 s + 0.15 s of keyframes each side of the boundary, keyframes imposed as context
+    fps = model.fps
+    side, keys = round(0.5 * fps), round(0.15 * fps)
+    imposed = mw[0].amax(-1).gt(0)
+    assert imposed.tolist() == [True] * keys + [False] * (2 * side) + [True] * keys
+    assert joins[:2] == [None, None] and torch.equal(joins[2], mw) and torch.equal(mw[0], mw[1])
+    assert sw is not None and sw.shape == xw.shape  # SDEdit from the hard cut
+    assert not torch.allclose(xw[0, :keys], xw[1, :keys], atol=1e-4)  # each sample's own join
 
 def test_chunked_batches_give_the_same_rows(model, batch_sizes):
     from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features

@@ -4,9 +4,9 @@ tests/data/reference_outputs.npz was written by scripts/record_reference_outputs
 the refactor (commit f496dd2) for the fixed cases of tests/reference_cases.py: text only, full-body
 keyframes, end effectors with foot contacts, waypoints and a two-prompt timeline, each with and without
 post-processing, 5 DDIM steps, fixed seeds. Every output must match within 1e-5 m (joint positions and
-root) and 1e-5 (quaternion components); contacts exactly. The two timeline cases were re-recorded once,
-on purpose, by issue 18's new joins (``--only timeline``); the merged code reproduced the timeline
-branch's own outputs for them bit for bit before they were written.
+root) and 1e-5 (quaternion components); contacts exactly. The two timeline cases were re-recorded on
+purpose (``--only timeline``) by issue 18's new joins and again when timelines became segments sampled
+on their own prompts with regenerated join windows (kinema.generate.segments).
 """
 
 from __future__ import annotations

@@ -28,6 +28,11 @@ TIMESTEP_SPACINGS = ("trailing", "leading")
 DenoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
 
+def kept_steps(num_steps: int, strength: float) -> int:
+    """How many of ``num_steps`` DDIM steps a start at ``strength`` (0, 1] runs: at least one."""
+    return max(1, round(strength * num_steps))
+
+
 def spaced_timesteps(num_train_steps: int, num_inference_steps: int, spacing: str = "trailing") -> list[int]:
     """``num_inference_steps`` evenly spaced, strictly descending 0-based steps out of ``num_train_steps``.
 
@@ -159,8 +164,14 @@ class DDIMSampler:
         init_noise: torch.Tensor | None = None,
         num_inference_steps: int | None = None,
         on_step: Callable[[int, int], None] | None = None,
+        start_x0: torch.Tensor | None = None,
+        strength: float = 1.0,
     ) -> torch.Tensor:
         """Run the whole reverse process and return the final x0 (shape ``shape``).
+
+        With ``start_x0`` (shape ``shape``, normalised), only the last ``strength`` share of the steps
+        runs (at least one), starting from ``start_x0`` noised to the first of them (SDEdit): the result
+        keeps the start's large-scale shape and redraws its details.
 
         ``num_inference_steps`` (default: the sampler's own setting) applies to this call only: the
         sampler is not changed, so calls from several threads with different step counts do not interfere.
@@ -183,6 +194,10 @@ class DDIMSampler:
             steps = self.timesteps.tolist()
         else:
             steps = spaced_timesteps(self.num_train_steps, num_inference_steps, self.timestep_spacing)
+        if start_x0 is not None:
+            steps = steps[len(steps) - kept_steps(len(steps), strength) :]
+            t0 = torch.full((x.shape[0],), steps[0], dtype=torch.long, device=x.device)
+            x = self.add_noise(start_x0.to(device=x.device, dtype=x.dtype), x, t0)
         pairs = list(zip(steps, steps[1:] + [-1], strict=True))
         if progress:
             from tqdm.auto import tqdm

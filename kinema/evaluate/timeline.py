@@ -8,7 +8,7 @@ for that clip's length clamped to [2.5, 4] s. It is generated as one timeline
   and ranked against the captions of every timeline segment of the suite (R@1 / R@3, chance k / N); the
   ground-truth row ranks the segments' own clip crops the same way;
 - join smoothness: mean joint speed (m/s) and acceleration (m/s^2) over all joints on the frames near
-  each join (``JOIN_BEFORE`` s before the segment boundary, where the overlap is cross-faded, to
+  each join (``JOIN_BEFORE`` s before the segment boundary, inside the regenerated join window, to
   ``JOIN_AFTER`` s after it) against the frames away from every join, and the peak (largest joint, any
   join frame) against the 99th percentile of the same quantity inside;
 - foot skate, contact accuracy and jerk of the whole motion (metrics of kinema.evaluate.metrics); the

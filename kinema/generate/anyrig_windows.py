@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import torch
 
-#: seconds of the previous segment a segment's windows re-play (the human model's OVERLAP_SECONDS),
-#: at most a quarter window
+#: seconds of the previous segment a segment's windows re-play (as the human model's segments did before
+#: its joins became regenerated windows, kinema.generate.segments), at most a quarter window
 OVERLAP_SECONDS = 0.5
 
 

@@ -12,20 +12,21 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
 import torch
 
 from kinema.diffusion.guidance import Guidance
+from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_api import AnyRigModel
 from kinema.generate.progress import ProgressFn, StepProgress, split_progress
 from kinema.generate.results import MotionResults
 from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
-from kinema.generate.segments import OVERLAP_SECONDS, SegmentPlan, plan_segments, stack_targets
-from kinema.generate.timeline import Segment, crossfade, parse_timeline, split_long
+from kinema.generate.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, stack_targets
+from kinema.generate.timeline import Segment, parse_timeline, splice, split_long
 from kinema.generate.twostage import KeyjointPlanner, sample_two_stage
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.loading import LoadedModel, load_denoiser
@@ -237,11 +238,11 @@ class KinemaModel:
             seconds = 5.0 if seconds is None else float(seconds)
             if not (math.isfinite(seconds) and seconds > 0):
                 raise KinemaError(f"seconds must be positive, got {seconds}")
-            return split_long(prompt_or_timeline, seconds, self.max_seconds - OVERLAP_SECONDS)
+            return split_long(prompt_or_timeline, seconds, self.max_seconds)
         segs = parse_timeline(prompt_or_timeline)
         out = []
         for s in segs:
-            out += split_long(s.prompt, s.seconds, self.max_seconds - OVERLAP_SECONDS)
+            out += split_long(s.prompt, s.seconds, self.max_seconds)
         return out
 
     def _guidance(self, guidance) -> Guidance:
@@ -270,7 +271,7 @@ class KinemaModel:
         return [self.known_prompts.match(p, self.encode_text(p)[0]) for p in distinct]
 
     def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
-        """One motion (all segments, cross-faded) and its post-processing report ({} when off)."""
+        """One motion (all segments and their regenerated joins) and its post-processing report ({} when off)."""
         motion = self._sample_batch(plan, guide, steps, g, heading, 1, progress)[0]
         return plan.postprocess(motion) if postprocess else (motion, {})
 
@@ -281,34 +282,43 @@ class KinemaModel:
 
     def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress,
                       planner: KeyjointPlanner | None = None) -> list[Motion]:
-        """``samples`` raw motions (all segments, cross-faded), sampled as one batch per segment.
+        """``samples`` raw motions: every segment sampled on its own prompt alone, then every join's
+        window regenerated between the two (kinema.generate.segments), one batch of all samples per pass.
 
         Sampling all motions in one denoiser batch is faster per motion than one after another (the
-        network runs on larger matrices). Segment k of every sample is sampled together, each row
-        conditioned on the end of its own motion so far. Noise: one ``(samples, T, D)`` draw per
-        segment from ``g``, so a seed fixes the result, but sample i is not what a call with fewer
-        samples returned for the same seed, nor what the earlier one-sample-after-another loop did.
+        network runs on larger matrices). Segment k of every sample starts where that sample's motion
+        so far ends. Noise: one ``(samples, T, D)`` draw per pass from ``g``, so a seed fixes the
+        result, but sample i is not what a call with fewer samples returned for the same seed.
         """
-        motions: list[Motion] | None = None
-        rep, L = self.representation, self.loaded
+        motions: list[Motion] = []
         bar, callback = split_progress(progress)
-        counter = None if callback is None else StepProgress(callback, segments=len(plan.segments), steps=steps)
+        passes = [steps] * len(plan.segments) + [kept_steps(steps, JOIN_STRENGTH)] * len(plan.joins)
+        counter = None if callback is None else StepProgress(callback, steps=passes)
+        run = partial(self._sample_pass, guide=guide, steps=steps, g=g, bar=bar, planner=planner)
         for k, seg in enumerate(plan.segments):
-            rows = ([plan.segment_targets(k, None, heading)] * samples if motions is None
-                    else [plan.segment_targets(k, m, heading) for m in motions])
-            targets, shift = stack_targets(rows)
-            settings = self._settings(seg.num_frames, guide, steps)
-            text = self.encode_text(seg.prompt)
-            text = None if text is None else text.expand(samples, -1)
-            sample = sample_features if planner is None else partial(sample_two_stage, planner=planner)
-            feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=bar,
-                           on_step=None if counter is None else counter.segment(k))
-            rep.shift_root_xz(feats, shift[:, None])
-            parts = [rep.to_motion(f) for f in feats]
-            motions = parts if motions is None else [crossfade(m, p, seg.overlap) for m, p in zip(motions, parts,
-                                                                                                 strict=True)]
-        assert motions is not None
+            rows = [plan.segment_targets(k, m if k else None, heading) for m in motions or [None] * samples]
+            parts = run(seg.prompt, rows, seg.num_frames, None if counter is None else counter.segment(k))
+            motions = parts if k == 0 else [m.concatenate(p) for m, p in zip(motions, parts, strict=True)]
+        for j, jn in enumerate(plan.joins):
+            rep = self.representation
+            rows = [plan.join_targets(j, rep.from_motion(m)) for m in motions]
+            on_step = None if counter is None else counter.segment(len(plan.segments) + j)
+            windows = run(jn.prompt, rows, jn.num_frames, on_step, strength=JOIN_STRENGTH)
+            motions = [splice(m, w, jn.lo, jn.fade_in, jn.fade_out) for m, w in zip(motions, windows, strict=True)]
         return motions
+
+    def _sample_pass(self, prompt: str, rows, num_frames: int, on_step, *, guide, steps, g, bar,
+                     planner: KeyjointPlanner | None, strength: float = 1.0) -> list[Motion]:
+        """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
+        rep, L = self.representation, self.loaded
+        targets, shift = stack_targets(rows)
+        text = self.encode_text(prompt)
+        text = None if text is None else text.expand(len(rows), -1)
+        sample = sample_features if planner is None else partial(sample_two_stage, planner=planner)
+        settings = replace(self._settings(num_frames, guide, steps), strength=strength)
+        feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=bar, on_step=on_step)
+        rep.shift_root_xz(feats, shift[:, None])
+        return [rep.to_motion(f) for f in feats]
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:

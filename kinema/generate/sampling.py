@@ -153,7 +153,9 @@ class SampleTargets:
     unnormalised feature targets ``x_tgt``/``mask (B, T, D)`` and world joint x/z ``world_xz (B, T, J, 2)``
     where ``world_mask (B, T, J)`` (kinema.representation.encode); ``context_mask (B, T, D)``: entries of
     ``mask`` every guidance branch sees (a timeline's join frames;
-    :meth:`kinema.model.denoiser.Denoiser.forward_guided`)."""
+    :meth:`kinema.model.denoiser.Denoiser.forward_guided`); ``start (B, T, D)``: unnormalised features
+    the reverse process starts from instead of pure noise (a timeline's join windows;
+    ``SampleSettings.strength``)."""
 
     c_dir: torch.Tensor
     x_tgt: torch.Tensor | None = None
@@ -161,6 +163,7 @@ class SampleTargets:
     world_xz: torch.Tensor | None = None
     world_mask: torch.Tensor | None = None
     context_mask: torch.Tensor | None = None
+    start: torch.Tensor | None = None
 
     @property
     def batch_size(self) -> int:
@@ -174,14 +177,14 @@ class SampleTargets:
         """Rows ``[lo, hi)`` of every tensor."""
         return SampleTargets(*(None if v is None else v[lo:hi] for v in
                                (self.c_dir, self.x_tgt, self.mask, self.world_xz, self.world_mask,
-                                self.context_mask)))
+                                self.context_mask, self.start)))
 
     def pruned(self) -> SampleTargets:
         """Without world targets when none is set, and without a mask that constrains nothing."""
         if self.has_world:
             return self
         if self.mask is not None and not bool(self.mask.any()):
-            return SampleTargets(self.c_dir)
+            return SampleTargets(self.c_dir, start=self.start)
         return replace(self, world_xz=None, world_mask=None)
 
 
@@ -189,7 +192,8 @@ class SampleTargets:
 class SampleSettings:
     """How to sample: ``num_frames``, ``guidance``, DDIM ``steps`` (None: the sampler's default) and the
     per-step corrections of the module docstring (``root_displacement`` with ``anchor_start``,
-    ``root_smoothing`` and ``joint_sigma`` in seconds; 0 / False turns one off)."""
+    ``root_smoothing`` and ``joint_sigma`` in seconds; 0 / False turns one off). ``strength`` (0, 1]:
+    the share of the steps run when the targets give a ``start`` (kinema.diffusion.sampler)."""
 
     num_frames: int
     guidance: Guidance
@@ -198,6 +202,7 @@ class SampleSettings:
     anchor_start: bool = True
     root_smoothing: float = ROOT_SMOOTHING_SECONDS
     joint_sigma: float = JOINT_SIGMA_SECONDS
+    strength: float = 1.0
 
 
 @torch.no_grad()
@@ -236,8 +241,10 @@ def sample_features(
         text = None if text_emb is None else text_emb[lo : lo + chunk]
         step = _StepCorrections(denoiser, rep, text, targets.rows(lo, lo + chunk), settings)
         count = None if on_step is None else (lambda d, n, c=c: on_step(c * n + d, len(starts) * n))
+        start = None if targets.start is None else rep.normalize(targets.start[lo : lo + chunk].float())
         x = sampler.sample(step, (step.batch, T, D), generator=generator, progress=progress,
-                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk], on_step=count)
+                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk], on_step=count,
+                           start_x0=start, strength=settings.strength)
         out.append(rep.denormalize(x))
     return torch.cat(out)
 

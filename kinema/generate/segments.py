@@ -1,25 +1,35 @@
-"""Per-segment targets for generation: user constraints split over a timeline plus the joins.
+"""Per-segment and per-join targets of a timeline: user constraints split over segments and join windows.
 
-Frames of user constraints refer to the whole output. Segment k covers output frames
-``[start_k, end_k)`` and is generated with ``overlap`` extra leading frames that re-play the end of the
-motion so far; the first ``imposed`` of them are full-body keyframes of that motion (positions,
-velocities, rotations, root and heading), given to the model as *context* that every guidance branch
-sees (``join`` mask; kinema.model.denoiser.Denoiser.forward_guided), and the whole overlap is
-cross-faded afterwards (kinema.generate.timeline.crossfade).
+Frames of user constraints refer to the whole output. The joins follow PriorMDM's DoubleTake (Shafir
+et al., sequential composition): a first take samples every segment ``[start_k, end_k)`` on its own
+prompt, with no context from the previous one, starting where the motion so far ends and facing its last
+heading; a second take regenerates each join: output frames ``[lo, hi)`` (``JOIN_SECONDS`` each side of
+the boundary plus ``JOIN_CONTEXT_SECONDS`` of full-body keyframes of the first take at each end, given
+as *context* every guidance branch sees, ``join`` mask; kinema.model.denoiser.Denoiser.forward_guided),
+with the later segment's prompt, over the last ``JOIN_STRENGTH`` of the DDIM steps starting from the
+first take's hard cut (Gaussian-smoothed over ``JOIN_START_SMOOTHING`` frames, then noised: SDEdit);
+the window is cross-faded into the motion over ``JOIN_FADE_SECONDS`` at each edge
+(kinema.generate.timeline.splice).
 
-Why so few frames, and why as context (issue 18; Kimodo Sec. 4.4 imposes 5 transition frames): with
-all 10 overlap frames imposed as constraints under separated guidance (w_constr = 2), every segment
-after the first kept doing what the first did (walk -> bow -> wave walked throughout: wave hand 0.3 m
-*below* the head). Measured on walk -> bow -> wave and bow -> wave -> walk, seeds 0-1, 50 steps, raw:
-3 of 10 frames imposed as context gives the wave hand 0.23-0.32 m above the head and the closing walk
-1.07 m/s (before: 0.16-0.29 m/s), peak join accelerations 41-119 m/s^2 (inside, p99: 76-186);
-5 imposed frames followed the prompts less (wave 0.0-0.32 m) with rougher joins (up to 185 m/s^2);
-constraints only at high noise (t >= 800) gave slower walks (0.56-0.66 m/s). On the 8 timeline cases of
-`kinema evaluate` (test split, 26 segments) per-segment R@3 went 50.0 -> 73.1 % (R@1 38.5 -> 57.7 %).
+Why (issue 18): the former joins re-played 0.5 s of the previous motion at the start of each segment
+with its first 0.15 s as context, and that context outweighed the new text: after a walk the bow
+segment kept shuffling forward at 0.3-0.5 m/s and leaned 8-9 degrees. Measured with the shipped model,
+raw, 50 steps (scripts/timeline_joins.py, walk -> bow -> wave and bow -> wave -> walk, seeds 0-3):
+the bow after a walk leans 14/12/25/19 degrees (former joins 9/8/23/9; the lone prompt 35/18/7/13;
+over seeds 0-7 the timeline's bow and the lone prompt average 18 and 16 degrees); the closing walk of
+bow -> wave -> walk 1.0-1.2 m/s (former 0.66-1.27). Window choices on the same cases and on the 8
+timeline cases of `kinema evaluate` (test split, 26 segments): windows sampled from pure noise jumped
+(the model snaps from the first keyframes to the later pose within 2 frames: join acceleration peaks
+170-590 m/s^2, whatever the text, guidance, keyframe count or constraint-vs-context); starting from
+the hard cut at 40/50/60/70 % of the steps gave evaluation join peaks 188/174/159/138 m/s^2, smoothing
+that start over 3/5 frames 119/104 (inside p99 117); 0.75-s sides gave peaks 60 but raw skate 15.2 cm/s
+(0.5-s: 12.9; former joins 11.9). Evaluation row with these settings: per-segment R@3 69.2 -> 92.3 %,
+R@1 50.0 -> 80.8 %, mean join acceleration 6.2 -> 3.5 m/s^2 (4.4 inside).
 
-Every segment is sampled in a local frame whose first root sits over the origin, as in training; the
-shift is added back afterwards. Shapes: ``x_tgt``/``mask``/``join`` ``(T, D)``, ``world_xz (T, J, 2)``.
-The plan works on an explicit representation (kinema.representation.flat), never on a model object.
+Every pass is sampled in a local frame whose first root sits over the origin, as in training; the
+shift is added back afterwards. Shapes: ``x_tgt``/``mask``/``join``/``start`` ``(T, D)``,
+``world_xz (T, J, 2)``. The plan works on an explicit representation (kinema.representation.flat),
+never on a model object.
 """
 
 from __future__ import annotations
@@ -33,33 +43,59 @@ from kinema.errors import KinemaError
 from kinema.generate.sampling import SampleTargets
 from kinema.generate.targets import UserTargets, encode_user_constraints, run_postprocess
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
 from kinema.representation.flat import FlatRepresentation
 
-#: seconds of the previous motion each later segment re-plays and cross-fades over
-OVERLAP_SECONDS = 0.5
-#: seconds at the start of that overlap imposed as full-body context (at least one frame)
-IMPOSED_SECONDS = 0.15
+#: seconds of each side of a join that its transition window regenerates
+JOIN_SECONDS = 0.5
+#: seconds at each end of a join's window imposed as full-body keyframes of the motion around it
+JOIN_CONTEXT_SECONDS = 0.15
+#: seconds at each end of a join's window over which it is cross-faded into the motion around it
+JOIN_FADE_SECONDS = 0.5
+#: share of the DDIM steps a join's window runs, starting from the hard cut noised to that level (SDEdit)
+JOIN_STRENGTH = 0.6
+#: frames (Gaussian sigma) the hard cut is smoothed over before it is noised
+JOIN_START_SMOOTHING = 5.0
 
 
 @dataclass
 class PlannedSegment:
     prompt: str
-    start: int  # first new output frame
+    start: int  # first output frame
     end: int  # one past the last output frame
-    overlap: int  # leading frames shared with the previous segment (cross-faded)
-    imposed: int = 0  # the first frames of the overlap given as full-body context
 
     @property
     def num_frames(self) -> int:
-        return self.end - self.start + self.overlap
+        return self.end - self.start
+
+
+@dataclass
+class PlannedJoin:
+    """The transition window of one join: output frames ``[lo, hi)`` regenerated with ``prompt`` (the
+    later segment's), the first ``head`` and last ``tail`` of them imposed as keyframes of the motion
+    around the window (context every guidance branch sees); the window is cross-faded into that motion
+    over its first ``fade_in`` and last ``fade_out`` frames."""
+
+    prompt: str
+    lo: int
+    hi: int
+    head: int
+    tail: int
+    fade_in: int
+    fade_out: int
+
+    @property
+    def num_frames(self) -> int:
+        return self.hi - self.lo
 
 
 @dataclass(frozen=True)
 class SegmentTargets:
-    """One sample's conditions for one segment, in the segment's local frame: unnormalised
+    """One sample's conditions for one segment or join window, in its local frame: unnormalised
     ``x_tgt``/``mask (T, D)``, ``world_xz (T, J, 2)``/``world_mask (T, J)`` (or None), first-frame
-    heading ``c_dir (2,)``, the ground ``shift (2,)`` metres to add back to the sampled root, and ``join
-    (T, D)`` (None for the first segment): the imposed overlap entries, which ``mask`` holds too."""
+    heading ``c_dir (2,)``, the ground ``shift (2,)`` metres to add back to the sampled root; for a join
+    window only, ``join (T, D)``: the imposed keyframe entries, which ``mask`` holds too, and ``start
+    (T, D)``: the unnormalised features the window's sampling starts from."""
 
     x_tgt: torch.Tensor
     mask: torch.Tensor
@@ -68,6 +104,7 @@ class SegmentTargets:
     c_dir: torch.Tensor
     shift: torch.Tensor
     join: torch.Tensor | None = None
+    start: torch.Tensor | None = None
 
 
 def stack_targets(rows: list[SegmentTargets]) -> tuple[SampleTargets, torch.Tensor]:
@@ -78,7 +115,7 @@ def stack_targets(rows: list[SegmentTargets]) -> tuple[SampleTargets, torch.Tens
         return None if values[0] is None else torch.stack(values)
 
     return SampleTargets(stack("c_dir"), stack("x_tgt"), stack("mask"), stack("world_xz"),
-                         stack("world_mask"), stack("join")), stack("shift")
+                         stack("world_mask"), stack("join"), stack("start")), stack("shift")
 
 
 @dataclass
@@ -90,35 +127,53 @@ class SegmentPlan:
     total_frames: int
     targets: UserTargets
     constraints: list = field(default_factory=list)
+    joins: list[PlannedJoin] = field(default_factory=list)
+
+    def _user(self, lo: int, hi: int):
+        """Copies of the user targets on output frames ``[lo, hi)``."""
+        user = self.targets
+        wxz = None if user.world_xz is None else user.world_xz[lo:hi].clone()
+        wm = None if user.world_mask is None else user.world_mask[lo:hi].clone()
+        return user.x_tgt[lo:hi].clone(), user.mask[lo:hi].clone(), wxz, wm
 
     def segment_targets(self, k: int, motion: Motion | None, heading: float) -> SegmentTargets:
-        """Segment k's targets in its local frame; ``motion`` is the sample's motion so far (None for
-        the first segment, whose first frame faces ``heading`` unless a heading constraint says otherwise)."""
-        seg, rep, user = self.segments[k], self.rep, self.targets
-        lo = seg.start - seg.overlap
-        join = None
-        x_tgt = user.x_tgt[lo : seg.end].clone()
-        mask = user.mask[lo : seg.end].clone()
-        wxz = None if user.world_xz is None else user.world_xz[lo : seg.end].clone()
-        wm = None if user.world_mask is None else user.world_mask[lo : seg.end].clone()
+        """Segment k's own targets (its user constraints, no context) in its local frame: it starts
+        where ``motion`` (the sample's motion so far; None for the first segment) ends, facing its last
+        heading; the first segment faces ``heading`` unless a heading constraint on frame 0 says otherwise."""
+        seg, rep = self.segments[k], self.rep
+        x_tgt, mask, wxz, wm = self._user(seg.start, seg.end)
         if motion is None:
             shift = torch.zeros(2)
             c_dir = torch.tensor([math.cos(heading), math.sin(heading)])
             if bool(mask[0, rep.heading].all()):  # a heading constraint on the first frame wins
                 c_dir = x_tgt[0, rep.heading].float()
         else:
-            prev_end = rep.from_motion(motion).float()[motion.num_frames - seg.overlap :]
-            shift = prev_end[0, rep.root_xz].clone()
-            c_dir = prev_end[0, rep.heading].clone()
-            channels, n = rep.motion_channels, seg.imposed
-            x_tgt[:n, channels] = prev_end[:n, channels]
-            mask[:n, channels] = 1.0
-            join = torch.zeros_like(mask)
-            join[:n, channels] = 1.0
+            last = rep.from_motion(motion).float()[-1]
+            shift, c_dir = last[rep.root_xz].clone(), last[rep.heading].clone()
         rep.shift_root_xz(x_tgt, -shift)
         if wxz is not None:
             wxz = wxz - shift
-        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift, join)
+        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift)
+
+    def join_targets(self, j: int, features: torch.Tensor) -> SegmentTargets:
+        """Join j's window targets in its local frame: ``features (T, D)`` (unnormalised, the sample's
+        assembled motion) imposed on the window's first ``head`` and last ``tail`` frames, as context
+        (``join``), over the user constraints of the window's frames."""
+        jn, rep = self.joins[j], self.rep
+        x_tgt, mask, wxz, wm = self._user(jn.lo, jn.hi)
+        around = torch.zeros(jn.num_frames, dtype=torch.bool)
+        around[: jn.head] = True
+        around[jn.num_frames - jn.tail :] = True
+        ch = around[:, None] & rep.motion_channels[None, :]
+        x_tgt = torch.where(ch, features[jn.lo : jn.hi].float(), x_tgt)
+        mask = torch.where(ch, torch.ones_like(mask), mask)
+        shift = features[jn.lo, rep.root_xz].float().clone()
+        c_dir = features[jn.lo, rep.heading].float().clone()
+        start = smooth_time(rep.shift_root_xz(features[jn.lo : jn.hi].float().clone(), -shift), JOIN_START_SMOOTHING)
+        rep.shift_root_xz(x_tgt, -shift)
+        if wxz is not None:
+            wxz = wxz - shift
+        return SegmentTargets(x_tgt, mask, wxz, wm, c_dir, shift, ch.float(), start)
 
     def postprocess(self, motion: Motion) -> tuple[Motion, dict]:
         """Guarded post-processing of one finished motion; returns it with its own report."""
@@ -140,16 +195,35 @@ def segment_bounds(segments, fps: float) -> list[int]:
     return bounds
 
 
+def plan_joins(segments: list[PlannedSegment], fps: float) -> list[PlannedJoin]:
+    """The transition window of every join: ``JOIN_SECONDS`` of each side regenerated plus
+    ``JOIN_CONTEXT_SECONDS`` of keyframes at each end, all within the half of each neighbouring
+    segment that faces the join (the whole segment at the timeline's ends), so windows never overlap.
+    A side with no frame to spare (a one-frame middle segment) gets no window: a plain cut."""
+    side, context = round(JOIN_SECONDS * fps), max(1, round(JOIN_CONTEXT_SECONDS * fps))
+    fade = max(1, round(JOIN_FADE_SECONDS * fps))
+    n, joins = len(segments), []
+    for k in range(n - 1):
+        before, after = segments[k], segments[k + 1]
+        room_before = before.num_frames if k == 0 else before.num_frames // 2
+        room_after = after.num_frames if k + 1 == n - 1 else after.num_frames // 2
+        if room_before < 1 or room_after < 1:
+            continue
+        head, tail = min(context, room_before), min(context, room_after)
+        lo = before.end - head - min(side, room_before - head)
+        hi = after.start + tail + min(side, room_after - tail)
+        fade_in, fade_out = max(head, min(fade, before.end - lo)), max(tail, min(fade, hi - after.start))
+        joins.append(PlannedJoin(after.prompt, lo, hi, head, tail, fade_in, fade_out))
+    return joins
+
+
 def plan_segments(rep: FlatRepresentation, segments, constraints,
                   constraints_fps: float | None = None) -> SegmentPlan:
-    """Frame ranges for every segment (at ``rep.fps``) and the encoded user constraints for the whole output."""
-    overlap = max(1, round(OVERLAP_SECONDS * rep.fps))
-    imposed = max(1, round(IMPOSED_SECONDS * rep.fps))
+    """Frame ranges for every segment and join window (at ``rep.fps``) and the encoded user
+    constraints for the whole output."""
     bounds = segment_bounds(segments, rep.fps)
-    planned = []
-    for i, (s, start, end) in enumerate(zip(segments, bounds[:-1], bounds[1:], strict=True)):
-        ov = 0 if i == 0 else min(overlap, start)
-        planned.append(PlannedSegment(s.prompt, start, end, ov, min(imposed, ov)))
+    planned = [PlannedSegment(s.prompt, start, end)
+               for s, start, end in zip(segments, bounds[:-1], bounds[1:], strict=True)]
     total_frames = bounds[-1]
     cons, targets = encode_user_constraints(rep, constraints, total_frames, constraints_fps)
-    return SegmentPlan(rep, planned, total_frames, targets, cons)
+    return SegmentPlan(rep, planned, total_frames, targets, cons, plan_joins(planned, rep.fps))

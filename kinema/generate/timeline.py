@@ -1,10 +1,9 @@
-"""Multi-prompt timelines (Kimodo Sec. 4.4): segments generated in sequence, joined by overlaps.
+"""Multi-prompt timelines: parsing, and the blending that joins their pieces.
 
-Each new segment starts with ``overlap`` frames that re-play the end of the previous motion; the
-first few are given to the model as full-body context (kinema.generate.segments says how many and
-why), so it continues the pose with consistent velocities and then follows its own prompt; afterwards
-the shared frames are cross-faded (root lerp, rotation slerp with raised-cosine weights) so the join
-has no seam.
+Each segment is sampled on its own prompt, then every join is regenerated as a transition window
+(kinema.generate.segments says how and why); :func:`splice` puts a window into the motion, cross-fading
+(root lerp, rotation slerp with raised-cosine weights, :func:`crossfade`) over its first and last
+frames so the join has no seam.
 """
 
 from __future__ import annotations
@@ -110,3 +109,11 @@ def crossfade(prev: Motion, new: Motion, overlap: int) -> Motion:
     if new.num_frames > overlap:
         out = out.concatenate(new.crop(overlap))
     return out
+
+
+def splice(motion: Motion, window: Motion, lo: int, fade_in: int, fade_out: int) -> Motion:
+    """``motion`` with frames ``[lo, lo + window.num_frames)`` replaced by ``window``: its first
+    ``fade_in`` frames blend from ``motion`` to the window, its last ``fade_out`` back to ``motion``."""
+    hi = lo + window.num_frames
+    out = crossfade(motion.crop(0, lo + fade_in), window, fade_in)
+    return crossfade(out, motion.crop(hi - fade_out), fade_out)
