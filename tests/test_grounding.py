@@ -12,7 +12,7 @@ import torch
 import kinema
 from kinema.cli import main
 from kinema.errors import KinemaError
-from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground
+from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, sides
 from kinema.model.vocabulary import KnownPrompts
 from kinema.text import get_text_encoder
 
@@ -70,6 +70,22 @@ def test_unknown_prompts_and_weight_zero_are_left_unchanged(known):
     e = _near(known, i, j, 0.3)
     assert ground("x", e, known, Grounding(weight=0.0)).status == "off"
     assert torch.equal(ground("x", e, None, Grounding(weight=0.5)).embedding, e)  # no known prompts
+
+
+def test_only_captions_that_name_the_same_sides_are_blended_in():
+    """MiniLM puts "left arm" next to "right arm": grounding must not swap the side the prompt names."""
+    assert sides("Somebody walks leftward, then raises the Right hand.") == {"left", "right"}
+    assert sides("A person bows.") == frozenset() and sides("He turns rightwards.") == {"right"}
+    caps = ["A person raises their right arm up.", "A person raises their left arm up.", "A person bows."]
+    known = KnownPrompts(caps, torch.tensor([[1.0, 0, 0, 0], [0.8, 0.6, 0, 0], [0, 0, 1.0, 0]]), "x")
+    e = torch.nn.functional.normalize(torch.tensor([[0.98, 0.2, 0, 0]]), dim=-1)
+    assert known.match("p", e).nearest[0][0] == caps[0]  # nearest overall: the wrong side
+    out = ground("Somebody lifts the left arm up high.", e, known, Grounding(weight=0.5, top_k=3))
+    assert out.status == "grounded" and [c for c, _ in out.captions] == [caps[1]]
+    out = ground("Somebody lifts an arm up high.", e, known, Grounding(weight=0.5, top_k=3))
+    assert out.status == "unmatched" and torch.equal(out.embedding, e)  # only the side-free bow, far away
+    right_only = KnownPrompts(caps[:1] + caps[2:], known.embeddings[[0, 2]], "x")
+    assert ground("Somebody lifts the left arm up high.", e, right_only, Grounding(weight=0.5)).status == "unmatched"
 
 
 @pytest.mark.parametrize(

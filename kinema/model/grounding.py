@@ -9,13 +9,22 @@ embeddings mean. Grounding moves the prompt's embedding towards them at inferenc
     e = |e_p| * normalize((1 - a) * e_p + a * sum_i w_i * e_i),   w = softmax(s_i / tau) over the top k
 
 with ``e_p`` the prompt's embedding ``(E,)``, ``e_i`` the unit embeddings of the ``k`` nearest known
-captions (kinema.model.vocabulary), ``s_i`` their cosine similarities, ``a`` = ``weight`` and
-``tau`` = ``temperature``. Three cases are left alone:
+captions (kinema.model.vocabulary) *that name the same sides as the prompt*, ``s_i`` their cosine
+similarities, ``a`` = ``weight`` and ``tau`` = ``temperature``.
+
+Same sides: MiniLM barely tells left from right ("Somebody lifts the left arm up high." is nearest to
+"A person raises their right arm up.", 0.87; "... a wave of the right hand." to "... a wave of their
+left hand.", 0.89), so blending the nearest captions as they come would swap sides. A caption is a
+candidate only when the set of side words it uses ({left, right}, also as leftward(s) / rightward(s))
+equals the prompt's; a prompt that names no side is grounded on captions that name none.
+
+Four cases are left alone:
 
 - a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`): the model knows
   it, so its embedding is returned unchanged (grounding is the identity there; tested);
 - an unknown prompt (nearest caption below ``UNKNOWN_BELOW``): rewriting it into the nearest known action
   would silently produce something else; it keeps its own embedding and the unknown-prompt warning;
+- no caption that names the same sides is near enough (best below ``UNKNOWN_BELOW``): 'unmatched';
 - ``weight`` 0 (grounding off).
 
 Settings are a small dataclass saved as JSON in a model's ``checkpoint.json`` under ``"grounding"``
@@ -26,6 +35,7 @@ Measurements behind the defaults: docs/evaluation.md ("Prompt grounding").
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -39,6 +49,12 @@ from kinema.model.vocabulary import UNKNOWN_BELOW, KnownPrompts
 #: embeddings agree with a fresh encoding to ~1e-6)
 EXACT_ABOVE = 0.9999
 _KEYS = ("weight", "temperature", "top_k")
+_SIDE = re.compile(r"\b(left|right)(?:wards?)?\b", re.IGNORECASE)
+
+
+def sides(text: str) -> frozenset[str]:
+    """The sides a text names: a subset of {'left', 'right'} ("walks leftward" names 'left')."""
+    return frozenset(m.lower() for m in _SIDE.findall(text))
 
 
 @dataclass(frozen=True)
@@ -115,7 +131,8 @@ def as_grounding(value, base: Grounding) -> Grounding:
 @dataclass(frozen=True)
 class Grounded:
     """A prompt's conditioning embedding ``(1, E)`` and what grounding did: ``status`` is 'grounded',
-    'exact' (a training caption), 'unknown' (too far from every caption) or 'off'; ``captions`` the
+    'exact' (a training caption), 'unknown' (too far from every caption), 'unmatched' (no caption naming
+    the same sides is near enough) or 'off'; ``captions`` the
     (caption, weight in the blend) pairs, empty unless grounded; the prompt's own weight is ``1 - sum``."""
 
     embedding: torch.Tensor
@@ -135,14 +152,22 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     e = embedding.float().reshape(1, -1)
     if settings.off or known is None:
         return Grounded(e, "off")
-    sims, idx = known.nearest(e[0], settings.top_k)
-    if prompt.strip() in known.caption_set or float(sims[0]) >= EXACT_ABOVE:
+    best, _ = known.nearest(e[0], 1)
+    if prompt.strip() in known.caption_set or float(best[0]) >= EXACT_ABOVE:
         return Grounded(e, "exact")
-    if float(sims[0]) < UNKNOWN_BELOW:
+    if float(best[0]) < UNKNOWN_BELOW:
         return Grounded(e, "unknown")
-    w = torch.softmax(sims.double() / settings.temperature, dim=0).float()
-    target = (w[:, None] * known.embeddings[idx]).sum(dim=0, keepdim=True)  # (1, E)
     unit = torch.nn.functional.normalize(e, dim=-1)
+    want = sides(prompt)
+    same = torch.tensor([sides(c) == want for c in known.captions])
+    sims = torch.where(same, known.embeddings @ unit[0], -math.inf)
+    top = sims.topk(min(settings.top_k, int(same.sum())))
+    if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
+        return Grounded(e, "unmatched")
+    w = torch.softmax(top.values.double() / settings.temperature, dim=0).float()
+    target = (w[:, None] * known.embeddings[top.indices]).sum(dim=0, keepdim=True)  # (1, E)
     blend = torch.nn.functional.normalize((1.0 - settings.weight) * unit + settings.weight * target, dim=-1)
-    captions = tuple((known.captions[int(i)], settings.weight * float(wi)) for i, wi in zip(idx, w, strict=True))
+    captions = tuple(
+        (known.captions[int(i)], settings.weight * float(wi)) for i, wi in zip(top.indices, w, strict=True)
+    )
     return Grounded(blend * e.norm(dim=-1, keepdim=True), "grounded", captions)
