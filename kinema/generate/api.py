@@ -174,9 +174,9 @@ class KinemaModel:
             grounding: condition on a blend of each prompt's embedding and its nearest training captions'
                 (kinema.model.grounding, docs/evaluation.md): a weight in [0, 1], a ``Grounding``, its dict,
                 False (off) or None (:attr:`grounding`, the model's saved default); a weight alone keeps
-                the default's temperature and top k. Prompts that are
-                training captions or unknown (see the warnings) are never grounded; timeline segments
-                are grounded one by one. ``report.prompts`` says on which captions, with what weights.
+                the default's temperature and top k. Training captions, unknown prompts (see the
+                warnings) and prompts without a near caption naming the same sides are never grounded;
+                timeline segments are grounded one by one. ``report.prompts`` says on which captions, with what weights.
             progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
                 steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
                 changes the result.
