@@ -81,3 +81,42 @@ def sample_paths(out: Path, n: int) -> list[Path]:
     name = out.name
     stem, suffix = (name[: -len(".bvh.gz")], ".bvh.gz") if name.lower().endswith(".bvh.gz") else (out.stem, out.suffix)
     return [out.with_name(f"{stem}_{i:02d}{suffix}") for i in range(n)]
+
+
+def unit_float(text: str) -> float:
+    """argparse type: a number in [0, 1] (blend weights)."""
+    x = _number(text)
+    if not (math.isfinite(x) and 0.0 <= x <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
+    return x
+
+
+def add_grounding_arguments(p: argparse.ArgumentParser) -> None:
+    """``--grounding WEIGHT``, ``--grounding-top-k K``, ``--grounding-temperature T`` (prompt grounding,
+    kinema.model.grounding); each left out keeps the model's saved setting."""
+    p.add_argument(
+        "--grounding",
+        type=unit_float,
+        metavar="WEIGHT",
+        help="prompt grounding: blend each prompt's text embedding with its nearest training captions' "
+        "(0 = off, 1 = the captions alone; training captions and unknown prompts are never "
+        "grounded; default: the model's setting)",
+    )
+    p.add_argument(
+        "--grounding-top-k",
+        type=positive_int,
+        metavar="K",
+        help="nearest training captions blended in (default: the model's setting)",
+    )
+    p.add_argument(
+        "--grounding-temperature",
+        type=positive_float,
+        metavar="T",
+        help="softmax temperature over their cosine similarities (default: the model's setting)",
+    )
+
+
+def grounding_overrides(args: argparse.Namespace) -> dict:
+    """The grounding settings given on the command line, as ``Grounding`` keys (empty: none given)."""
+    given = {"weight": args.grounding, "top_k": args.grounding_top_k, "temperature": args.grounding_temperature}
+    return {k: v for k, v in given.items() if v is not None}

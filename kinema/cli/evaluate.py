@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import non_negative_float, positive_int, seed
+from kinema.cli._args import add_grounding_arguments, grounding_overrides, non_negative_float, positive_int, seed
 from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
 from kinema.cli.evaluate_sfcontrol import run_sfcontrol
 
@@ -27,6 +27,7 @@ def register(sub) -> None:
     p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting)")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
                    help="separated guidance weights (default: the model's setting)")
+    add_grounding_arguments(p)
     p.add_argument("--imputation-only", action="store_true",
                    help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)")
     p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
@@ -95,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
             model.skeleton.require_roles(PROBE_ROLES)
         except KinemaError as err:
             raise KinemaError(f"--phrasings: {err}; or pass --phrasings 0") from None
+    if grounding_overrides(args):  # every row, probe and held-out case then uses these settings
+        model.grounding = model.grounding_settings(grounding_overrides(args))
     if args.imputation_only:
         model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
     save_suite(cases, out / "suite.json")

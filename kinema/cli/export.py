@@ -2,7 +2,7 @@
 
 This is how the default model inside the package is made (see kinema/assets/models/default/MODEL_CARD.md):
 float16 weights plus checkpoint.json, no optimizer state. ``--guidance`` and ``--steps`` replace the
-sampling defaults saved with the model.
+sampling defaults saved with the model, ``--grounding*`` the prompt-grounding default (kinema.model.grounding).
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import non_negative_float, positive_int
+from kinema.cli._args import add_grounding_arguments, grounding_overrides, non_negative_float, positive_int
 
 
 def register(sub) -> None:
@@ -25,6 +25,7 @@ def register(sub) -> None:
     p.add_argument("--weights", default="ema", choices=("ema", "raw"),
                    help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
                         "mostly holds the starting weights)")
+    add_grounding_arguments(p)
     p.add_argument("--known-prompts", type=Path, metavar="DATA",
                    help="dataset build whose train captions the model learned: their embeddings are saved as "
                         "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
@@ -42,14 +43,14 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
-                      ema=args.weights == "ema")
+                      ema=args.weights == "ema", grounding=grounding_overrides(args))
     loaded = (load_anyrig if is_anyrig_checkpoint(out) else load_denoiser)(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
-          f"{loaded.sampler.num_inference_steps} DDIM steps)")
+          f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")
     return 0
 
 
@@ -62,3 +63,11 @@ def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
     captions = [c for rec in MotionDataset(data, "train").clips for c in rec["captions"]]
     known = KnownPrompts.build(captions, get_text_encoder(encoder_id, cache_dir=Path("cache/text")))
     print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")
+
+
+def _grounding_note(loaded) -> str:
+    """', grounding W (k K, T T)' for a model that saves a grounding default, else ''."""
+    g = getattr(loaded, "grounding", None)
+    if g is None or "grounding" not in loaded.info:
+        return ""
+    return f", grounding {g.weight:g} (top {g.top_k}, temperature {g.temperature:g})"

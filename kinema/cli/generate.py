@@ -12,7 +12,9 @@ import argparse
 from pathlib import Path
 
 from kinema.cli._args import (
+    add_grounding_arguments,
     finite_float,
+    grounding_overrides,
     non_negative_float,
     non_negative_int,
     positive_float,
@@ -70,6 +72,7 @@ def register(sub) -> None:
                    help="two-stage control: 'default' (the shipped keyjoint model) or a keyjoint model folder "
                         "plans pelvis, head, hands and feet from the constraints first, then the body follows "
                         "(docs/constraints.md; one prompt up to 10 s, no objectives)")
+    add_grounding_arguments(p)
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
@@ -141,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
 
     from kinema.cli.generate_anyrig import run_anyrig
     from kinema.cli.objective_table import objective_table
-    from kinema.cli.report import print_warnings, residual_table, use_plain_warnings
+    from kinema.cli.report import grounding_lines, print_warnings, residual_table, use_plain_warnings
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
     from kinema.generate.api import load_model, resolve_model_path
@@ -152,6 +155,9 @@ def run(args: argparse.Namespace) -> int:
     use_plain_warnings()
     model_path = resolve_model_path(args.model)
     if is_anyrig_checkpoint(model_path):  # a model for any rig: its own options (kinema.cli.generate_anyrig)
+        if grounding_overrides(args):
+            raise KinemaError(f"--grounding: the any-rig model {args.model!r} keeps no training captions to ground "
+                              "prompts on")
         return run_anyrig(args, model_path)
     if args.rig is not None:
         raise KinemaError(f"--rig: the model {args.model!r} is for one skeleton; use --model creatures for any rig")
@@ -182,7 +188,8 @@ def run(args: argparse.Namespace) -> int:
         what, seconds=seconds, constraints=args.constraints, samples=samples, steps=args.steps,
         guidance=guidance, seed=DEFAULT_SEED if args.seed is None else args.seed,
         postprocess=not args.no_postprocess, heading=math.radians(args.heading), progress=not args.no_progress,
-        objective_steps=args.objective_steps, keyjoint_model=args.keyjoint_model, **extra,
+        objective_steps=args.objective_steps, keyjoint_model=args.keyjoint_model,
+        grounding=grounding_overrides(args) or None, **extra,
     )
     for motion, path in zip(motions, outputs, strict=True):
         if args.fps is not None:
@@ -193,6 +200,8 @@ def run(args: argparse.Namespace) -> int:
     rep = motions.report
     print(f"generated {len(motions)} motion(s), {rep.segments} segment(s), {rep.steps} DDIM steps in "
           f"{rep.seconds:.2f} s")
+    for line in grounding_lines(rep.prompts):
+        print(line)
     table = residual_table(rep.residuals)
     if table:
         print(table)

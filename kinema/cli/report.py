@@ -1,5 +1,6 @@
-"""How `kinema generate` shows a generation report: a short table of constraint residuals (cm,
-degrees) and the warnings, on stderr, that a user must not miss."""
+"""How `kinema generate` shows a generation report: which training captions each prompt was grounded
+on, a short table of constraint residuals (cm, degrees) and the warnings, on stderr, that a user must
+not miss."""
 
 from __future__ import annotations
 
@@ -41,6 +42,19 @@ def residual_table(residuals: list[dict]) -> str:
         lines.append("  " + "  ".join(c.ljust(w) if k < 2 else c.rjust(w) for k, (c, w) in
                                       enumerate(zip(r, widths, strict=True))))
     return "\n".join(lines)
+
+
+def grounding_lines(prompts: list[dict]) -> list[str]:
+    """One line per grounded prompt of ``report.prompts``: the training captions it was blended with
+    and their weights (kinema.model.grounding)."""
+    lines = []
+    for p in prompts:
+        g = p.get("grounding") or {}
+        if g.get("status") != "grounded":
+            continue
+        caps = ", ".join(f"{c['caption']!r} ({c['weight']:.2f})" for c in g["captions"])
+        lines.append(f"grounded {p['prompt']!r} (own weight {g['prompt_weight']:.2f}) on {caps}")
+    return lines
 
 
 def print_warnings(messages: list[str]) -> None:

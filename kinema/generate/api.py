@@ -29,6 +29,7 @@ from kinema.generate.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, 
 from kinema.generate.timeline import Segment, parse_timeline, splice, split_long
 from kinema.generate.twostage import KeyjointPlanner, sample_two_stage
 from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
+from kinema.model.grounding import Grounded, Grounding, as_grounding, ground
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
@@ -50,7 +51,9 @@ class GenerationReport:
     ``warnings`` are the things a user must hear about (a stage undone by the guard, an unreachable
     target, a prompt far from every training caption); the CLI prints them on stderr.
     ``prompts`` holds, per distinct prompt, its nearest training captions and their cosine similarity
-    (kinema.model.vocabulary; empty when the model folder has no ``known_prompts.safetensors``).
+    (kinema.model.vocabulary; empty when the model folder has no ``known_prompts.safetensors``) and
+    ``grounding``: what prompt grounding did with it (kinema.model.grounding: ``status``, the captions
+    blended in with their ``weight`` and the prompt's own ``prompt_weight``).
     """
 
     seconds: float = 0.0
@@ -83,6 +86,8 @@ class KinemaModel:
     ``root_smoothing`` (seconds, default 0.25) filters the predicted root x/z; ``joint_sigma`` (seconds,
     default 0.6) spreads each keyjoint's miss into its position channels
     (kinema.generate.keyjoints). Set them to False / 0 / 0 for the paper's imputation alone.
+    ``grounding`` (kinema.model.grounding) is what ``generate(grounding=None)`` uses: the model's saved
+    setting (``checkpoint.json`` "grounding", else ``DEFAULT_GROUNDING``).
     """
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder, known_prompts: KnownPrompts | None = None):
@@ -92,6 +97,7 @@ class KinemaModel:
         self.root_displacement = True
         self.root_smoothing = ROOT_SMOOTHING_SECONDS
         self.joint_sigma = JOINT_SIGMA_SECONDS
+        self.grounding: Grounding = loaded.grounding
 
     @property
     def skeleton(self):
@@ -137,6 +143,7 @@ class KinemaModel:
         objectives=None,
         objective_steps: int | None = None,
         keyjoint_model=None,
+        grounding: float | Grounding | dict | bool | None = None,
     ) -> GenerationResult:
         """Generate ``samples`` motions; returns them with this call's report (``result.report``).
 
@@ -165,6 +172,12 @@ class KinemaModel:
                 (the shipped keyjoint model), a keyjoint model folder or a loaded ``KeyjointPlanner``;
                 the keyjoints (pelvis, head, hands, ankles) are planned first from the constraints,
                 then the body follows them. One segment (up to ``max_seconds``), no objectives.
+            grounding: condition on a blend of each prompt's embedding and its nearest training captions'
+                (kinema.model.grounding, docs/evaluation.md): a weight in [0, 1], a ``Grounding``, its dict,
+                False (off) or None (:attr:`grounding`, the model's saved default); a weight alone keeps
+                the default's temperature and top k. Training captions, unknown prompts (see the
+                warnings) and prompts without a near caption naming the same sides are never grounded;
+                timeline segments are grounded one by one. ``report.prompts`` says on which captions, with what weights.
             progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
                 steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
                 changes the result.
@@ -174,6 +187,7 @@ class KinemaModel:
         samples, steps, seed = self._check_counts(samples, steps, seed)
         segments = self._segments(prompt_or_timeline, seconds)
         matches = self.match_prompts([s.prompt for s in segments])
+        texts = self.ground_prompts([s.prompt for s in segments], grounding)
         guide = self._guidance(guidance)
         plan = plan_segments(self.representation, segments, constraints, constraints_fps)
         g = torch.Generator().manual_seed(seed)
@@ -185,11 +199,11 @@ class KinemaModel:
                                           DEFAULT_DDIM_STEPS)
             steps = settings.steps
             opt = NoiseOptSettings(DEFAULT_ITERATIONS if objective_steps is None else objective_steps)
-            text = self.encode_text(plan.segments[0].prompt)
+            text = self._text(plan.segments[0].prompt, texts)
             raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
                                                             opt, split_progress(progress)[0])
         else:
-            raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner)
+            raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner, texts)
             plans = [plan] * samples
         motions, residuals = [], []
         for motion, sample_plan in zip(raw, plans, strict=True):
@@ -204,7 +218,7 @@ class KinemaModel:
         report = GenerationReport(
             seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
-            prompts=[m.to_dict() for m in matches], objectives=obj_report,
+            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} for m in matches], objectives=obj_report,
         )
         return GenerationResult(motions, report)
 
@@ -263,6 +277,25 @@ class KinemaModel:
     def encode_text(self, prompt: str) -> torch.Tensor | None:
         return None if not prompt.strip() else self.text_encoder.encode([prompt]).float()
 
+    def grounding_settings(self, grounding=None) -> Grounding:
+        """``generate``'s ``grounding`` argument as settings (None: :attr:`grounding`)."""
+        return as_grounding(grounding, self.grounding)
+
+    def ground_prompts(self, prompts: list[str], grounding=None) -> dict[str, Grounded]:
+        """Per distinct non-empty prompt, the embedding to condition on (kinema.model.grounding)."""
+        settings = self.grounding_settings(grounding)
+        return {p: ground(p, self.encode_text(p), self.known_prompts, settings)
+                for p in dict.fromkeys(prompts) if p.strip()}
+
+    def _text(self, prompt: str, texts: dict[str, Grounded] | None) -> torch.Tensor | None:
+        """The conditioning embedding ``(1, E)`` of a prompt (None for no text), grounded by the model's
+        default unless ``texts`` (from :meth:`ground_prompts`) holds it."""
+        if not prompt.strip():
+            return None
+        if texts is None or prompt not in texts:
+            texts = self.ground_prompts([prompt])
+        return texts[prompt].embedding
+
     def match_prompts(self, prompts: list[str]) -> list[PromptMatch]:
         """Nearest training captions of each distinct non-empty prompt ([] without known prompts)."""
         if self.known_prompts is None:
@@ -281,9 +314,10 @@ class KinemaModel:
                               joint_sigma=self.joint_sigma)
 
     def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress,
-                      planner: KeyjointPlanner | None = None) -> list[Motion]:
-        """``samples`` raw motions: every segment sampled on its own prompt alone, then every join's
-        window regenerated between the two (kinema.generate.segments), one batch of all samples per pass.
+                      planner: KeyjointPlanner | None = None,
+                      texts: dict[str, Grounded] | None = None) -> list[Motion]:
+        """``samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every
+        join's window regenerated between the two (kinema.generate.segments), one batch of all samples per pass.
 
         Sampling all motions in one denoiser batch is faster per motion than one after another (the
         network runs on larger matrices). Segment k of every sample starts where that sample's motion
@@ -294,7 +328,7 @@ class KinemaModel:
         bar, callback = split_progress(progress)
         passes = [steps] * len(plan.segments) + [kept_steps(steps, JOIN_STRENGTH)] * len(plan.joins)
         counter = None if callback is None else StepProgress(callback, steps=passes)
-        run = partial(self._sample_pass, guide=guide, steps=steps, g=g, bar=bar, planner=planner)
+        run = partial(self._sample_pass, guide=guide, steps=steps, g=g, bar=bar, planner=planner, texts=texts)
         for k, seg in enumerate(plan.segments):
             rows = [plan.segment_targets(k, m if k else None, heading) for m in motions or [None] * samples]
             parts = run(seg.prompt, rows, seg.num_frames, None if counter is None else counter.segment(k))
@@ -308,11 +342,12 @@ class KinemaModel:
         return motions
 
     def _sample_pass(self, prompt: str, rows, num_frames: int, on_step, *, guide, steps, g, bar,
-                     planner: KeyjointPlanner | None, strength: float = 1.0) -> list[Motion]:
+                     planner: KeyjointPlanner | None, texts: dict[str, Grounded] | None = None,
+                     strength: float = 1.0) -> list[Motion]:
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
         rep, L = self.representation, self.loaded
         targets, shift = stack_targets(rows)
-        text = self.encode_text(prompt)
+        text = self._text(prompt, texts)
         text = None if text is None else text.expand(len(rows), -1)
         sample = sample_features if planner is None else partial(sample_two_stage, planner=planner)
         settings = replace(self._settings(num_frames, guide, steps), strength=strength)

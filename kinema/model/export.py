@@ -20,7 +20,15 @@ from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
 from kinema.model.anyrig_loading import load_anyrig
-from kinema.model.loading import find_checkpoint, load_denoiser, read_checkpoint_info, read_weights, weights_file
+from kinema.model.grounding import Grounding
+from kinema.model.loading import (
+    find_checkpoint,
+    load_denoiser,
+    read_checkpoint_info,
+    read_grounding,
+    read_weights,
+    weights_file,
+)
 
 #: checkpoint.json keys that only matter for resuming training.
 _TRAINING_ONLY = ("optimizer_param_groups",)
@@ -35,6 +43,7 @@ def export_model(
     sampling_steps: int | None = None,
     extra_info: dict | None = None,
     ema: bool = True,
+    grounding: dict | None = None,
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
@@ -42,7 +51,8 @@ def export_model(
     0.995 every 10 steps, a ~2000-step horizon) still mostly holds the starting weights.
 
     ``guidance`` and ``sampling_steps`` replace the defaults saved with the model (e.g. values tuned on
-    the validation split); ``extra_info`` is merged into checkpoint.json under ``"export"``.
+    the validation split); ``grounding`` (some of kinema.model.grounding.Grounding's keys) replaces those
+    keys of the saved prompt-grounding default; ``extra_info`` is merged into checkpoint.json under ``"export"``.
     Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
     """
     if dtype not in DTYPES:
@@ -59,6 +69,11 @@ def export_model(
         info.pop(key, None)
     if guidance is not None:
         info["guidance"] = guidance.to_dict()
+    if grounding:
+        if info.get("kind") == "anyrig":
+            raise KinemaError(f"{ckpt}: an any-rig model keeps no training captions; it cannot save a grounding")
+        base = read_grounding(info, ckpt).to_dict()
+        info["grounding"] = Grounding.from_dict({**base, **grounding}, "grounding").to_dict()
     if sampling_steps is not None:
         if sampling_steps <= 0:
             raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")

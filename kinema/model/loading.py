@@ -15,6 +15,7 @@ from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
 from kinema.model.config import ModelConfig
 from kinema.model.denoiser import Denoiser
+from kinema.model.grounding import DEFAULT_GROUNDING, Grounding
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
@@ -38,7 +39,7 @@ def find_checkpoint(path: str | Path) -> Path:
 @dataclass
 class LoadedModel:
     """A denoiser in eval mode plus its skeleton, fps, feature layout, representation (the rig, layout and
-    the denoiser's own normalisation statistics), sampler and guidance defaults."""
+    the denoiser's own normalisation statistics), sampler, guidance and prompt-grounding defaults."""
 
     denoiser: Denoiser
     skeleton: Skeleton
@@ -51,6 +52,7 @@ class LoadedModel:
     info: dict
     path: Path
     representation: FlatRepresentation
+    grounding: Grounding = DEFAULT_GROUNDING
 
 
 def weights_file(ckpt: Path, ema: bool = True) -> Path:
@@ -94,6 +96,14 @@ def read_weights(path: Path) -> dict[str, torch.Tensor]:
     return state
 
 
+def read_grounding(info: dict, ckpt: Path) -> Grounding:
+    """The prompt-grounding default saved in ``checkpoint.json`` (kinema.model.grounding), else
+    :data:`DEFAULT_GROUNDING`."""
+    if "grounding" not in info:
+        return DEFAULT_GROUNDING
+    return Grounding.from_dict(info["grounding"], f"{ckpt / 'checkpoint.json'}: field 'grounding'")
+
+
 def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
     """Read ``checkpoint.json`` and the (EMA) safetensors weights of a checkpoint or run folder."""
     ckpt = find_checkpoint(path)
@@ -119,6 +129,7 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
             info=info,
             path=ckpt,
             representation=rep,
+            grounding=read_grounding(info, ckpt),
         )
     except KinemaError as err:  # e.g. a SkeletonError for a malformed skeleton entry
         raise KinemaError(f"{ckpt}: cannot load model ({err})") from None

@@ -70,6 +70,7 @@ class KnownPrompts:
         self.captions = list(captions)
         self.embeddings = torch.nn.functional.normalize(embeddings.float(), dim=-1)
         self.encoder_id = encoder_id
+        self.caption_set = frozenset(c.strip() for c in self.captions)
 
     @classmethod
     def build(cls, captions, encoder) -> KnownPrompts:
@@ -105,8 +106,9 @@ class KnownPrompts:
         except (OSError, KeyError, ValueError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
-    def match(self, prompt: str, embedding: torch.Tensor) -> PromptMatch:
-        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``."""
+    def nearest(self, embedding: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Cosine similarities ``(k,)`` (descending) and indices ``(k,)`` of the ``k`` nearest captions
+        (fewer when there are fewer) of an embedding ``(E,)`` or ``(1, E)``."""
         e = torch.nn.functional.normalize(embedding.float().reshape(1, -1), dim=-1)
         if e.shape[1] != self.embeddings.shape[1]:
             raise KinemaError(
@@ -114,6 +116,11 @@ class KnownPrompts:
                 f"{self.embeddings.shape[1]} ({self.encoder_id})"
             )
         sims = (self.embeddings @ e[0]).clamp(-1.0, 1.0)
-        top = sims.topk(min(NEAREST, len(self.captions)))
-        nearest = [(self.captions[int(i)], float(v)) for v, i in zip(top.values, top.indices, strict=True)]
+        top = sims.topk(min(k, len(self.captions)))
+        return top.values, top.indices
+
+    def match(self, prompt: str, embedding: torch.Tensor) -> PromptMatch:
+        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``."""
+        sims, idx = self.nearest(embedding, NEAREST)
+        nearest = [(self.captions[int(i)], float(v)) for v, i in zip(sims, idx, strict=True)]
         return PromptMatch(prompt, nearest, nearest[0][1] >= UNKNOWN_BELOW)

@@ -1,0 +1,173 @@
+"""Prompt grounding: condition the denoiser on a blend of the prompt and its nearest training captions.
+
+Why: a small denoiser trained on a fixed set of captions follows those captions, but not a paraphrase
+whose text embedding merely lies *near* them (issue 18: "Someone strolls slowly ahead." came out as fast
+as a sprint). The nearest training captions of a paraphrase mostly carry its meaning ("Someone strolls
+slowly ahead." -> "Someone walks slowly ahead.", cosine 0.93), and the denoiser has learned what those
+embeddings mean. Grounding moves the prompt's embedding towards them at inference time:
+
+    e = |e_p| * normalize((1 - a) * e_p + a * sum_i w_i * e_i),   w = softmax(s_i / tau) over the top k
+
+with ``e_p`` the prompt's embedding ``(E,)``, ``e_i`` the unit embeddings of the ``k`` nearest known
+captions (kinema.model.vocabulary) *that name the same sides as the prompt*, ``s_i`` their cosine
+similarities, ``a`` = ``weight`` and ``tau`` = ``temperature``.
+
+Same sides: MiniLM barely tells left from right ("Somebody lifts the left arm up high." is nearest to
+"A person raises their right arm up.", 0.87; "... a wave of the right hand." to "... a wave of their
+left hand.", 0.89), so blending the nearest captions as they come would swap sides. A caption is a
+candidate only when the set of side words it uses ({left, right}, also as leftward(s) / rightward(s))
+equals the prompt's; a prompt that names no side is grounded on captions that name none.
+
+Four cases are left alone:
+
+- a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`): the model knows
+  it, so its embedding is returned unchanged (grounding is the identity there; tested);
+- an unknown prompt (nearest caption below ``UNKNOWN_BELOW``): rewriting it into the nearest known action
+  would silently produce something else; it keeps its own embedding and the unknown-prompt warning;
+- no caption that names the same sides is near enough (best below ``UNKNOWN_BELOW``): 'unmatched';
+- ``weight`` 0 (grounding off).
+
+Settings are a small dataclass saved as JSON in a model's ``checkpoint.json`` under ``"grounding"``
+(unknown keys rejected, like the guidance settings); a model without it uses :data:`DEFAULT_GROUNDING`.
+Measurements behind the defaults: docs/evaluation.md ("Prompt grounding").
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.model.vocabulary import UNKNOWN_BELOW, KnownPrompts
+
+#: cosine at or above which a prompt counts as the training caption itself (float16-stored caption
+#: embeddings agree with a fresh encoding to ~1e-6)
+EXACT_ABOVE = 0.9999
+_KEYS = ("weight", "temperature", "top_k")
+_SIDE = re.compile(r"\b(left|right)(?:wards?)?\b", re.IGNORECASE)
+
+
+def sides(text: str) -> frozenset[str]:
+    """The sides a text names: a subset of {'left', 'right'} ("walks leftward" names 'left')."""
+    return frozenset(m.lower() for m in _SIDE.findall(text))
+
+
+@dataclass(frozen=True)
+class Grounding:
+    """How strongly a prompt is pulled towards its nearest training captions.
+
+    ``weight`` a in [0, 1] (0 = off, 1 = the captions alone), ``temperature`` tau > 0 of the softmax over
+    the captions' cosine similarities (small = the nearest caption dominates), ``top_k`` >= 1 captions."""
+
+    weight: float = 0.0
+    temperature: float = 0.05
+    top_k: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("weight", "temperature"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise KinemaError(f"grounding {name} must be a finite number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if not 0.0 <= self.weight <= 1.0:
+            raise KinemaError(
+                f"grounding weight must be in [0, 1] (0 = off, 1 = the nearest captions alone), got {self.weight:g}"
+            )
+        if self.temperature <= 0.0:
+            raise KinemaError(f"grounding temperature must be > 0, got {self.temperature:g}")
+        if isinstance(self.top_k, bool) or not isinstance(self.top_k, int) or self.top_k < 1:
+            raise KinemaError(f"grounding top_k must be an integer >= 1, got {self.top_k!r}")
+
+    @property
+    def off(self) -> bool:
+        return self.weight == 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"weight": self.weight, "temperature": self.temperature, "top_k": self.top_k}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "grounding") -> Grounding:
+        """Rebuild from :meth:`to_dict`; unknown keys or bad values are a one-line ``KinemaError``."""
+        if not isinstance(data, Mapping):
+            raise KinemaError(f"{where}: expected an object with keys {list(_KEYS)}, got {type(data).__name__}")
+        unknown = sorted(set(data) - set(_KEYS))
+        if unknown:
+            raise KinemaError(f"{where}: unknown keys {unknown} (expected some of {list(_KEYS)})")
+        try:
+            return cls(**data)
+        except KinemaError as err:
+            raise KinemaError(f"{where}: {err}") from None
+
+
+#: used by models whose checkpoint.json has no "grounding" entry (measured: docs/evaluation.md)
+DEFAULT_GROUNDING = Grounding()
+
+
+def as_grounding(value, base: Grounding) -> Grounding:
+    """``generate``'s ``grounding`` argument as settings: None (``base``, the model's default), a
+    Grounding, a weight in [0, 1] (``base``'s temperature and top k), False (off) or a dict of some of
+    :meth:`Grounding.to_dict`'s keys (the others from ``base``)."""
+    if value is None:
+        return base
+    if isinstance(value, Grounding):
+        return value
+    if value is False:
+        return replace(base, weight=0.0)
+    if isinstance(value, Mapping):
+        return Grounding.from_dict({**base.to_dict(), **value})
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return replace(base, weight=float(value))
+    raise KinemaError(
+        f"grounding must be a weight in [0, 1], a Grounding, a dict with some of the keys "
+        f"{list(_KEYS)}, False or None (the model's default), got {value!r}"
+    )
+
+
+@dataclass(frozen=True)
+class Grounded:
+    """A prompt's conditioning embedding ``(1, E)`` and what grounding did: ``status`` is 'grounded',
+    'exact' (a training caption), 'unknown' (too far from every caption), 'unmatched' (no caption naming
+    the same sides is near enough) or 'off'; ``captions`` the
+    (caption, weight in the blend) pairs, empty unless grounded; the prompt's own weight is ``1 - sum``."""
+
+    embedding: torch.Tensor
+    status: str
+    captions: tuple[tuple[str, float], ...] = ()
+
+    def to_dict(self) -> dict:
+        return {
+            "status": self.status,
+            "prompt_weight": round(1.0 - sum(w for _, w in self.captions), 4),
+            "captions": [{"caption": c, "weight": round(w, 4)} for c, w in self.captions],
+        }
+
+
+def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, settings: Grounding) -> Grounded:
+    """The embedding ``(1, E)`` to condition on for ``prompt`` (its own ``embedding`` ``(1, E)`` or ``(E,)``)."""
+    e = embedding.float().reshape(1, -1)
+    if settings.off or known is None:
+        return Grounded(e, "off")
+    best, _ = known.nearest(e[0], 1)
+    if prompt.strip() in known.caption_set or float(best[0]) >= EXACT_ABOVE:
+        return Grounded(e, "exact")
+    if float(best[0]) < UNKNOWN_BELOW:
+        return Grounded(e, "unknown")
+    unit = torch.nn.functional.normalize(e, dim=-1)
+    want = sides(prompt)
+    same = torch.tensor([sides(c) == want for c in known.captions])
+    sims = torch.where(same, known.embeddings @ unit[0], -math.inf)
+    top = sims.topk(min(settings.top_k, int(same.sum())))
+    if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
+        return Grounded(e, "unmatched")
+    w = torch.softmax(top.values.double() / settings.temperature, dim=0).float()
+    target = (w[:, None] * known.embeddings[top.indices]).sum(dim=0, keepdim=True)  # (1, E)
+    blend = torch.nn.functional.normalize((1.0 - settings.weight) * unit + settings.weight * target, dim=-1)
+    captions = tuple(
+        (known.captions[int(i)], settings.weight * float(wi)) for i, wi in zip(top.indices, w, strict=True)
+    )
+    return Grounded(blend * e.norm(dim=-1, keepdim=True), "grounded", captions)

@@ -1,0 +1,216 @@
+"""Prompt grounding (kinema/model/grounding.py): paraphrases are conditioned on a blend with their nearest
+training captions; training captions and unknown prompts are left alone."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+import torch
+
+import kinema
+from kinema.cli import main
+from kinema.errors import KinemaError
+from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, sides
+from kinema.model.vocabulary import KnownPrompts
+from kinema.text import get_text_encoder
+
+CAPTIONS = ["A person walks forward.", "A person bows.", "A person waves their right hand.", "A person runs."]
+
+
+@pytest.fixture(scope="module")
+def known():
+    return KnownPrompts.build(CAPTIONS, get_text_encoder("hash-test-32"))
+
+
+def _near(known: KnownPrompts, i: int, j: int, mix: float) -> torch.Tensor:
+    """A unit embedding between caption i and caption j (a stand-in for a paraphrase of caption i)."""
+    e = (1 - mix) * known.embeddings[i] + mix * known.embeddings[j]
+    return torch.nn.functional.normalize(e, dim=0)[None]
+
+
+def test_a_training_caption_is_left_unchanged(known):
+    enc = get_text_encoder("hash-test-32")
+    e = enc.encode(["A person bows."])
+    out = ground("A person bows.", e, known, Grounding(weight=0.9, top_k=3))
+    assert out.status == "exact" and out.captions == ()
+    assert torch.equal(out.embedding, e.float())
+    assert out.to_dict() == {"status": "exact", "prompt_weight": 1.0, "captions": []}
+
+
+def test_a_paraphrase_gets_the_blend_of_its_nearest_captions(known):
+    i, j = known.captions.index("A person walks forward."), known.captions.index("A person runs.")
+    e = _near(known, i, j, 0.3)
+    sims = known.embeddings @ e[0]
+    assert 0.7 < float(sims.max()) < 0.9999  # near a caption, but none of them
+    settings = Grounding(weight=0.6, temperature=0.05, top_k=2)
+    out = ground("Somebody strolls ahead.", e, known, settings)
+    assert out.status == "grounded"
+    top = sims.topk(2)
+    w = torch.softmax(top.values.double() / 0.05, dim=0).float()
+    expect = 0.4 * e[0] + 0.6 * (w[:, None] * known.embeddings[top.indices]).sum(0)
+    torch.testing.assert_close(out.embedding[0], torch.nn.functional.normalize(expect, dim=0))
+    names = [c for c, _ in out.captions]
+    assert names == [known.captions[int(k)] for k in top.indices] and names[0] == "A person walks forward."
+    assert sum(wt for _, wt in out.captions) == pytest.approx(0.6)
+    assert out.captions[0][1] > out.captions[1][1]  # the nearer caption weighs more
+    d = out.to_dict()
+    assert d["prompt_weight"] == pytest.approx(0.4) and d["captions"][0]["caption"] == "A person walks forward."
+    # weight 1, one caption: the nearest caption's own embedding
+    solo = ground("Somebody strolls ahead.", e, known, Grounding(weight=1.0, top_k=1))
+    torch.testing.assert_close(solo.embedding[0], known.embeddings[i])
+
+
+def test_unknown_prompts_and_weight_zero_are_left_unchanged(known):
+    far = torch.nn.functional.normalize(-known.embeddings.sum(0), dim=0)[None]
+    out = ground("A person sits down on a chair.", far, known, Grounding(weight=1.0))
+    assert out.status == "unknown" and torch.equal(out.embedding, far)
+    i, j = 0, 1
+    e = _near(known, i, j, 0.3)
+    assert ground("x", e, known, Grounding(weight=0.0)).status == "off"
+    assert torch.equal(ground("x", e, None, Grounding(weight=0.5)).embedding, e)  # no known prompts
+
+
+def test_only_captions_that_name_the_same_sides_are_blended_in():
+    """MiniLM puts "left arm" next to "right arm": grounding must not swap the side the prompt names."""
+    assert sides("Somebody walks leftward, then raises the Right hand.") == {"left", "right"}
+    assert sides("A person bows.") == frozenset() and sides("He turns rightwards.") == {"right"}
+    caps = ["A person raises their right arm up.", "A person raises their left arm up.", "A person bows."]
+    known = KnownPrompts(caps, torch.tensor([[1.0, 0, 0, 0], [0.8, 0.6, 0, 0], [0, 0, 1.0, 0]]), "x")
+    e = torch.nn.functional.normalize(torch.tensor([[0.98, 0.2, 0, 0]]), dim=-1)
+    assert known.match("p", e).nearest[0][0] == caps[0]  # nearest overall: the wrong side
+    out = ground("Somebody lifts the left arm up high.", e, known, Grounding(weight=0.5, top_k=3))
+    assert out.status == "grounded" and [c for c, _ in out.captions] == [caps[1]]
+    out = ground("Somebody lifts an arm up high.", e, known, Grounding(weight=0.5, top_k=3))
+    assert out.status == "unmatched" and torch.equal(out.embedding, e)  # only the side-free bow, far away
+    right_only = KnownPrompts(caps[:1] + caps[2:], known.embeddings[[0, 2]], "x")
+    assert ground("Somebody lifts the left arm up high.", e, right_only, Grounding(weight=0.5)).status == "unmatched"
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"weight": 1.5}, r"grounding weight must be in \[0, 1\]"),
+        ({"weight": float("nan")}, "grounding weight must be a finite number"),
+        ({"temperature": 0}, "grounding temperature must be > 0"),
+        ({"top_k": 0}, "grounding top_k must be an integer >= 1"),
+        ({"top_k": 2.5}, "grounding top_k must be an integer >= 1"),
+        ({"weight": True}, "grounding weight must be a finite number"),
+    ],
+)
+def test_bad_settings_are_one_line_errors(kwargs, message):
+    with pytest.raises(KinemaError, match=message) as err:
+        Grounding(**kwargs)
+    assert "\n" not in str(err.value)
+
+
+def test_settings_round_trip_and_arguments():
+    g = Grounding(weight=0.5, temperature=0.1, top_k=3)
+    assert Grounding.from_dict(g.to_dict()) == g
+    with pytest.raises(KinemaError, match=r"ckpt: unknown keys \['alpha'\]"):
+        Grounding.from_dict({"alpha": 0.5}, "ckpt")
+    with pytest.raises(KinemaError, match="expected an object"):
+        Grounding.from_dict([0.5])
+    assert as_grounding(None, g) is g
+    assert as_grounding(0.2, g) == Grounding(weight=0.2, temperature=0.1, top_k=3)  # keeps the default's k, tau
+    assert as_grounding(False, g).off
+    assert as_grounding({"top_k": 1}, g) == Grounding(weight=0.5, temperature=0.1, top_k=1)
+    with pytest.raises(KinemaError, match="grounding must be a weight in"):
+        as_grounding("strong", g)
+
+
+# ----------------------------------------------------------------------------- through generate
+@pytest.fixture(scope="module")
+def model():
+    return kinema.load_model()
+
+
+def _positions(model, prompt, **kw):
+    res = model.generate(prompt, seconds=1.0, steps=2, postprocess=False, **kw)
+    return res[0].positions, res.report
+
+
+def test_generate_leaves_training_captions_and_unknown_prompts_alone(model):
+    caption = "A person walks straight ahead."
+    assert caption in model.known_prompts.caption_set
+    plain, _ = _positions(model, caption, grounding=0)
+    grounded, rep = _positions(model, caption, grounding=Grounding(weight=0.9, top_k=3))
+    assert torch.equal(plain, grounded) and rep.prompts[0]["grounding"]["status"] == "exact"
+    unknown = "A person sits down on a chair."
+    plain, _ = _positions(model, unknown, grounding=0)
+    grounded, rep = _positions(model, unknown, grounding=1.0)
+    assert torch.equal(plain, grounded) and rep.prompts[0]["grounding"]["status"] == "unknown"
+    assert len(rep.warnings) == 1 and "is far from every caption" in rep.warnings[0]  # the warning stays
+
+
+def test_generate_grounds_paraphrases_and_reports_the_captions(model):
+    prompt = "Someone strolls slowly ahead."
+    plain, rep0 = _positions(model, prompt, grounding=0)
+    assert rep0.prompts[0]["grounding"]["status"] == "off"
+    half, rep = _positions(model, prompt, grounding={"weight": 0.5, "top_k": 2})
+    g = rep.prompts[0]["grounding"]
+    assert g["status"] == "grounded" and g["prompt_weight"] == pytest.approx(0.5)
+    assert [c["caption"] for c in g["captions"]] == [n["caption"] for n in rep.prompts[0]["nearest"][:2]]
+    assert sum(c["weight"] for c in g["captions"]) == pytest.approx(0.5, abs=1e-3)
+    assert not torch.equal(plain, half)
+    # weight 1 on one caption conditions the denoiser as the caption itself does (float16-stored embedding)
+    nearest = g["captions"][0]["caption"]
+    solo, _ = _positions(model, prompt, grounding=Grounding(weight=1.0, top_k=1))
+    direct, _ = _positions(model, nearest, grounding=0)
+    assert (solo - direct).abs().max() < 0.02
+
+
+def test_each_timeline_segment_is_grounded_on_its_own(model):
+    segments = [
+        ("Someone strolls slowly ahead.", 1.0),
+        ("A person walks straight ahead.", 1.0),
+        ("A person sits down on a chair.", 1.0),
+    ]
+    rep = model.generate(segments, steps=1, postprocess=False, grounding=0.5).report
+    assert [p["grounding"]["status"] for p in rep.prompts] == ["grounded", "exact", "unknown"]
+    with pytest.raises(KinemaError, match=r"grounding weight must be in \[0, 1\]"):
+        model.generate("A person walks.", seconds=1.0, steps=1, grounding=2)
+
+
+def test_cli_flag_reports_grounding_and_rejects_bad_values(tmp_path, capsys):
+    out = tmp_path / "m.bvh"
+    args = [
+        "generate",
+        "Someone strolls slowly ahead.",
+        "--seconds",
+        "1",
+        "--steps",
+        "1",
+        "--no-postprocess",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
+    assert main([*args, "--grounding", "0.5", "--grounding-top-k", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "grounded 'Someone strolls slowly ahead.' (own weight 0.50) on 'A person walks straight ahead.'" in text
+    for flag, value in (("--grounding", "1.5"), ("--grounding-top-k", "0"), ("--grounding-temperature", "-1")):
+        with pytest.raises(SystemExit) as exit_:
+            main([*args, flag, value])
+        assert exit_.value.code == 2
+        assert f"argument {flag}: expected" in capsys.readouterr().err
+
+
+def test_the_default_is_saved_with_the_model(tiny_checkpoint, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "model"
+    assert (
+        main(["export", str(tiny_checkpoint), "--out", str(out), "--grounding", "0.4", "--grounding-top-k", "2"]) == 0
+    )
+    assert "grounding 0.4 (top 2" in capsys.readouterr().out
+    m = kinema.load_model(out)
+    assert m.grounding == Grounding(weight=0.4, temperature=DEFAULT_GROUNDING.temperature, top_k=2)
+    assert kinema.load_model(tiny_checkpoint).grounding == DEFAULT_GROUNDING  # no entry: the documented default
+    bad = tmp_path / "bad"
+    shutil.copytree(out, bad)
+    info = json.loads((bad / "checkpoint.json").read_text())
+    info["grounding"]["alpha"] = 1
+    (bad / "checkpoint.json").write_text(json.dumps(info))
+    with pytest.raises(KinemaError, match=r"checkpoint.json: field 'grounding': unknown keys \['alpha'\]"):
+        kinema.load_model(bad)
