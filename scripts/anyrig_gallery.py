@@ -31,13 +31,30 @@ CASES = [
 ]
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def base_parser(description: str, out: str) -> argparse.ArgumentParser:
+    """The options every creatures picture script shares (model, data root, output folder, length, steps)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--model", default="creatures")
     ap.add_argument("--quaternius", type=Path, default=Path("../shared/datasets/quaternius"))
-    ap.add_argument("--out", type=Path, default=Path("out/gallery"))
+    ap.add_argument("--out", type=Path, default=Path(out))
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--steps", type=int)
+    return ap
+
+
+def film(model, rig_file: Path, prompt: str, out: Path, title: str, *, seconds: float, steps, seed: int) -> Path:
+    """Generate one motion on ``rig_file``, save it as ``out``.glb and draw its 8-frame filmstrip ``out``.png."""
+    res = model.generate(prompt, rig=rig_file, seconds=seconds, steps=steps, seed=seed)
+    glb, png = out.with_suffix(".glb"), out.with_suffix(".png")
+    res[0].save(glb)
+    cmd = [sys.executable, "-m", "kinema", "render", str(glb), "--out", str(png), "--frames", "8", "--title", title]
+    subprocess.run(cmd, check=True)
+    print(f"{png}: {res[0].num_joints} joints, {res.report.seconds:.1f} s", flush=True)
+    return png
+
+
+def main() -> int:
+    ap = base_parser(__doc__.splitlines()[0], "out/gallery")
     ap.add_argument("--only", nargs="+", help="picture names to make")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
@@ -45,27 +62,17 @@ def main() -> int:
     for file, prompt, name in CASES:
         if args.only and name not in args.only:
             continue
-        res = model.generate(prompt, rig=args.quaternius / file, seconds=args.seconds, steps=args.steps, seed=0)
-        glb = args.out / f"{name}.glb"
-        res[0].save(glb)
-        png = args.out / f"{name}.png"
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "kinema",
-                "render",
-                str(glb),
-                "--out",
-                str(png),
-                "--frames",
-                "8",
-                "--title",
-                f"{prompt} ({file.split('/')[-1]}, generated)",
-            ],
-            check=True,
+        title = f"{prompt} ({file.split('/')[-1]}, generated)"
+        film(
+            model,
+            args.quaternius / file,
+            prompt,
+            args.out / name,
+            title,
+            seconds=args.seconds,
+            steps=args.steps,
+            seed=0,
         )
-        print(f"{png}: {res[0].num_joints} joints, {res.report.seconds:.1f} s")
     return 0
 
 

@@ -12,11 +12,10 @@ training split. Look at the sheets before quoting them.
 
 from __future__ import annotations
 
-import argparse
-import subprocess
 import sys
 from pathlib import Path
 
+from anyrig_gallery import base_parser, film
 from PIL import Image
 
 from kinema.generate.api import load_model
@@ -92,19 +91,6 @@ SHEETS: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
 }
 
 
-def render_row(model, rig_file: Path, prompt: str, label: str, out: Path, args) -> Path:
-    """Generate one motion, save it as GLB and draw its filmstrip; returns the PNG."""
-    res = model.generate(prompt, rig=rig_file, seconds=args.seconds, steps=args.steps, seed=args.seed)
-    glb = out.with_suffix(".glb")
-    res[0].save(glb)
-    png = out.with_suffix(".png")
-    title = f"{label}: {prompt} ({rig_file.name}, generated, seed {args.seed})"
-    cmd = [sys.executable, "-m", "kinema", "render", str(glb), "--out", str(png), "--frames", "8", "--title", title]
-    subprocess.run(cmd, check=True)
-    print(f"{png}: {res[0].num_joints} joints, {res.report.seconds:.1f} s", flush=True)
-    return png
-
-
 def stack(pngs: list[Path], out: Path) -> None:
     """Stack filmstrips vertically (white background) into one sheet."""
     images = [Image.open(p).convert("RGB") for p in pngs]
@@ -117,12 +103,7 @@ def stack(pngs: list[Path], out: Path) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--model", default="creatures")
-    ap.add_argument("--quaternius", type=Path, default=Path("../shared/datasets/quaternius"))
-    ap.add_argument("--out", type=Path, default=Path("out/sheet"))
-    ap.add_argument("--seconds", type=float, default=3.0)
-    ap.add_argument("--steps", type=int)
+    ap = base_parser(__doc__.splitlines()[0], "out/sheet")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", nargs="+", choices=sorted(SHEETS), help="rigs to draw")
     args = ap.parse_args()
@@ -132,13 +113,15 @@ def main() -> int:
         if args.only and rig not in args.only:
             continue
         pngs = [
-            render_row(
+            film(
                 model,
                 args.quaternius / file,
                 prompt,
-                f"{rig} ({split}) {action}",
                 args.out / "rows" / f"{rig}_{i}",
-                args,
+                f"{rig} ({split}) {action}: {prompt} ({Path(file).name}, generated, seed {args.seed})",
+                seconds=args.seconds,
+                steps=args.steps,
+                seed=args.seed,
             )
             for i, (action, prompt) in enumerate(rows)
         ]
