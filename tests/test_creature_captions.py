@@ -12,6 +12,7 @@ from kinema.data.creature_captions import (
     subject_for,
 )
 from kinema.data.split import assign_rig_splits
+from kinema.errors import DataError
 
 
 @pytest.mark.parametrize(
@@ -102,3 +103,16 @@ def test_rig_splits_hold_out_whole_rigs() -> None:
     assert assign_rig_splits({"a": 5, "b": 3}) == {"a": "train", "b": "train"}  # too few rigs to hold out
     three = assign_rig_splits({"a": 5, "b": 3, "c": 100})
     assert sorted(three.values()) == ["test", "train", "val"]  # one rig each, even when large
+
+
+def test_rig_splits_keep_named_rigs_in_train() -> None:
+    """A rig named in ``train`` moves to train and every other rig keeps its split (held-out shares
+    shrink instead of another rig being drawn); a name that is not a rig is a one-line error."""
+    rigs = {f"rig{i}": n for i, n in enumerate([40, 30, 25, 20, 12, 12, 10, 8, 6, 6, 5, 4, 4, 3, 2, 2, 1])}
+    plain = assign_rig_splits(rigs)
+    held = sorted(r for r, s in plain.items() if s != "train")
+    pinned = assign_rig_splits(rigs, train=frozenset(held[:1]))
+    assert pinned[held[0]] == "train"
+    assert {r: s for r, s in pinned.items() if r != held[0]} == {r: s for r, s in plain.items() if r != held[0]}
+    with pytest.raises(DataError, match=r"train rigs \['dragon'\] are not rigs of this build \(rigs: rig0, rig1,"):
+        assign_rig_splits(rigs, train=frozenset({"dragon"}))

@@ -129,6 +129,19 @@ def test_multi_rig_folder(tmp_path, capsys) -> None:
     assert main(["data", "stats", str(out)]) == 0
     table = capsys.readouterr().out
     assert "5 rigs (3-22 joints)" in table and "eel4" in table
+    held = sorted(r for r, split in splits.items() if split != "train")
+    pinned = tmp_path / "zoo_pinned"
+    assert main(["data", "build", "folder", "--root", str(root), "--out", str(pinned), "--quiet",
+                 "--train-rigs", held[0]]) == 0
+    capsys.readouterr()
+    again = {r["rig"]: r["split"] for r in MotionCache(pinned).rigs.values()}
+    assert again == splits | {held[0]: "train"}
+    assert f"kept in train: {held[0]}" in json.loads((pinned / "meta.json").read_text())["split_rule"]
+    assert main(["data", "build", "folder", "--root", str(root), "--out", str(tmp_path / "bad"), "--quiet",
+                 "--train-rigs", "dragon"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--train-rigs dragon: no such rig in this build (rigs: eel3, eel4, eel5, eel6, walk)")
+    assert not (tmp_path / "bad" / "meta.json").exists()
 
 
 def test_manifest_joins_builds(human_folder, tmp_path) -> None:

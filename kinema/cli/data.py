@@ -16,6 +16,7 @@ from collections import defaultdict
 
 from kinema.cli import data_multirig
 from kinema.cli._args import positive_int
+from kinema.errors import DataError
 
 DATASETS = ("bandai-namco", "quaternius", "folder")
 
@@ -57,6 +58,14 @@ def register(sub) -> None:
         action="store_true",
         help="folder: leave out clips without captions (listed) instead of stopping",
     )
+    b.add_argument(
+        "--train-rigs",
+        nargs="*",
+        default=None,
+        metavar="RIG",
+        help="quaternius / folder: rig ids never held out (quaternius default: parasaurolophus, the biped "
+        "dinosaur; give the flag with no names for the plain hash split)",
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=_build)
 
@@ -79,6 +88,8 @@ def _build(args) -> int:
 
     if args.dataset != "bandai-namco":
         return data_multirig.build(args)
+    if args.train_rigs is not None:
+        raise DataError("--train-rigs is for multi-rig builds (quaternius, folder); bandai-namco is split by take")
     t0 = time.time()
     meta = build_dataset(
         args.root,

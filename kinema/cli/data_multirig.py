@@ -28,7 +28,9 @@ def build(args) -> int:
     if args.dataset == "quaternius":
         from kinema.data.quaternius import build_quaternius
 
-        meta, messages = build_quaternius(args.root, args.out, fps=args.fps, limit=args.limit, progress=not args.quiet)
+        meta, messages = build_quaternius(
+            args.root, args.out, fps=args.fps, limit=args.limit, train_rigs=args.train_rigs, progress=not args.quiet
+        )
     else:
         from kinema.data.folder import build_folder
 
@@ -40,6 +42,7 @@ def build(args) -> int:
             fps=args.fps,
             units=args.units,
             skip_uncaptioned=args.skip_uncaptioned,
+            train_rigs=args.train_rigs,
             progress=not args.quiet,
         )
     for m in messages:

@@ -57,11 +57,13 @@ def build_folder(
     fps: float = 20.0,
     units: str = "auto",
     skip_uncaptioned: bool = False,
+    train_rigs: tuple[str, ...] | None = None,
     progress: bool = True,
 ) -> tuple[dict, list[str]]:
     """Build ``out_dir`` from the files under ``root``; returns (meta.json, messages to show).
 
     Messages: the detected units, skipped clips, unused caption-file entries, reader warnings.
+    ``train_rigs``: rig ids never held out.
     Raises `DataError` (one line) for a missing root, no files, uncaptioned clips (unless
     skipped), unreadable files and an output folder that is not a previous build.
     """
@@ -80,7 +82,7 @@ def build_folder(
         caps = captions.captions(f.path, None if f.kind == "bvh" else name, single=len(f.clips) == 1)
         return Description(caps, action=name, subject="")
 
-    asm = assemble(files, fps, describe)
+    asm = assemble(files, fps, describe, train_rigs=tuple(train_rigs or ()))
     if asm.uncaptioned and not skip_uncaptioned:
         raise DataError(_missing_message(root, asm.uncaptioned))
     if not asm.writer.clips:

@@ -65,7 +65,7 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "rig"
 
 
-def _rig_ids(files: list[SourceFile]) -> dict[str, str]:
+def rig_ids(files: list[SourceFile]) -> dict[str, str]:
     """Topology key -> rig id (first file's stem as a slug, ``-2``, ``-3`` on collisions)."""
     ids: dict[str, str] = {}
     for f in files:
@@ -93,10 +93,11 @@ def file_scale(f: SourceFile) -> float:
     return 1.0 / extent
 
 
-def assemble(files: list[SourceFile], fps: float, describe: Describe) -> Assembly:
-    """Rigs, scale, captions, dedup and splits of ``files`` (see the module docstring)."""
+def assemble(files: list[SourceFile], fps: float, describe: Describe, *, train_rigs: tuple[str, ...] = ()) -> Assembly:
+    """Rigs, scale, captions, dedup and splits of ``files`` (see the module docstring); rigs named
+    in ``train_rigs`` are never held out."""
     writer = CacheWriter(fps=float(fps))
-    rig_of = _rig_ids(files)
+    rig_of = rig_ids(files)
     seen: dict[str, dict] = {}
     uncaptioned, dropped, total = [], 0, 0
     for f in files:
@@ -135,24 +136,29 @@ def assemble(files: list[SourceFile], fps: float, describe: Describe) -> Assembl
             }
             seen[h] = rec
             writer.add_clip(m, rec)
-    split_rule = _assign(writer)
+    split_rule = _assign(writer, frozenset(train_rigs))
     return Assembly(writer, uncaptioned, dropped, total, split_rule)
 
 
-def _assign(writer: CacheWriter) -> str:
+def _assign(writer: CacheWriter, train_rigs: frozenset[str] = frozenset()) -> str:
     """Set every rig's and clip's split; returns the rule used, for meta.json. Clips flagged
     ``prop`` do not count, and rigs with only props stay in train: a held-out lever says nothing."""
+    unknown = sorted(train_rigs - set(writer.rigs))
+    if unknown:
+        known = ", ".join(sorted(writer.rigs))
+        raise DataError(f"--train-rigs {' '.join(unknown)}: no such rig in this build (rigs: {known})")
     counts: dict[str, int] = {}
     for rec in writer.clips:
         if "prop" not in rec["flags"]:
             counts[rec["rig"]] = counts.get(rec["rig"], 0) + 1
     if len(counts) >= 3:
-        by_rig = assign_rig_splits(counts)
+        by_rig = assign_rig_splits(counts, train=train_rigs & set(counts))
         for rid, rig in writer.rigs.items():
             rig["split"] = by_rig.get(rid, "train")
         for rec in writer.clips:
             rec["split"] = writer.rigs[rec["rig"]]["split"]
-        return "kinema.data.split.assign_rig_splits over non-prop clips: whole rigs, about 80/10/10 of clips"
+        pinned = f"; kept in train: {', '.join(sorted(train_rigs))}" if train_rigs else ""
+        return f"kinema.data.split.assign_rig_splits over non-prop clips: whole rigs, about 80/10/10 of clips{pinned}"
     by_clip = assign_splits([(r["clip_id"], r["rig"]) for r in writer.clips])
     for rec in writer.clips:
         rec["split"] = by_clip[rec["clip_id"]]

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from kinema.data.build import _prepare_out
 from kinema.data.creature_captions import LOCOMOTION, clean_clip_name, creature_captions, is_prop, subject_for
-from kinema.data.multirig_build import Description, assemble, counts, write_build
+from kinema.data.multirig_build import Description, assemble, counts, rig_ids, write_build
 from kinema.data.sources import SourceFile, load_source
 from kinema.errors import DataError, KinemaError
 from kinema.motion.core import Motion
@@ -63,16 +63,32 @@ def read_files(paths: list[Path], root: Path, fps: float, progress: bool) -> tup
     return files, skipped
 
 
+#: Rigs the default build keeps in train: the biped dinosaur (parasaurolophus, also the T-rex), so that
+#: the model knows each kind of body its users ask for most (fish, quadruped, biped dinosaur, mech,
+#: humanoid); the quadruped dinosaurs stay held out by the hash rule.
+DEFAULT_TRAIN_RIGS = ("parasaurolophus",)
+
+
+def _train_rigs(files: list[SourceFile], asked: tuple[str, ...] | None) -> tuple[str, ...]:
+    """The rigs to keep in train: what the user asked for, or the defaults among ``files``'s rigs."""
+    if asked is not None:
+        return tuple(asked)
+    present = set(rig_ids(files).values())
+    return tuple(r for r in DEFAULT_TRAIN_RIGS if r in present)
+
+
 def build_quaternius(
     root: str | Path,
     out_dir: str | Path,
     *,
     fps: float = 20.0,
     limit: int | None = None,
+    train_rigs: tuple[str, ...] | None = None,
     progress: bool = True,
 ) -> tuple[dict, list[str]]:
     """Build the Quaternius cache; returns (meta.json, messages). ``limit`` keeps the first N files
-    (sorted by path) for quick tests; splits are then computed over those files only."""
+    (sorted by path) for quick tests; splits are then computed over those files only. ``train_rigs``
+    are never held out (default `DEFAULT_TRAIN_RIGS`, those of them the files hold; ``()`` = none)."""
     t0 = time.time()
     root, out_dir = Path(root), Path(out_dir).absolute()
     if not fps > 0:
@@ -82,7 +98,7 @@ def build_quaternius(
     files, messages = read_files(paths, root, float(fps), progress)
     if not files:
         raise DataError(f"{root}: no GLB file could be read ({messages[0] if messages else ''})")
-    asm = assemble(files, fps, describe)
+    asm = assemble(files, fps, describe, train_rigs=_train_rigs(files, train_rigs))
     messages += [f"{f.rel}: {w}" for f in files for w in f.warnings]
     meta = {
         "_t0": t0,

@@ -143,7 +143,9 @@ def assign_splits(clips: list[tuple[str, str]], fractions=(0.8, 0.1, 0.1)) -> di
     return result
 
 
-def assign_rig_splits(rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1)) -> dict[str, str]:
+def assign_rig_splits(
+    rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1), *, train: frozenset[str] = frozenset()
+) -> dict[str, str]:
     """Split whole rigs (skeletons) of a multi-rig dataset: {rig_id: "train" | "val" | "test"}.
 
     Every clip of a rig lands in its rig's split, so val and test measure how a model does on
@@ -153,8 +155,14 @@ def assign_rig_splits(rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1)) -> d
     twice that share, then likewise to "val"; every other rig is "train". With three or more rigs,
     val and test get at least one rig each (the first in hash order that fits, else the smallest)
     and at least one rig stays in train. Fewer than three rigs are all train. Deterministic.
+    Rigs named in ``train`` are then moved to train (the others keep their split, so held-out shares
+    shrink rather than other rigs moving): a kind of skeleton the model must know (a biped dinosaur)
+    is not held out by chance.
     """
     _, f_val, f_test = _check_fractions(fractions)
+    unknown = sorted(set(train) - set(rig_clips))
+    if unknown:
+        raise DataError(f"train rigs {unknown} are not rigs of this build (rigs: {', '.join(sorted(rig_clips))})")
     ranked = sorted(rig_clips, key=lambda r: (_unit(r, "rig"), r))
     result = dict.fromkeys(ranked, "train")
     if len(ranked) < 3:
@@ -173,4 +181,4 @@ def assign_rig_splits(rig_clips: dict[str, int], fractions=(0.8, 0.1, 0.1)) -> d
         free = [r for r in ranked if result[r] == "train"]
         if taken == 0 and len(free) > reserve:
             result[min(free, key=lambda r: (rig_clips[r], _unit(r, "rig"), r))] = split
-    return result
+    return result | dict.fromkeys(train, "train")
