@@ -6,8 +6,9 @@ idle, death) on rigs of different topology, one filmstrip row per action, one PN
 
 Each motion is generated with the rig's own words (the captions its clips have in the Quaternius build),
 saved as GLB (skinned mesh kept), drawn with `kinema render` (8 frames) and the rows stacked into
-``<rig>.png``. The parasaurolophus (biped dinosaur) is a held-out rig: every dinosaur is outside the
-training split. Look at the sheets before quoting them.
+``<rig>.png``. The parasaurolophus (biped dinosaur, also the T-rex) is a training rig since the build keeps
+it in train (`kinema.data.quaternius.DEFAULT_TRAIN_RIGS`); apatosaurus, rat, alpaca and the platformer
+character are held out. Look at the sheets before quoting them.
 """
 
 from __future__ import annotations
@@ -79,13 +80,57 @@ SHEETS: dict[str, tuple[str, str, list[tuple[str, str]]]] = {
     ),
     "parasaurolophus": (
         "dinosaurs_pack/Parasaurolophus.glb",
-        "held out",
+        "train",
         [
             ("walk", "A parasaurolophus walks."),
             ("run", "A parasaurolophus runs."),
             ("attack", "A parasaurolophus attacks."),
             ("idle", "A parasaurolophus stands idle."),
             ("death", "A parasaurolophus dies."),
+        ],
+    ),
+    "apatosaurus": (
+        "dinosaurs_pack/Apatosaurus.glb",
+        "held out",
+        [
+            ("walk", "An apatosaurus walks."),
+            ("run", "An apatosaurus runs."),
+            ("attack", "An apatosaurus attacks."),
+            ("idle", "An apatosaurus stands idle."),
+            ("death", "An apatosaurus dies."),
+        ],
+    ),
+    "rat": (
+        "easy_enemies_pack/Rat.glb",
+        "held out",
+        [
+            ("walk", "A rat walks."),
+            ("run", "A rat runs."),
+            ("attack", "A rat attacks."),
+            ("idle", "A rat stands idle."),
+            ("death", "A rat dies."),
+        ],
+    ),
+    "alpaca": (
+        "animals_pack/Alpaca.glb",
+        "held out",
+        [
+            ("walk", "An alpaca walks."),
+            ("gallop", "An alpaca gallops."),
+            ("attack", "An alpaca attacks with a headbutt."),
+            ("idle", "An alpaca stands idle."),
+            ("death", "An alpaca dies."),
+        ],
+    ),
+    "character-2": (
+        "platformer_game_pack/Character.glb",
+        "held out",
+        [
+            ("walk", "A person walks."),
+            ("run", "A person runs."),
+            ("attack", "A person punches."),
+            ("idle", "A person stands idle."),
+            ("death", "A person dies."),
         ],
     ),
 }

@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Ablation rows of the creatures model card (issue 15): the full anyrig-small recipe and the same run
+# without TreePE, without RestPE and without rig augmentation, each trained from scratch for the same
+# short schedule (seed 0, same build), then evaluated on train and held-out rigs.
+#   bash scripts/anyrig_ablate.sh [STEPS] [RUNS_DIR]     (default 2000 steps, runs/ablate)
+# Resumable: a finished run is skipped, a stopped one continues from its newest checkpoint.
+set -euo pipefail
+steps=${1:-2000}
+runs=${2:-runs/ablate}
+data=${KINEMA_ABLATE_DATA:-cache/quat20}
+mkdir -p "$runs"
+declare -A flags=([full]="" [no-tree-pe]="--no-tree-pe" [no-rest-pe]="--no-rest-pe" [no-aug]="--variants 0")
+for row in full no-tree-pe no-rest-pe no-aug; do
+    out="$runs/$row"
+    resume=$([ -d "$out" ] && echo --resume || true)
+    # shellcheck disable=SC2086
+    kinema train-anyrig --config anyrig-small --data "$data" --out "$out" --steps "$steps" --seed 0 \
+        --log-every 100 --ckpt-every 500 --threads 1 ${flags[$row]} $resume
+    [ -f "$runs/$row.json" ] || kinema evaluate-anyrig --model "$out" --data "$data" --splits train val test \
+        --clips 2 --steps 20 --threads 1 --out "$runs/$row.json"
+done
