@@ -33,6 +33,28 @@ def quaternius_root() -> Path:
     return SHARED
 
 
+def test_build_keeps_the_biped_dinosaur_in_train(quaternius_root, tmp_path) -> None:
+    """The default quaternius build never holds the parasaurolophus (biped dinosaur) rig out, whatever
+    the hash rule says; ``train_rigs=()`` gives the plain hash split, and with fewer than three rigs
+    (clips split inside each rig) a kept rig's clips all train."""
+    root = tmp_path / "zoo"
+    for rel in ("dinosaurs_pack/Parasaurolophus.glb", "animals_pack/Bull.glb", "easy_enemies_pack/Rat.glb"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).symlink_to(quaternius_root / rel)
+    plain, _ = build_quaternius(root, tmp_path / "plain", fps=20, train_rigs=(), progress=False)
+    assert "kept in train" not in plain["split_rule"]
+    assert "parasaurolophus" in {r["rig"] for r in MotionCache(tmp_path / "plain").rigs.values() if r["split"] != "train"}
+    meta, _ = build_quaternius(root, tmp_path / "kept", fps=20, progress=False)
+    assert meta["split_rule"].endswith("kept in train: parasaurolophus")
+    splits = {r["rig"]: r["split"] for r in MotionCache(tmp_path / "kept").rigs.values()}
+    assert splits["parasaurolophus"] == "train" and {"val", "test"} & set(splits.values())
+    (root / "easy_enemies_pack/Rat.glb").unlink()
+    build_quaternius(root, tmp_path / "two", fps=20, progress=False)
+    cache = MotionCache(tmp_path / "two")
+    assert {r["split"] for r in cache.clips if r["rig"] == "parasaurolophus"} == {"train"}
+    assert {r["split"] for r in cache.clips if r["rig"] != "parasaurolophus"} == {"train", "val", "test"}
+
+
 def test_build_three_files(quaternius_root, tmp_path, capsys) -> None:
     out = tmp_path / "quat"
     # the first three files: Alpaca, Bull and Cow (Bull and Cow share one rig and most clips)

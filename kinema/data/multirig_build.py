@@ -147,6 +147,7 @@ def _assign(writer: CacheWriter, train_rigs: frozenset[str] = frozenset()) -> st
     if unknown:
         known = ", ".join(sorted(writer.rigs))
         raise DataError(f"--train-rigs {' '.join(unknown)}: no such rig in this build (rigs: {known})")
+    pinned = f"; kept in train: {', '.join(sorted(train_rigs))}" if train_rigs else ""
     counts: dict[str, int] = {}
     for rec in writer.clips:
         if "prop" not in rec["flags"]:
@@ -157,14 +158,13 @@ def _assign(writer: CacheWriter, train_rigs: frozenset[str] = frozenset()) -> st
             rig["split"] = by_rig.get(rid, "train")
         for rec in writer.clips:
             rec["split"] = writer.rigs[rec["rig"]]["split"]
-        pinned = f"; kept in train: {', '.join(sorted(train_rigs))}" if train_rigs else ""
         return f"kinema.data.split.assign_rig_splits over non-prop clips: whole rigs, about 80/10/10 of clips{pinned}"
     by_clip = assign_splits([(r["clip_id"], r["rig"]) for r in writer.clips])
     for rec in writer.clips:
-        rec["split"] = by_clip[rec["clip_id"]]
-    for rig in writer.rigs.values():
-        rig["split"] = "mixed"
-    return "kinema.data.split.assign_splits per clip inside each rig (fewer than 3 rigs), 80/10/10"
+        rec["split"] = "train" if rec["rig"] in train_rigs else by_clip[rec["clip_id"]]
+    for rid, rig in writer.rigs.items():
+        rig["split"] = "train" if rid in train_rigs else "mixed"
+    return f"kinema.data.split.assign_splits per clip inside each rig (fewer than 3 rigs), 80/10/10{pinned}"
 
 
 def counts(asm: Assembly, files: list[SourceFile]) -> dict:
