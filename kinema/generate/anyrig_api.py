@@ -42,7 +42,7 @@ from kinema.generate.anyrig_feet import (
     translated_feet,
 )
 from kinema.generate.anyrig_ground import ground_motion, leg_ends, settle_offsets, steady_height
-from kinema.generate.anyrig_post import dejitter, pin_root, root_pins, unmet_warnings
+from kinema.generate.anyrig_post import dejitter, pin_root, reach_by_translation, root_pins, unmet_warnings
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
@@ -67,7 +67,7 @@ class AnyRigReport:
     """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
     foot locking, the largest vertical change of de-jittering the root height, of putting the motion on
     the floor and of settling the body onto its legs (rig sizes: ``height_smoothed``, ``grounded``,
-    ``settled``), warnings."""
+    ``settled``), joint targets met by translating a bone (name -> largest shift, rig sizes), warnings."""
 
     seconds: float = 0.0
     steps: int = 0
@@ -79,6 +79,7 @@ class AnyRigReport:
     grounded: float = 0.0
     height_smoothed: float = 0.0
     settled: float = 0.0
+    reached_by_translation: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -255,6 +256,10 @@ class AnyRigModel:
             news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
             report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
+        if targets is not None:
+            m, moved = reach_by_translation(m, targets, self._movable(m, rep_n, constraints))
+            for name, size in moved.items():
+                report.reached_by_translation[name] = max(size, report.reached_by_translation.get(name, 0.0))
         if postprocess:
             m, locked = self._lock_feet(m, rep_n, targets, report)
             report.foot_lock.append({**post.get("foot_lock", {}), **locked})
@@ -269,6 +274,16 @@ class AnyRigModel:
                 worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
             report.warnings += unmet_warnings(worst, self.fps, report.warnings)
         return motion
+
+    @staticmethod
+    def _movable(m: Motion, rep_n, constraints) -> set[int]:
+        """Joints whose translation may meet a joint target (kinema.generate.anyrig_post.reach_by_translation):
+        joint 0 and the bones under a floor-level armature, but not the root or its path when keyframes or
+        waypoints have fixed where the root is."""
+        movable = {0, *floor_root_children(m.skeleton)}
+        if any(isinstance(c, (Keyframe, RootPath, RootMotion)) for c in constraints):
+            movable -= set(m.skeleton.path_from_root(rep_n.rig.root))
+        return movable
 
     @staticmethod
     def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:

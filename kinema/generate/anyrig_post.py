@@ -11,8 +11,10 @@ from dataclasses import replace
 
 import torch
 
+from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.guard import DEFAULT_BOUNDS, plausibility, violations
+from kinema.postprocess.ik import spread_corrections
 from kinema.postprocess.smooth import DEFAULT_ROT_SIGMA_SECONDS, DEFAULT_SIGMA_SECONDS, smooth_motion
 from kinema.postprocess.targets import PostTargets
 
@@ -95,3 +97,48 @@ def pin_root(m: Motion, pins: dict[int, torch.Tensor], root: int, reach_s: float
         shift[anchors[0][0]] = anchors[0][1]
     root_t = m.root_translation.to(P.dtype) + shift
     return Motion(m.skeleton, m.fps, root_t, m.local_rotations, m.foot_contacts, m.local_translations)
+
+
+def translation_carrier(skeleton, joint: int, movable: set[int]) -> int | None:
+    """The nearest of ``joint`` and its ancestors whose translation post-processing may change (``movable``:
+    joint 0, whose translation is the root's, and the bones that carry animated translations), or None."""
+    j = joint
+    while j >= 0:
+        if j in movable:
+            return j
+        j = skeleton.parents[j]
+    return None
+
+
+def reach_by_translation(
+    m: Motion, targets: PostTargets, movable: set[int], *, tol: float = 0.005, limit: float = 0.25, blend_s: float = 0.3
+) -> tuple[Motion, dict[str, float]]:
+    """Joint-position targets still missed after the exact pass, met by translating the nearest bone
+    that carries a translation (`translation_carrier`; the whole body when that is joint 0) by what is
+    left, blended in and out over ``blend_s`` (kinema.postprocess.ik.spread_corrections). Why: on rigs
+    whose body hangs from a floor-level armature the bones' translations are set after the rotation-only
+    exact pass (the snake's head was left 10-16 cm off), and a joint right below joint 0 (a dolphin's
+    head) has no two-bone chain. Misses above ``limit`` (rig units; the rest pose is 1 across) are left
+    to the unmet-constraint warning rather than dragging the body. Returns the motion and
+    {joint name: largest shift}; ``m`` itself when nothing moved."""
+    skel, T = m.skeleton, m.num_frames
+    moved: dict[str, float] = {}
+    for j, (frames, pos) in targets.joint_positions.items():
+        carrier = translation_carrier(skel, j, movable)
+        G, P = m.global_transforms()
+        miss = pos.to(P.dtype) - P[frames, j]
+        size = miss.norm(dim=-1)
+        if carrier is None or float(size.max()) <= tol or float(size.max()) > limit:
+            continue
+        field, env = spread_corrections(frames, miss, T, max(1.0, blend_s * m.fps))
+        delta = field * env[:, None]
+        if carrier == 0:
+            m = replace(m, root_translation=m.root_translation + delta.to(m.root_translation.dtype))
+        else:
+            parent = skel.parents[carrier]
+            lt = (skel.offsets[None].repeat(T, 1, 1) if m.local_translations is None else m.local_translations).clone()
+            local = quat_rotate(quat_inverse(G[:, parent]), delta)
+            lt[:, carrier] += local.to(lt.dtype)
+            m = replace(m, local_translations=lt)
+        moved[skel.names[j]] = float(size.max())
+    return m, moved
