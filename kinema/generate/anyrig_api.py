@@ -40,16 +40,23 @@ from kinema.generate.anyrig_feet import (
     lock_translated_feet,
     rest_extent,
     translated_feet,
+    with_floor_translations,
 )
 from kinema.generate.anyrig_ground import ground_motion, leg_ends, settle_offsets, steady_height
-from kinema.generate.anyrig_post import dejitter, pin_root, reach_by_translation, root_pins, unmet_warnings
+from kinema.generate.anyrig_post import (
+    dejitter,
+    pin_root,
+    reach_by_translation,
+    root_pins,
+    translatable_bones,
+    unmet_warnings,
+)
 from kinema.generate.anyrig_sampling import sample_features
 from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.generate.progress import ProgressFn
 from kinema.generate.results import MotionResults
 from kinema.generate.segments import segment_bounds
 from kinema.generate.timeline import parse_timeline
-from kinema.geometry.rotations import quat_inverse, quat_rotate
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
 from kinema.model.anyrig_loading import LoadedAnyRig
@@ -57,7 +64,7 @@ from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
 from kinema.postprocess import postprocess as run_postprocess
 from kinema.postprocess.guard import plausibility, violations
-from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -257,7 +264,8 @@ class AnyRigModel:
             report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
         if targets is not None:
-            m, moved = reach_by_translation(m, targets, self._movable(m, rep_n, constraints))
+            fixed = any(isinstance(c, (Keyframe, RootPath, RootMotion)) for c in constraints)
+            m, moved = reach_by_translation(m, targets, translatable_bones(m.skeleton, rep_n.rig.root, fixed))
             for name, size in moved.items():
                 report.reached_by_translation[name] = max(size, report.reached_by_translation.get(name, 0.0))
         if postprocess:
@@ -274,16 +282,6 @@ class AnyRigModel:
                 worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
             report.warnings += unmet_warnings(worst, self.fps, report.warnings)
         return motion
-
-    @staticmethod
-    def _movable(m: Motion, rep_n, constraints) -> set[int]:
-        """Joints whose translation may meet a joint target (kinema.generate.anyrig_post.reach_by_translation):
-        joint 0 and the bones under a floor-level armature, but not the root or its path when keyframes or
-        waypoints have fixed where the root is."""
-        movable = {0, *floor_root_children(m.skeleton)}
-        if any(isinstance(c, (Keyframe, RootPath, RootMotion)) for c in constraints):
-            movable -= set(m.skeleton.path_from_root(rep_n.rig.root))
-        return movable
 
     @staticmethod
     def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:
@@ -342,33 +340,6 @@ class AnyRigModel:
             report.warnings.append(f"post-processing: translated foot locking undone, it made the motion worse: {why}")
             return m, {**locked, "undone": problems}
         return new, locked
-
-
-def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
-    """``m`` (posed from rotations) with the bones under a floor-level armature joint (`floor_root_children`)
-    moved as in the data: the armature stays on the floor (y = 0) below the root, the root keeps the
-    position the root row gave it, and every other such bone takes its translation from the predicted
-    joint positions ``feats (T, J, 13)`` (the motion's units), so feet driven by IK bones follow the model."""
-    root = rep.rig.root
-    path = m.skeleton.path_from_root(root)
-    kids = floor_root_children(m.skeleton)
-    joints = [j for j in kids if j not in path]
-    move_root = len(path) == 2 and root in kids  # the root hangs directly from the armature
-    if not joints and not move_root:
-        return m
-    G, P = m.global_transforms()
-    f = feats.to(P.dtype)
-    psi = torch.atan2(f[:, root, 10], f[:, root, 9])
-    T = m.num_frames
-    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
-    trans = m.root_translation.to(P.dtype).clone()
-    if move_root:
-        trans[:, 1] -= P[:, 0, 1]  # joint 0 back on the floor; the root's own translation carries the height
-        joints, world = [*joints, root], torch.cat([world, P[:, root : root + 1]], dim=1)
-    base = P[:, :1] - (m.root_translation.to(P.dtype) - trans)[:, None]
-    lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
-    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - base)
-    return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
 
 
 def _waypoint_frames(constraints) -> list[int]:

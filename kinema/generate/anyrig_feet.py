@@ -42,6 +42,7 @@ from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess.footlock import contact_segments
+from kinema.representation.joint import JointRepresentation, yaw_quat
 from kinema.rig import Rig
 from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
@@ -274,3 +275,30 @@ def _hold_weights(foot: TranslatedFoot, hold: dict[int, list[int]], skeleton: Sk
         for f in frames:
             w = torch.maximum(w, _ramp(int(f), int(f) + 1, T, torch.float64))
     return w
+
+
+def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresentation) -> Motion:
+    """``m`` (posed from rotations) with the bones under a floor-level armature joint (`floor_root_children`)
+    moved as in the data: the armature stays on the floor (y = 0) below the root, the root keeps the
+    position the root row gave it, and every other such bone takes its translation from the predicted
+    joint positions ``feats (T, J, 13)`` (the motion's units), so feet driven by IK bones follow the model."""
+    root = rep.rig.root
+    path = m.skeleton.path_from_root(root)
+    kids = floor_root_children(m.skeleton)
+    joints = [j for j in kids if j not in path]
+    move_root = len(path) == 2 and root in kids  # the root hangs directly from the armature
+    if not joints and not move_root:
+        return m
+    G, P = m.global_transforms()
+    f = feats.to(P.dtype)
+    psi = torch.atan2(f[:, root, 10], f[:, root, 9])
+    T = m.num_frames
+    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    trans = m.root_translation.to(P.dtype).clone()
+    if move_root:
+        trans[:, 1] -= P[:, 0, 1]  # joint 0 back on the floor; the root's own translation carries the height
+        joints, world = [*joints, root], torch.cat([world, P[:, root : root + 1]], dim=1)
+    base = P[:, :1] - (m.root_translation.to(P.dtype) - trans)[:, None]
+    lt = m.skeleton.offsets.to(P.dtype)[None].repeat(T, 1, 1)
+    lt[:, joints] = quat_rotate(quat_inverse(G[:, :1]).expand(T, len(joints), 4), world - base)
+    return Motion(m.skeleton, m.fps, trans, m.local_rotations, m.foot_contacts, lt)
