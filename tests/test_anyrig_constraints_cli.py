@@ -5,6 +5,7 @@ world targets are met after post-processing (kinema.generate.anyrig_world)."""
 from __future__ import annotations
 
 import json
+import math
 
 import anyrig_fixtures
 import pytest
@@ -14,7 +15,10 @@ from rig_fixtures import quadruped, walking
 
 from kinema.cli import main
 from kinema.generate.anyrig_world import json_form, load_constraints_file
+from kinema.geometry.rotations import quat_mul
 from kinema.io.registry import load_motion
+from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.rig import Rig
 
 creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
 
@@ -73,6 +77,11 @@ def test_world_targets_waypoints_and_keyframes_from_a_constraints_file(trained, 
         ([{"type": "right-hand", "times": [9.0], "positions": [[0, 1, 0]]}], "c.json: constraint 0 (right-hand)"),
         ([{"type": "root2d", "times": [1.0], "smooth_root_2d": [[0, 1, 2]]}], "c.json: constraint 0 (root2d)"),
         ([{"type": "joint", "joint": "HeadA", "frame": 3, "position": [0, 1, 0], "fps": 30}], "c.json[0]: a joint"),
+        ([{"type": "joint", "joint": "HeadA", "frame": 3}], "c.json[0]: a joint target is {type, joint"),
+        ([{"type": "joint", "joint": "HeadA", "frame": 3, "rotation": [1, 0, 0]}],
+         "c.json[0].rotation: expected a list of 4 numbers, got [1, 0, 0]"),
+        ([{"type": "joint", "joint": "HeadA", "frame": 3, "rotation": [0, 0, 0, 0]}],
+         "c.json[0]: joint target on 'HeadA': rotation must be a quaternion [w, x, y, z], got (0.0, 0.0, 0.0, 0.0)"),
     ],
 )  # fmt: skip
 def test_bad_constraint_files_are_one_line_errors(trained, rig_file, tmp_path, capsys, constraints, message) -> None:
@@ -94,6 +103,34 @@ def test_any_rig_list_still_works_and_roles_and_keyframe_rows_are_split(trained,
     assert own == [] and [w["frame_indices"] for w in world] == [[2], [4]]
     assert world[1]["positions"] == [[0.0, 1.0, 1.0]] and world[0]["joint"] == "HeadA"
     assert json_form([], skel, 20.0, 30) == []
+
+
+def test_rotation_targets_on_any_joint_are_met(trained, rig_file, tmp_path, capsys) -> None:
+    """A joint's global rotation (character frame, as forward kinematics gives it), alone on a leg
+    joint and with a position on the head, is met after post-processing; the CLI prints both errors."""
+    turn = [math.cos(0.4), 0.0, math.sin(0.4), 0.0]  # 46 degrees about +Y
+    down = [math.cos(0.3), math.sin(0.3), 0.0, 0.0]
+    own = [{"type": "joint", "joint": "HeadA", "frame": 12, "position": [0.0, 0.3, 0.4], "rotation": turn},
+           {"type": "joint", "joint": 5, "frame": 20, "rotation": down}]  # fmt: skip
+    code, raw = _run(trained, rig_file, tmp_path, own, "--no-postprocess")
+    assert code == 0
+    code, m = _run(trained, rig_file, tmp_path, own)
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "constraint error after post-processing: max 0." in out
+    assert "rotation target error after post-processing: max 0." in out
+    # the character frame is the generated motion's own at that frame (before post-processing): in the
+    # world the targets are the raw heading's turn of the given rotations
+    rep = JointRepresentation(Rig.from_skeleton(m.skeleton), m.fps)
+    psi = rep.heading(raw.global_rotations.double())
+    G, raw_errors = m.global_rotations.double(), []
+    for j, f, q in ((m.skeleton.index("HeadA"), 12, turn), (5, 20, down)):
+        world = quat_mul(yaw_quat(psi[f]), torch.tensor(q, dtype=torch.float64))
+        assert float((G[f, j] * world).sum().abs()) > math.cos(math.radians(0.5) / 2), (j, f)
+        dot = float((raw.global_rotations[f, j].double() * world).sum().abs())
+        raw_errors.append(math.degrees(2 * math.acos(min(1.0, dot))))
+    print("raw rotation errors (deg):", raw_errors)
+    assert max(raw_errors) > 1  # imputation alone leaves 1.5 deg (features -> motion); the exact pass closes it
 
 
 def test_constraints_count_over_a_whole_timeline(trained, rig_file, tmp_path, capsys) -> None:

@@ -62,6 +62,8 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     )
     if rep.residuals_cm:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
+    if rep.residuals_deg:
+        print(f"rotation target error after post-processing: max {max(rep.residuals_deg):.2f} deg")
     for w in [*notes, *rep.warnings]:
         print(f"warning: {w}")
     return 0

@@ -48,6 +48,7 @@ from kinema.generate.anyrig_post import (
     pin_root,
     reach_by_translation,
     root_pins,
+    rotation_errors_deg,
     translatable_bones,
     unmet_warnings,
 )
@@ -71,7 +72,8 @@ from kinema.skeleton import Skeleton
 
 @dataclass
 class AnyRigReport:
-    """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm),
+    """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm;
+    degrees for rotation targets),
     foot locking, the largest vertical change of de-jittering the root height, of putting the motion on
     the floor and of settling the body onto its legs (rig sizes: ``height_smoothed``, ``grounded``,
     ``settled``), joint targets met by translating a bone (name -> largest shift, rig sizes), warnings."""
@@ -82,6 +84,7 @@ class AnyRigReport:
     joints: int = 0
     segments: int = 1
     residuals_cm: list[float] = field(default_factory=list)
+    residuals_deg: list[float] = field(default_factory=list)
     foot_lock: list[dict] = field(default_factory=list)
     grounded: float = 0.0
     height_smoothed: float = 0.0
@@ -281,6 +284,7 @@ class AnyRigModel:
                 k = int(err.argmax())
                 worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
             report.warnings += unmet_warnings(worst, self.fps, report.warnings)
+            report.residuals_deg += rotation_errors_deg(motion, targets)
         return motion
 
     @staticmethod

@@ -2,9 +2,11 @@
 
 Three kinds (frames at the model's fps; lengths in metres; Y up, +Z forward):
 
-- `JointTarget(joint=, frame=, position=)`: any joint's position at a frame, in the *character frame*
-  (relative to the rig's root joint, turned so the character faces +Z at that frame) -- the frame the
-  per-joint features use, so the model is told it exactly;
+- `JointTarget(joint=, frame=, position=, rotation=)`: any joint's position and/or global rotation at a
+  frame, in the *character frame* (relative to the rig's root joint, turned so the character faces +Z
+  at that frame) -- the frame the per-joint features use, so the model is told it exactly. The
+  rotation is a unit quaternion (w, x, y, z) as forward kinematics gives it (rest orientation
+  included), e.g. read off a frame of one of the rig's clips; on the root joint only a rotation;
 - `Keyframe(frame=, pose=, pose_frame=0)`: a full-body pose (a `Motion` on the same skeleton, e.g. a
   frame of one of the rig's clips): every joint's position and rotation and the root height;
 - `RootPath(frames=, xz=)`: world ground waypoints of the root, starting from the origin at frame 0;
@@ -29,7 +31,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.generate.anyrig_sampling import FeatureTargets
-from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.geometry.rotations import quat_mul, quat_rotate, quat_to_sixd
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
 from kinema.motion.core import Motion
@@ -42,7 +44,25 @@ from kinema.skeleton import Skeleton
 class JointTarget:
     joint: str | int
     frame: int
-    position: tuple[float, float, float]
+    position: tuple[float, float, float] | None = None
+    rotation: tuple[float, float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.position is None and self.rotation is None:
+            raise KinemaError(
+                f"joint target on {self.joint!r} at frame {self.frame}: give a position, a rotation or both"
+            )
+        if self.rotation is not None:
+            q = torch.as_tensor(self.rotation, dtype=torch.float64)
+            if q.shape != (4,) or not bool(torch.isfinite(q).all()) or float(q.norm()) < 1e-6:
+                raise KinemaError(
+                    f"joint target on {self.joint!r}: rotation must be a quaternion [w, x, y, z], got {self.rotation!r}"
+                )
+
+    def unit_rotation(self) -> torch.Tensor:
+        """The rotation target as a unit quaternion ``(4,)`` float64 (only when one is given)."""
+        q = torch.as_tensor(self.rotation, dtype=torch.float64)
+        return q / q.norm()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -99,10 +119,14 @@ def encode_constraints(
     for c in constraints:
         if isinstance(c, JointTarget):
             j, f = _joint(rep, c.joint), _frame(c.frame, frames, "joint target")
-            if j == root:
-                raise KinemaError("a joint target on the root joint: use RootPath for where the root goes")
-            x[f, j, 0:3] = torch.as_tensor(c.position, dtype=torch.float32) * scale
-            m[f, j, 0:3] = 1.0
+            if j == root and c.position is not None:
+                raise KinemaError("a joint position target on the root joint: use RootPath for where the root goes")
+            if c.position is not None:
+                x[f, j, 0:3] = torch.as_tensor(c.position, dtype=torch.float32) * scale
+                m[f, j, 0:3] = 1.0
+            if c.rotation is not None:
+                x[f, j, 3:9] = quat_to_sixd(c.unit_rotation()).to(x.dtype)
+                m[f, j, 3:9] = 1.0
         elif isinstance(c, Keyframe):
             f = _frame(c.frame, frames, "keyframe")
             if c.pose.num_joints != J:
@@ -176,8 +200,12 @@ def post_targets(
 
     for c in constraints:
         if isinstance(c, JointTarget):
-            local = torch.as_tensor(c.position, dtype=torch.float64) * scale
-            add(positions, _joint(rep, c.joint), c.frame, P[c.frame, root] + quat_rotate(yaw_quat(psi[c.frame]), local))
+            j, turn = _joint(rep, c.joint), yaw_quat(psi[c.frame])
+            if c.position is not None:
+                local = torch.as_tensor(c.position, dtype=torch.float64) * scale
+                add(positions, j, c.frame, P[c.frame, root] + quat_rotate(turn, local))
+            if c.rotation is not None:
+                add(rotations, j, c.frame, quat_mul(turn, c.unit_rotation()))
         elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
             pose = _rest_lengths(c.pose.to(torch.float64), translated)
             Gp, Pp = pose.global_transforms()
@@ -289,14 +317,23 @@ def _from_json(i: int, obj, where: str, base: Path = Path("."), fps: float | Non
     if obj["type"] == "keyframe":
         return _keyframe_from_json(obj, at, base, fps)
     if obj["type"] == "joint":
-        unknown = set(obj) - {"type", "joint", "frame", "position"}
-        if unknown or not isinstance(obj.get("joint"), (str, int)) or not isinstance(obj.get("frame"), int):
+        unknown = set(obj) - {"type", "joint", "frame", "position", "rotation"}
+        if (
+            unknown
+            or not isinstance(obj.get("joint"), (str, int))
+            or not isinstance(obj.get("frame"), int)
+            or not {"position", "rotation"} & set(obj)
+        ):
             raise KinemaError(
-                f"{at}: a joint target is {{type, joint (name or index), frame (int), position [x, y, z]}}"
+                f"{at}: a joint target is {{type, joint (name or index), frame (int), position [x, y, z] and/or "
+                "rotation [w, x, y, z]}"
             )
-        return JointTarget(
-            joint=obj["joint"], frame=obj["frame"], position=tuple(_number_list(obj.get("position"), 3, at))
-        )
+        pos = tuple(_number_list(obj["position"], 3, at)) if "position" in obj else None
+        rot = tuple(_number_list(obj["rotation"], 4, f"{at}.rotation")) if "rotation" in obj else None
+        try:
+            return JointTarget(joint=obj["joint"], frame=obj["frame"], position=pos, rotation=rot)
+        except KinemaError as err:
+            raise KinemaError(f"{at}: {err}") from None
     unknown = set(obj) - {"type", "frames", "xz"}
     frames, xz = obj.get("frames"), obj.get("xz")
     if (
@@ -311,9 +348,10 @@ def _from_json(i: int, obj, where: str, base: Path = Path("."), fps: float | Non
 
 def read_constraints(path: str | Path, fps: float | None = None) -> list[Constraint]:
     """Constraints from a JSON list: ``{"type": "joint", "joint": "Head", "frame": 10, "position": [x, y, z]}``
-    (character frame, metres), ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres) and
-    ``{"type": "keyframe", "frame": 40, "clip": "Fox.glb", "animation": "Gallop", "clip_frame": 5}`` (a
-    pose of a clip on the same skeleton; clip frames at ``fps``, the model's)."""
+    (character frame, metres; and/or ``"rotation": [w, x, y, z]``, the joint's global rotation there),
+    ``{"type": "root_path", "frames": [40], "xz": [[0, 2]]}`` (world, metres) and ``{"type": "keyframe",
+    "frame": 40, "clip": "Fox.glb", "animation": "Gallop", "clip_frame": 5}`` (a pose of a clip on the
+    same skeleton; clip frames at ``fps``, the model's)."""
     path = Path(path)
     try:
         data = json.loads(path.read_text(encoding="utf-8"))

@@ -151,3 +151,14 @@ def reach_by_translation(
             m = replace(m, local_translations=lt)
         moved[skel.names[j]] = float(size.max())
     return m, moved
+
+
+def rotation_errors_deg(m: Motion, targets: PostTargets) -> list[float]:
+    """Angle (degrees) between each joint-rotation target and the joint's global rotation in ``m`` (any
+    uniform scale of ``m`` leaves rotations alone, so targets of the rig in its units apply)."""
+    G = m.global_rotations
+    out: list[float] = []
+    for j, (frames, q) in targets.joint_rotations.items():
+        dot = (G[frames, j].to(torch.float64) * q.to(torch.float64)).sum(-1).abs().clamp(max=1.0)
+        out += torch.rad2deg(2 * torch.acos(dot)).tolist()
+    return out
