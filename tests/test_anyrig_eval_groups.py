@@ -8,7 +8,15 @@ import torch
 from rig_fixtures import fish, hexapod, quadruped, walking
 
 from kinema.evaluate.anyrig import caption_retrieval, evaluate_split, format_row
-from kinema.evaluate.anyrig_groups import CLASSES, classify, rig_shape, similarity_table, training_shapes, tree_code
+from kinema.evaluate.anyrig_groups import (
+    CLASSES,
+    classify,
+    rig_shape,
+    similarity_table,
+    split_summary,
+    training_shapes,
+    tree_code,
+)
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
@@ -61,6 +69,21 @@ def test_similarity_table_groups_and_aggregates() -> None:
     lines = similarity_table(rows).splitlines()
     assert len(lines) == 4 and lines[2] == "| same topology (a, b) | 2 | 3.00 | 2.50 | 0.50 | 0.80 (0.40) |"
     assert lines[3] == "| new limb count (c) | 1 | - | - | - | - |"
+
+
+def test_split_summary_medians_and_worst_cases() -> None:
+    rows = [
+        {"rig": "a", "split": "train", "skate_ratio": 1.5, "jerk": 4.0, "jerk_ref": 2.0, "constraint_cm": 0.0,
+         "constraint_deg": 0.1, "keyframe_cm": 0.0, "stretch": 1e-12, "retrieval_hits": 1, "retrieval_n": 2},
+        {"rig": "b", "split": "train", "skate_ratio": 4.5, "jerk": 9.0, "jerk_ref": 3.0, "constraint_cm": 2.0,
+         "constraint_deg": 0.3, "keyframe_cm": 0.5, "stretch": 1e-10, "retrieval_hits": 2, "retrieval_n": 2},
+        {"rig": "c", "split": "test", "skate_ratio": None, "jerk": 1.0, "jerk_ref": 0.0, "constraint_cm": None,
+         "stretch": 0.0},
+    ]  # fmt: skip
+    lines = split_summary(rows).splitlines()
+    assert len(lines) == 4
+    assert lines[2] == "| train | 2 | 3.00 | 1 of 2 | 2.50 | 1.00 / 2.00 | 0.30 | 0.50 | 1.0e-10 | 3 of 4 |"
+    assert lines[3] == "| test | 1 | - | 0 of 0 | - | - / - | - | - | 0.0e+00 | 0 of 0 |"
 
 
 def test_caption_retrieval_finds_the_clip_of_the_caption() -> None:

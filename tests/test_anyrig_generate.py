@@ -232,5 +232,7 @@ def test_per_rig_evaluation_rows(trained, creature_cache) -> None:
         assert r["motions"] == 1 and r["stretch"] < 1e-6  # FK of rotations: bones never stretch
         assert r["jerk"] > 0 and r["jerk_ref"] >= 0 and 0 <= r["coverage"] <= 1 and 0 <= r["novelty"] <= 1
         assert r["constraint_cm"] is not None and r["constraint_cm"] < 10.0  # untrained: post-processing does it
+        assert r["constraint_deg"] is not None and r["constraint_deg"] < 1.0  # the effector's rotation too
+        assert r["keyframe_cm"] is not None and r["keyframe_cm"] < 1.0  # a full-body keyframe
     picks = pick_rigs([("a", 3, []), ("b", 40, []), ("c", 10, []), ("d", 2, [])])
     assert picks == [("a", 3), ("c", 10), ("b", 40)]

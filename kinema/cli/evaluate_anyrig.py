@@ -30,7 +30,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from kinema.errors import KinemaError
     from kinema.evaluate.anyrig import TABLE_HEADER, evaluate_split
-    from kinema.evaluate.anyrig_groups import similarity_table, training_shapes
+    from kinema.evaluate.anyrig_groups import similarity_table, split_summary, training_shapes
     from kinema.generate.anyrig_api import AnyRigModel
     from kinema.generate.api import load_model
     from kinema.io.atomic import atomic_write_text, check_output_path
@@ -49,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
         rows += evaluate_split(
             model, args.data, split, clips=args.clips, steps=args.steps, rigs=args.rigs, train_shapes=shapes
         )
+    print("\nmedians over rigs, per split:\n")
+    print(split_summary(rows))
     held = [r for r in rows if r["split"] != "train"]
     if held:
         print("\nheld-out rigs by similarity to the training rigs (kinema/evaluate/anyrig_groups.py):\n")

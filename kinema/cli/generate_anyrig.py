@@ -108,5 +108,3 @@ def _generate(model, args: argparse.Namespace, what, samples: int):
         res, notes, _ = generate_world(model, what, rig=rig, constraints=world, samples=samples, **kw)
         return res, notes
     return model.generate(what, rig=rig, constraints=own, samples=samples, **kw), []
-
-

@@ -13,8 +13,10 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
 - ``stretch``: largest relative change of any bone length (bones moved by translation under a floor
   armature excepted: they are IK handles, not body bones; the others are FK of rotations, so this
   checks the pipeline, post-processing included);
-- ``constraint_cm``: error (cm at 1-m scale) of one joint target per motion after post-processing: the
-  first end effector's position at the middle frame, taken from a reference clip (character frame);
+- ``constraint_cm`` / ``constraint_deg``: error (cm at 1-m scale / degrees) of one joint target per
+  motion after post-processing: the first end effector's position and rotation at the middle frame,
+  taken from a reference clip (character frame);
+- ``keyframe_cm``: largest joint error at a full-body keyframe (one extra motion per rig, `keyframe_error`);
 - ``coverage`` / ``novelty``: Dragon App. C AUCs (kinema.evaluate.distribution) of 10-frame windows
   of root-relative joint positions in the heading frame, against the rig's own clips;
 - ``retrieval_hits`` / ``retrieval_n`` / ``retrieval_chance``: caption retrieval among the rig's
@@ -36,7 +38,8 @@ from kinema.data.multirig import MultiRigData
 from kinema.evaluate.anyrig_groups import RigShape, classify, rig_shape
 from kinema.evaluate.distribution import coverage_novelty_auc
 from kinema.evaluate.metrics import position_jerk
-from kinema.generate.anyrig_api import AnyRigModel, JointTarget, floor_root_children
+from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children
+from kinema.geometry.rotations import sixd_to_quat
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
 from kinema.representation.joint import JointRepresentation
@@ -99,8 +102,24 @@ def _target(rig: Rig, ref: Motion, rep: JointRepresentation, frames: int) -> Joi
     if j == rig.root:
         return None
     f = min(frames, ref.num_frames) // 2
-    pos = rep.from_motion(ref.to(torch.float64))[f, j, 0:3]
-    return JointTarget(joint=j, frame=f, position=tuple(float(v) for v in pos))
+    feats = rep.from_motion(ref.to(torch.float64))[f, j]
+    pos, rot = feats[0:3], sixd_to_quat(feats[3:9])
+    return JointTarget(joint=j, frame=f, position=tuple(float(v) for v in pos), rotation=tuple(float(v) for v in rot))
+
+
+def keyframe_error(model: AnyRigModel, rig: Rig, ref: Motion, caption: str, *, steps: int, seed: int) -> float:
+    """Largest joint error (x 100: cm at 1-m scale) at a full-body keyframe after post-processing: the
+    pose of ``ref``'s frame at a third of its length, asked for at that frame of a motion as long as
+    ``ref`` (at least two windows), compared in the character frame (root-relative, facing +Z)."""
+    rep = JointRepresentation(rig, model.fps)
+    seconds = max(ref.duration, 2 * WINDOW / model.fps)
+    f = min(round(seconds * model.fps) // 3, ref.num_frames - 1)
+    res = model.generate(caption, rig=rig, seconds=seconds, steps=steps, seed=seed,
+                         constraints=[Keyframe(frame=f, pose=ref, pose_frame=f)])  # fmt: skip
+    want = rep.from_motion(ref.to(torch.float64))[f, :, 0:3]
+    got = rep.from_motion(res[0].to(torch.float64))[f, :, 0:3]
+    body = [j for j in range(rig.num_joints) if j != rig.root]
+    return float(100 * (got[body] - want[body]).norm(dim=-1).max())
 
 
 def motion_descriptor(m: Motion, rep: JointRepresentation) -> torch.Tensor:
@@ -139,7 +158,7 @@ def evaluate_rig(
     """Metrics of one rig (see the module docstring); ``motions`` are its clips, ``captions`` one per clip."""
     rig = Rig.from_skeleton(motions[0].skeleton)
     rep = JointRepresentation(rig, model.fps)
-    gen, cons, t0 = [], [], time.perf_counter()
+    gen, cons, degs, t0 = [], [], [], time.perf_counter()
     for i, (ref, caption) in enumerate(zip(motions, captions, strict=True)):
         seconds = max(ref.duration, 2 * WINDOW / model.fps)
         target = _target(rig, ref, rep, round(seconds * model.fps))
@@ -148,6 +167,7 @@ def evaluate_rig(
         )
         gen.append(res[0])
         cons += res.report.residuals_cm
+        degs += res.report.residuals_deg
     ref_windows = [_local_positions(m, rep) for m in motions if m.num_frames >= WINDOW]
     gen_windows = [_local_positions(m, rep) for m in gen]
     cn = coverage_novelty_auc(gen_windows, ref_windows, ref_windows, window=WINDOW) if ref_windows else None
@@ -167,6 +187,8 @@ def evaluate_rig(
         "jerk_ref": _mean([position_jerk(m.positions, m.fps) for m in motions]),
         "stretch": max(_stretch(m) for m in gen),
         "constraint_cm": max(cons) if cons else None,
+        "constraint_deg": max(degs) if degs else None,
+        "keyframe_cm": keyframe_error(model, rig, motions[0], captions[0], steps=steps, seed=seed),
         "coverage": None if cn is None else cn.coverage_auc,
         "novelty": None if cn is None else cn.novelty_auc,
         **caption_retrieval(gen, motions, captions, rep),
@@ -236,12 +258,13 @@ def format_row(r: dict) -> str:
         f"| {r['rig']} | {r['split']} | {similarity} | {r['joints']} | {r['contacts']} | {_f(r['skate'])} "
         f"| {_f(r['skate_ref'])} | {_f(r['skate_ratio'])} | {_f(r.get('planted'))} | {_f(r.get('planted_ref'))} "
         f"| {_f(r['jerk'], 0)} | {_f(r['jerk_ref'], 0)} "
-        f"| {r['stretch']:.1e} | {_f(r['constraint_cm'])} | {_f(r['coverage'])} | {_f(r['novelty'])} | {retrieval} |"
+        f"| {r['stretch']:.1e} | {_f(r['constraint_cm'])} | {_f(r.get('constraint_deg'))} | {_f(r.get('keyframe_cm'))} "
+        f"| {_f(r['coverage'])} | {_f(r['novelty'])} | {retrieval} |"
     )
 
 
 TABLE_HEADER = (
     "| rig | split | similarity (nearest training rig) | joints | contacts | skate | skate (own clips) | ratio "
-    "| planted | planted (own clips) | jerk | jerk (own clips) | stretch | constraint cm | coverage AUC | novelty AUC "
-    "| retrieval |\n|" + "---|" * 17
+    "| planted | planted (own clips) | jerk | jerk (own clips) | stretch | constraint cm | constraint deg "
+    "| keyframe cm | coverage AUC | novelty AUC | retrieval |\n|" + "---|" * 19
 )

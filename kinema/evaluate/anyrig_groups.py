@@ -139,3 +139,32 @@ def similarity_table(rows: list[dict]) -> str:
             f"| {retrieval} |"
         )
     return "\n".join(out)
+
+
+def _max(values) -> str:
+    vs = [v for v in values if v is not None]
+    return f"{max(vs):.2f}" if vs else "-"
+
+
+def split_summary(rows: list[dict]) -> str:
+    """Markdown table of medians over the rigs of each split (skate and jerk as ratios to the rigs' own
+    clips, rigs whose skate is within 2x of their own clips'), the constraint errors (median and
+    worst), the largest bone stretch and the caption retrieval hits."""
+    out = [
+        "| split | rigs | median skate ratio | skate within 2x | median jerk ratio | joint target cm (median / max) "
+        "| rotation target deg (max) | keyframe cm (max) | stretch (max) | retrieval hits |",
+        "|" + "---|" * 10,
+    ]
+    for split in dict.fromkeys(r["split"] for r in rows):
+        group = [r for r in rows if r["split"] == split]
+        ratios = [r["skate_ratio"] for r in group if r.get("skate_ratio") is not None]
+        hits = sum(r.get("retrieval_hits") or 0 for r in group)
+        tries = sum(r.get("retrieval_n") or 0 for r in group)
+        out.append(
+            f"| {split} | {len(group)} | {_median(ratios)} | {sum(x <= 2 for x in ratios)} of {len(ratios)} "
+            f"| {_median(_ratio(r, 'jerk') for r in group)} "
+            f"| {_median(r.get('constraint_cm') for r in group)} / {_max(r.get('constraint_cm') for r in group)} "
+            f"| {_max(r.get('constraint_deg') for r in group)} | {_max(r.get('keyframe_cm') for r in group)} "
+            f"| {max(r['stretch'] for r in group):.1e} | {hits} of {tries} |"
+        )
+    return "\n".join(out)

@@ -31,11 +31,35 @@ from kinema.representation.kimodo import motion_to_features
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")
 #: summary columns, in the order of the report table (docs/evaluation.md documents each)
-COLUMNS = ("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality", "coverage_auc", "novelty_auc",
-           "foot_skate_cm_s",
-           "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm", "pelvis_p95_cm", "jerk")
-CASE_METRICS = ("foot_skate_cm_s", "contact_acc", "jerk", "jitter", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
-                "root2d_pos_cm", "pelvis_p95_cm")
+COLUMNS = (
+    "r1_whole",
+    "r3_whole",
+    "r3_batch32",
+    "fid",
+    "diversity",
+    "multimodality",
+    "coverage_auc",
+    "novelty_auc",
+    "foot_skate_cm_s",
+    "contact_acc",
+    "fullbody_pos_cm",
+    "ee_pos_cm",
+    "ee_rot_deg",
+    "root2d_pos_cm",
+    "pelvis_p95_cm",
+    "jerk",
+)
+CASE_METRICS = (
+    "foot_skate_cm_s",
+    "contact_acc",
+    "jerk",
+    "jitter",
+    "fullbody_pos_cm",
+    "ee_pos_cm",
+    "ee_rot_deg",
+    "root2d_pos_cm",
+    "pelvis_p95_cm",
+)
 R_BATCH = 32
 
 
@@ -61,17 +85,33 @@ def score_motion(motion: Motion, targets: dict) -> tuple[dict, list[float]]:
     Constraint errors are averaged over every constrained (frame, joint) of the case; a type the case
     does not constrain is None."""
     skate, count = M.foot_skate_with_count(motion)
-    out = {"foot_skate_cm_s": skate, "foot_skate_samples": count, "contact_acc": M.contact_accuracy(motion),
-           "jerk": M.jerk(motion), "jitter": M.jitter(motion)}
+    out = {
+        "foot_skate_cm_s": skate,
+        "foot_skate_samples": count,
+        "contact_acc": M.contact_accuracy(motion),
+        "jerk": M.jerk(motion),
+        "jitter": M.jitter(motion),
+    }
     fb = [(M.fullbody_position_error(motion, f, p), len(f)) for f, p in targets["fullbody"]]
-    eep = [(M.end_effector_position_error(motion, j, f, p), len(f)) for j, f, p, _ in targets["end_effector"]
-           if p is not None]
-    eer = [(M.end_effector_rotation_error(motion, j, f, q), len(f)) for j, f, _, q in targets["end_effector"]
-           if q is not None]
+    eep = [
+        (M.end_effector_position_error(motion, j, f, p), len(f))
+        for j, f, p, _ in targets["end_effector"]
+        if p is not None
+    ]
+    eer = [
+        (M.end_effector_rotation_error(motion, j, f, q), len(f))
+        for j, f, _, q in targets["end_effector"]
+        if q is not None
+    ]
     r2 = [(M.root2d_error(motion, f, xz), len(f)) for f, xz in targets["root2d"]]
     dev = [float(d) for f, xz in targets["root2d"] for d in M.pelvis_deviations(motion, f, xz)]
-    out.update(fullbody_pos_cm=_weighted(fb), ee_pos_cm=_weighted(eep), ee_rot_deg=_weighted(eer),
-               root2d_pos_cm=_weighted(r2), pelvis_p95_cm=_p95(dev))
+    out.update(
+        fullbody_pos_cm=_weighted(fb),
+        ee_pos_cm=_weighted(eep),
+        ee_rot_deg=_weighted(eer),
+        root2d_pos_cm=_weighted(r2),
+        pelvis_p95_cm=_p95(dev),
+    )
     return out, dev
 
 
@@ -131,17 +171,28 @@ def train_embeddings(retrieval, data_dir, limit: int = 2000) -> torch.Tensor | N
         return retrieval.encode_clips([ds[i]["features"] for i in idx])
 
 
-def text_metrics(retrieval, captions: list[str], motions: dict[str, list[Motion]], mm: dict[str, list[list[Motion]]],
-                 seed: int, warn: list[str], text_cache=None, train_emb: torch.Tensor | None = None) -> dict:
+def text_metrics(
+    retrieval,
+    captions: list[str],
+    motions: dict[str, list[Motion]],
+    mm: dict[str, list[list[Motion]]],
+    seed: int,
+    warn: list[str],
+    text_cache=None,
+    train_emb: torch.Tensor | None = None,
+) -> dict:
     """Per row: R@1/R@3 over the whole text set, R@3 in batches of 32, FID against the GT embeddings,
     diversity, multimodality, and coverage/novelty AUC (Dragon App. C: coverage of the GT test motions,
     novelty against the train clips; needs ``train_emb``) — None where undefined."""
     from kinema.evaluate import distribution as D
 
     N = len(captions)
-    out = {row: dict.fromkeys(("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality",
-                               "coverage_auc", "novelty_auc"))
-           for row in motions}
+    out = {
+        row: dict.fromkeys(
+            ("r1_whole", "r3_whole", "r3_batch32", "fid", "diversity", "multimodality", "coverage_auc", "novelty_auc")
+        )
+        for row in motions
+    }
     if N == 0:
         return out
     with torch.no_grad():
@@ -179,8 +230,11 @@ def _post(model, motion: Motion, case: dict) -> Motion:
     from kinema.constraints import load_constraints
     from kinema.generate.targets import run_postprocess
 
-    cons = load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames) \
-        if case["constraints"] else []
+    cons = (
+        load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames)
+        if case["constraints"]
+        else []
+    )
     return run_postprocess(motion, cons, model.representation)[0]
 
 
@@ -199,9 +253,21 @@ def _bar(total: int, progress: bool, desc: str):
     return tqdm(total=total, desc=desc, disable=not progress, unit="gen")
 
 
-def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: int | None = None, seed: int = 0,
-              progress: bool = True, retrieval="default", mm_prompts: int = 3, mm_samples: int = 4,
-              guidance=None, text_cache=None, datasets: dict | None = None, phrasings: int = 0) -> EvalResults:
+def run_suite(
+    model,
+    cases: list[dict],
+    postprocess_modes=(False, True),
+    steps: int | None = None,
+    seed: int = 0,
+    progress: bool = True,
+    retrieval="default",
+    mm_prompts: int = 3,
+    mm_samples: int = 4,
+    guidance=None,
+    text_cache=None,
+    datasets: dict | None = None,
+    phrasings: int = 0,
+) -> EvalResults:
     """Generate and score every case; returns :class:`EvalResults` (see docs/evaluation.md).
 
     ``retrieval``: "default" (the shipped weights), a folder, a loaded ``RetrievalModel`` or None; when
@@ -240,8 +306,9 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             datasets[key] = MotionDataset(src["data"], src["split"])
         if case["kind"] == "timeline":
             t0 = time.perf_counter()
-            rec, motions[case["id"]], segs = run_timeline_case(model, case, modes, seed * 100003 + i, steps,
-                                                               guidance, datasets[key], _post)
+            rec, motions[case["id"]], segs = run_timeline_case(
+                model, case, modes, seed * 100003 + i, steps, guidance, datasets[key], _post
+            )
             gen_seconds += time.perf_counter() - t0
             records.append(rec)
             timelines.append(case)
@@ -252,9 +319,17 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         gt = case_ground_truth(case, datasets[key])
         targets = case_targets(case, model.skeleton)
         t0 = time.perf_counter()
-        raw = model.generate(case["prompt"], seconds=case["seconds"], constraints=case["constraints"] or None,
-                             samples=1, steps=steps, guidance=guidance, seed=seed * 100003 + i,
-                             postprocess=False, heading=case["heading"])[0]
+        raw = model.generate(
+            case["prompt"],
+            seconds=case["seconds"],
+            constraints=case["constraints"] or None,
+            samples=1,
+            steps=steps,
+            guidance=guidance,
+            seed=seed * 100003 + i,
+            postprocess=False,
+            heading=case["heading"],
+        )[0]
         out = {"ground_truth": gt}
         if "raw" in modes:
             out["raw"] = raw
@@ -270,16 +345,38 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         motions[case["id"]] = out
         if case["kind"] == "text":
             text_ids.append(i)
-        records.append({k: case[k] for k in ("id", "kind", "parts", "clip_id", "prompt", "with_text", "perturbed",
-                                             "seconds", "num_keyframes")} | {"metrics": scored})
+        records.append(
+            {
+                k: case[k]
+                for k in (
+                    "id",
+                    "kind",
+                    "parts",
+                    "clip_id",
+                    "prompt",
+                    "with_text",
+                    "perturbed",
+                    "seconds",
+                    "num_keyframes",
+                )
+            }
+            | {"metrics": scored}
+        )
         bar.update(1)
     mm: dict[str, list[list[Motion]]] = {r: [] for r in modes}
     if n_mm:
         for k, i in enumerate(text_ids[:n_mm]):
             case = cases[i]
             t0 = time.perf_counter()
-            group = model.generate(case["prompt"], seconds=case["seconds"], samples=mm_samples, steps=steps,
-                                   guidance=guidance, seed=seed * 100003 + 50021 + k, postprocess=False)
+            group = model.generate(
+                case["prompt"],
+                seconds=case["seconds"],
+                samples=mm_samples,
+                steps=steps,
+                guidance=guidance,
+                seed=seed * 100003 + 50021 + k,
+                postprocess=False,
+            )
             if "raw" in modes:
                 mm["raw"].append(group)
             if "post" in modes:
@@ -290,8 +387,13 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             bar.update(1)
     bar.close()
     summary = _summarize(records, rows, devs)
-    text_info = {"cases": len(text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm.get(modes[0], [])),
-                 "mm_samples": mm_samples, "retrieval": None}
+    text_info = {
+        "cases": len(text_ids),
+        "r_batch_size": R_BATCH,
+        "mm_prompts": len(mm.get(modes[0], [])),
+        "mm_samples": mm_samples,
+        "retrieval": None,
+    }
     if ret is not None:
         text_info["retrieval"] = _retrieval_name(retrieval)
         caps = [cases[i]["prompt"] for i in text_ids]
@@ -301,8 +403,16 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
             train_emb = train_embeddings(ret, src) if src else None
         except (KinemaError, OSError, KeyError) as err:
             warn.append(f"coverage/novelty skipped: no train split to compare with ({err})")
-        tm = text_metrics(ret, caps, {r: [motions[cases[i]["id"]][r] for i in text_ids] for r in rows}, mm,
-                          seed, warn, text_cache, train_emb)
+        tm = text_metrics(
+            ret,
+            caps,
+            {r: [motions[cases[i]["id"]][r] for i in text_ids] for r in rows},
+            mm,
+            seed,
+            warn,
+            text_cache,
+            train_emb,
+        )
         for r in rows:
             summary[r].update(tm[r])
     if timelines:
@@ -310,25 +420,54 @@ def run_suite(model, cases: list[dict], postprocess_modes=(False, True), steps: 
         tl_records = [r for r in records if r["kind"] == "timeline"]
         tl_table = timeline_summary(tl_records, captions, tl_segments, ret, text_cache, _embed)
     t_phr = time.perf_counter()
-    phr = None if not phrasings else run_phrasings(
-        model, cases, motions, datasets, ret, samples=phrasings, seed=seed, steps=steps, guidance=guidance,
-        text_cache=text_cache, embed=_embed, warn=warn, progress=progress)
+    phr = (
+        None
+        if not phrasings
+        else run_phrasings(
+            model,
+            cases,
+            motions,
+            datasets,
+            ret,
+            samples=phrasings,
+            seed=seed,
+            steps=steps,
+            guidance=guidance,
+            text_cache=text_cache,
+            embed=_embed,
+            warn=warn,
+            progress=progress,
+        )
+    )
     wall, t_phr = time.perf_counter() - t_start, time.perf_counter() - t_phr
     data = {
-        "format": "kinema-eval-report", "version": 1,
-        "meta": {"model": str(getattr(getattr(model, "loaded", None), "path", model)), "fps": model.fps,
-                 "num_cases": len(cases), "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
-                 "modes": modes, "steps": steps, "seed": seed, "data": sorted({c["source"]["data"] for c in cases}),
-                 "split": sorted({c["source"]["split"] for c in cases}), "torch_threads": torch.get_num_threads(),
-                 "machine": platform.platform(),
-                 "guidance": _guidance_meta(model, guidance),
-                 "root_displacement": bool(getattr(model, "root_displacement", False)),
-                 "root_smoothing": float(getattr(model, "root_smoothing", 0.0)),
-                 "joint_sigma": float(getattr(model, "joint_sigma", 0.0)),
-                 "grounding": None if getattr(model, "grounding", None) is None else model.grounding.to_dict()},
-        "timing": {"wall_seconds": wall, "generate_seconds": gen_seconds, "postprocess_seconds": post_seconds,
-                   "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
-                   "phrasings_seconds": t_phr if phrasings else None},
+        "format": "kinema-eval-report",
+        "version": 1,
+        "meta": {
+            "model": str(getattr(getattr(model, "loaded", None), "path", model)),
+            "fps": model.fps,
+            "num_cases": len(cases),
+            "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
+            "modes": modes,
+            "steps": steps,
+            "seed": seed,
+            "data": sorted({c["source"]["data"] for c in cases}),
+            "split": sorted({c["source"]["split"] for c in cases}),
+            "torch_threads": torch.get_num_threads(),
+            "machine": platform.platform(),
+            "guidance": _guidance_meta(model, guidance),
+            "root_displacement": bool(getattr(model, "root_displacement", False)),
+            "root_smoothing": float(getattr(model, "root_smoothing", 0.0)),
+            "joint_sigma": float(getattr(model, "joint_sigma", 0.0)),
+            "grounding": None if getattr(model, "grounding", None) is None else model.grounding.to_dict(),
+        },
+        "timing": {
+            "wall_seconds": wall,
+            "generate_seconds": gen_seconds,
+            "postprocess_seconds": post_seconds,
+            "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
+            "phrasings_seconds": t_phr if phrasings else None,
+        },
         "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},
         "text": text_info,
         "by_kind": _by_kind(records, rows),
@@ -351,8 +490,10 @@ def _summarize(records: list[dict], rows: list[str], devs: dict) -> dict:
             "foot_skate_cm_s": _weighted([(m["foot_skate_cm_s"], m["foot_skate_samples"]) for m in mets]),
             "contact_acc": _mean(m["contact_acc"] for m in mets),
             "jerk": _mean(m["jerk"] for m in mets),
-            **{k: _mean(r["metrics"][row][k] for r in records)
-               for k in ("fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm")},
+            **{
+                k: _mean(r["metrics"][row][k] for r in records)
+                for k in ("fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm")
+            },
             "pelvis_p95_cm": _p95(devs[row]),
         }
     return out
@@ -371,8 +512,12 @@ def _by_kind(records: list[dict], rows: list[str]) -> dict:
 
 def _by_keyframes(records: list[dict], rows: list[str]) -> dict:
     """kind -> row -> list of {num_keyframes, cases, error} (fullbody cm, end-effector cm, root 2D cm)."""
-    metric = {"fullbody_sparse": "fullbody_pos_cm", "inbetween": "fullbody_pos_cm", "end_effector": "ee_pos_cm",
-              "waypoints": "root2d_pos_cm"}
+    metric = {
+        "fullbody_sparse": "fullbody_pos_cm",
+        "inbetween": "fullbody_pos_cm",
+        "end_effector": "ee_pos_cm",
+        "waypoints": "root2d_pos_cm",
+    }
     out: dict = {}
     for kind, key in metric.items():
         sel = [r for r in records if r["kind"] == kind and r["num_keyframes"]]
@@ -381,9 +526,14 @@ def _by_keyframes(records: list[dict], rows: list[str]) -> dict:
         out[kind] = {"metric": key}
         for row in rows:
             ks = sorted({r["num_keyframes"] for r in sel})
-            out[kind][row] = [{"num_keyframes": k, "cases": sum(r["num_keyframes"] == k for r in sel),
-                               "error": _mean(r["metrics"][row][key] for r in sel if r["num_keyframes"] == k)}
-                              for k in ks]
+            out[kind][row] = [
+                {
+                    "num_keyframes": k,
+                    "cases": sum(r["num_keyframes"] == k for r in sel),
+                    "error": _mean(r["metrics"][row][key] for r in sel if r["num_keyframes"] == k),
+                }
+                for k in ks
+            ]
     return out
 
 
