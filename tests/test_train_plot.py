@@ -30,3 +30,15 @@ def test_plot_names_the_bad_line(tmp_path):
     (tmp_path / "log.jsonl").write_text('{"step": 1, "loss": 1.0}\nnot json\n')
     with pytest.raises(KinemaError, match=r"log.jsonl:2: not a JSON line"):
         read_log(tmp_path)
+
+
+def test_any_rig_log_gets_one_panel(tmp_path):
+    """An any-rig run logs only its x0 loss: the picture is one panel (no empty "terms" panel)."""
+    from PIL import Image
+
+    recs = [{"step": s, "loss": 1.0 / s, "s_per_step": 0.4} for s in range(50, 1001, 50)]
+    (tmp_path / "log.jsonl").write_text("\n".join(json.dumps(r) for r in recs) + "\n")
+    (tmp_path / "two").mkdir()
+    (tmp_path / "two" / "log.jsonl").write_text("\n".join(json.dumps(r | {"root_pos": 0.1}) for r in recs) + "\n")
+    one, two = Image.open(plot_losses(tmp_path)), Image.open(plot_losses(tmp_path / "two"))
+    assert one.height == two.height and one.width < 0.7 * two.width

@@ -52,19 +52,23 @@ def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
     run_dir = Path(run_dir)
     recs = read_log(run_dir)
     steps = [r["step"] for r in recs]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    terms = [t for t in (*TERMS, "constraint") if any(t in r for r in recs)]
+    # an any-rig run logs its one x0 loss only: one panel, no empty "terms" panel beside it
+    fig, axes = plt.subplots(1, 2 if terms else 1, figsize=(12 if terms else 7, 4.5), squeeze=False)
+    axes = axes[0]
     window = max(1, len(recs) // 40)
     total = [r["loss"] for r in recs]
     axes[0].plot(steps, total, lw=0.6, alpha=0.35, color="C0", label="per batch")
     axes[0].plot(steps, moving_average(total, window), lw=1.6, color="C0", label=f"mean of {window} logs")
     axes[0].legend(fontsize=8)
-    axes[0].set(title=f"{run_dir.name}: total loss (Eq. 1)", xlabel="step", ylabel="loss", yscale="log")
-    for term in (*TERMS, "constraint"):
+    what = "total loss (Eq. 1)" if terms else "loss (x0 MSE, normalised features)"
+    axes[0].set(title=f"{run_dir.name}: {what}", xlabel="step", ylabel="loss", yscale="log")
+    for term in terms:
         pts = [(r["step"], r[term]) for r in recs if term in r]
-        if pts:
-            axes[1].plot([p[0] for p in pts], moving_average([p[1] for p in pts], window), lw=1, label=term)
-    axes[1].set(title=f"loss terms (unweighted, mean of {window} logs)", xlabel="step", yscale="log")
-    axes[1].legend(fontsize=8)
+        axes[1].plot([p[0] for p in pts], moving_average([p[1] for p in pts], window), lw=1, label=term)
+    if terms:
+        axes[1].set(title=f"loss terms (unweighted, mean of {window} logs)", xlabel="step", yscale="log")
+        axes[1].legend(fontsize=8)
     phase2 = next((r["step"] for r in recs if r.get("phase") == 2), None)
     for ax in axes:
         ax.grid(alpha=0.3)
