@@ -11,7 +11,6 @@ the motions (for plots); kinema.evaluate.report writes them out.
 
 from __future__ import annotations
 
-import math
 import platform
 import time
 import warnings
@@ -21,8 +20,8 @@ from pathlib import Path
 import torch
 
 from kinema.errors import KinemaError
-from kinema.evaluate import metrics as M
 from kinema.evaluate.phrasings import run_phrasings
+from kinema.evaluate.scores import COLUMNS, by_keyframes, by_kind, finite, score_motion, summarize
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
 from kinema.evaluate.timeline import run_timeline_case, timeline_summary
 from kinema.motion.core import Motion
@@ -30,36 +29,6 @@ from kinema.representation.kimodo import motion_to_features
 
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")
-#: summary columns, in the order of the report table (docs/evaluation.md documents each)
-COLUMNS = (
-    "r1_whole",
-    "r3_whole",
-    "r3_batch32",
-    "fid",
-    "diversity",
-    "multimodality",
-    "coverage_auc",
-    "novelty_auc",
-    "foot_skate_cm_s",
-    "contact_acc",
-    "fullbody_pos_cm",
-    "ee_pos_cm",
-    "ee_rot_deg",
-    "root2d_pos_cm",
-    "pelvis_p95_cm",
-    "jerk",
-)
-CASE_METRICS = (
-    "foot_skate_cm_s",
-    "contact_acc",
-    "jerk",
-    "jitter",
-    "fullbody_pos_cm",
-    "ee_pos_cm",
-    "ee_rot_deg",
-    "root2d_pos_cm",
-    "pelvis_p95_cm",
-)
 R_BATCH = 32
 
 
@@ -71,57 +40,6 @@ class EvalResults:
     data: dict
     motions: dict[str, dict[str, Motion]] = field(default_factory=dict)
     cases: list[dict] = field(default_factory=list)
-
-
-# ----------------------------------------------------------------------------- per motion
-def _weighted(pairs: list[tuple[float, int]]) -> float | None:
-    n = sum(w for _, w in pairs)
-    return None if n == 0 else sum(v * w for v, w in pairs) / n
-
-
-def score_motion(motion: Motion, targets: dict) -> tuple[dict, list[float]]:
-    """(metrics of one motion against a case's targets, its pelvis deviations in cm).
-
-    Constraint errors are averaged over every constrained (frame, joint) of the case; a type the case
-    does not constrain is None."""
-    skate, count = M.foot_skate_with_count(motion)
-    out = {
-        "foot_skate_cm_s": skate,
-        "foot_skate_samples": count,
-        "contact_acc": M.contact_accuracy(motion),
-        "jerk": M.jerk(motion),
-        "jitter": M.jitter(motion),
-    }
-    fb = [(M.fullbody_position_error(motion, f, p), len(f)) for f, p in targets["fullbody"]]
-    eep = [
-        (M.end_effector_position_error(motion, j, f, p), len(f))
-        for j, f, p, _ in targets["end_effector"]
-        if p is not None
-    ]
-    eer = [
-        (M.end_effector_rotation_error(motion, j, f, q), len(f))
-        for j, f, _, q in targets["end_effector"]
-        if q is not None
-    ]
-    r2 = [(M.root2d_error(motion, f, xz), len(f)) for f, xz in targets["root2d"]]
-    dev = [float(d) for f, xz in targets["root2d"] for d in M.pelvis_deviations(motion, f, xz)]
-    out.update(
-        fullbody_pos_cm=_weighted(fb),
-        ee_pos_cm=_weighted(eep),
-        ee_rot_deg=_weighted(eer),
-        root2d_pos_cm=_weighted(r2),
-        pelvis_p95_cm=_p95(dev),
-    )
-    return out, dev
-
-
-def _p95(values: list[float]) -> float | None:
-    return None if not values else float(torch.quantile(torch.tensor(values, dtype=torch.float64), 0.95))
-
-
-def _mean(values) -> float | None:
-    vals = [v for v in values if v is not None]
-    return None if not vals else float(sum(vals) / len(vals))
 
 
 # ----------------------------------------------------------------------------- retrieval
@@ -253,6 +171,155 @@ def _bar(total: int, progress: bool, desc: str):
     return tqdm(total=total, desc=desc, disable=not progress, unit="gen")
 
 
+#: fields of a case copied into its report record
+RECORD_KEYS = ("id", "kind", "parts", "clip_id", "prompt", "with_text", "perturbed", "seconds", "num_keyframes")
+
+
+@dataclass
+class _SuiteRun:
+    """What the case loop of `run_suite` gathers: report records, motions per case and row, per-row
+    constraint deviations, the text cases, the timeline cases and their segments, and timings."""
+
+    modes: list[str]
+    rows: list[str]
+    records: list[dict] = field(default_factory=list)
+    motions: dict = field(default_factory=dict)
+    devs: dict = field(default_factory=dict)
+    text_ids: list[int] = field(default_factory=list)
+    timelines: list[dict] = field(default_factory=list)
+    tl_segments: dict = field(default_factory=dict)
+    gen_seconds: float = 0.0
+    post_seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.devs = {r: [] for r in self.rows}
+        self.tl_segments = {r: [] for r in self.rows}
+
+
+def _dataset(case: dict, model, datasets: dict):
+    """The case's checked source dataset (loaded once per (data, split) into ``datasets``)."""
+    if case["kind"] not in CASE_KINDS:
+        raise KinemaError(f"case {case.get('id')}: unknown kind {case['kind']!r}")
+    if abs(float(case["fps"]) - model.fps) > 1e-6:
+        raise KinemaError(f"case {case['id']} is at {case['fps']:g} fps but the model runs at {model.fps:g} fps")
+    key = (case["source"]["data"], case["source"]["split"])
+    if key not in datasets:
+        from kinema.data.dataset import MotionDataset
+
+        datasets[key] = MotionDataset(*key)
+    return datasets[key]
+
+
+def _run_case(model, i: int, case: dict, data, run: _SuiteRun, seed: int, steps, guidance) -> None:
+    """Generate case ``i`` once (raw), post-process it for the ``post`` mode, score every row."""
+    t0 = time.perf_counter()
+    if case["kind"] == "timeline":
+        rec, run.motions[case["id"]], segs = run_timeline_case(
+            model, case, run.modes, seed * 100003 + i, steps, guidance, data, _post
+        )
+        run.gen_seconds += time.perf_counter() - t0
+        run.records.append(rec)
+        run.timelines.append(case)
+        for row, ms in segs.items():
+            run.tl_segments[row] += ms
+        return
+    gt, targets = case_ground_truth(case, data), case_targets(case, model.skeleton)
+    raw = model.generate(
+        case["prompt"], seconds=case["seconds"], constraints=case["constraints"] or None, samples=1, steps=steps,
+        guidance=guidance, seed=seed * 100003 + i, postprocess=False, heading=case["heading"],
+    )[0]  # fmt: skip
+    out = {"ground_truth": gt} | ({"raw": raw} if "raw" in run.modes else {})
+    if "post" in run.modes:
+        t1 = time.perf_counter()
+        out["post"] = _post(model, raw, case)
+        run.post_seconds += time.perf_counter() - t1
+    run.gen_seconds += time.perf_counter() - t0
+    scored = {}
+    for row, m in out.items():
+        scored[row], d = score_motion(m, targets)
+        run.devs[row] += d
+    run.motions[case["id"]] = out
+    if case["kind"] == "text":
+        run.text_ids.append(i)
+    run.records.append({k: case[k] for k in RECORD_KEYS} | {"metrics": scored})
+
+
+def _multimodality(model, cases, run: _SuiteRun, n_mm: int, mm_samples: int, seed: int, steps, guidance, bar) -> dict:
+    """``mm_samples`` extra text-only samples of the first ``n_mm`` text cases, per mode."""
+    mm: dict[str, list[list[Motion]]] = {r: [] for r in run.modes}
+    for k, i in enumerate(run.text_ids[:n_mm]):
+        case = cases[i]
+        t0 = time.perf_counter()
+        group = model.generate(
+            case["prompt"], seconds=case["seconds"], samples=mm_samples, steps=steps, guidance=guidance,
+            seed=seed * 100003 + 50021 + k, postprocess=False,
+        )  # fmt: skip
+        if "raw" in run.modes:
+            mm["raw"].append(group)
+        if "post" in run.modes:
+            t1 = time.perf_counter()
+            mm["post"].append([_post(model, m, case) for m in group])
+            run.post_seconds += time.perf_counter() - t1
+        run.gen_seconds += time.perf_counter() - t0
+        bar.update(1)
+    return mm
+
+
+def _add_text_metrics(summary, ret, retrieval, cases, run: _SuiteRun, mm, seed: int, warn, text_cache) -> None:
+    """R-precision, FID, diversity, multimodality, coverage/novelty of the text cases into ``summary``."""
+    caps = [cases[i]["prompt"] for i in run.text_ids]
+    train_emb = None
+    try:
+        src = cases[run.text_ids[0]]["source"]["data"] if run.text_ids else None
+        train_emb = train_embeddings(ret, src) if src else None
+    except (KinemaError, OSError, KeyError) as err:
+        warn.append(f"coverage/novelty skipped: no train split to compare with ({err})")
+    gen = {r: [run.motions[cases[i]["id"]][r] for i in run.text_ids] for r in run.rows}
+    tm = text_metrics(ret, caps, gen, mm, seed, warn, text_cache, train_emb)
+    for r in run.rows:
+        summary[r].update(tm[r])
+
+
+def _meta(model, cases: list[dict], modes: list[str], steps, seed: int, guidance) -> dict:
+    """The report's ``meta``: what was evaluated, how, on what machine."""
+    return {
+        "model": str(getattr(getattr(model, "loaded", None), "path", model)),
+        "fps": model.fps,
+        "num_cases": len(cases),
+        "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
+        "modes": modes,
+        "steps": steps,
+        "seed": seed,
+        "data": sorted({c["source"]["data"] for c in cases}),
+        "split": sorted({c["source"]["split"] for c in cases}),
+        "torch_threads": torch.get_num_threads(),
+        "machine": platform.platform(),
+        "guidance": _guidance_meta(model, guidance),
+        "root_displacement": bool(getattr(model, "root_displacement", False)),
+        "root_smoothing": float(getattr(model, "root_smoothing", 0.0)),
+        "joint_sigma": float(getattr(model, "joint_sigma", 0.0)),
+        "grounding": None if getattr(model, "grounding", None) is None else model.grounding.to_dict(),
+    }
+
+
+def _timeline_table(run: _SuiteRun, ret, text_cache) -> dict | None:
+    """The timeline row (kinema.evaluate.timeline.timeline_summary), None without timeline cases."""
+    if not run.timelines:
+        return None
+    captions = [s["prompt"] for c in run.timelines for s in c["segments"]]
+    tl_records = [r for r in run.records if r["kind"] == "timeline"]
+    return timeline_summary(tl_records, captions, run.tl_segments, ret, text_cache, _embed)
+
+
+def _tables(run: _SuiteRun, summary: dict) -> dict:
+    """The report's summary table and its breakdowns by case kind and by keyframe count."""
+    return {
+        "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in run.rows},
+        "by_kind": by_kind(run.records, run.rows),
+        "by_keyframes": by_keyframes(run.records, run.rows),
+    }
+
+
 def run_suite(
     model,
     cases: list[dict],
@@ -281,268 +348,41 @@ def run_suite(
         raise KinemaError(f"postprocess_modes must list False and/or True once each, got {postprocess_modes}")
     if not cases:
         raise KinemaError("the suite has no cases")
-    t_start = time.perf_counter()
-    warn: list[str] = []
+    t_start, warn = time.perf_counter(), []
     datasets = {} if datasets is None else datasets
-    rows = ["ground_truth", *modes]
-    records, motions, devs = [], {}, {r: [] for r in rows}
-    gen_seconds = post_seconds = 0.0
-    text_ids: list[int] = []
-    timelines: list[dict] = []
-    tl_segments: dict[str, list[Motion]] = {r: [] for r in rows}
+    run = _SuiteRun(modes, ["ground_truth", *modes])
     ret = _load_retrieval(retrieval, warn)
     n_mm = min(mm_prompts, sum(c["kind"] == "text" for c in cases)) if ret is not None and mm_samples > 1 else 0
     bar = _bar(len(cases) + n_mm, progress, "evaluate")
     for i, case in enumerate(cases):
-        if case["kind"] not in CASE_KINDS:
-            raise KinemaError(f"case {case.get('id')}: unknown kind {case['kind']!r}")
-        if abs(float(case["fps"]) - model.fps) > 1e-6:
-            raise KinemaError(f"case {case['id']} is at {case['fps']:g} fps but the model runs at {model.fps:g} fps")
-        src = case["source"]
-        key = (src["data"], src["split"])
-        if key not in datasets:
-            from kinema.data.dataset import MotionDataset
-
-            datasets[key] = MotionDataset(src["data"], src["split"])
-        if case["kind"] == "timeline":
-            t0 = time.perf_counter()
-            rec, motions[case["id"]], segs = run_timeline_case(
-                model, case, modes, seed * 100003 + i, steps, guidance, datasets[key], _post
-            )
-            gen_seconds += time.perf_counter() - t0
-            records.append(rec)
-            timelines.append(case)
-            for row, ms in segs.items():
-                tl_segments[row] += ms
-            bar.update(1)
-            continue
-        gt = case_ground_truth(case, datasets[key])
-        targets = case_targets(case, model.skeleton)
-        t0 = time.perf_counter()
-        raw = model.generate(
-            case["prompt"],
-            seconds=case["seconds"],
-            constraints=case["constraints"] or None,
-            samples=1,
-            steps=steps,
-            guidance=guidance,
-            seed=seed * 100003 + i,
-            postprocess=False,
-            heading=case["heading"],
-        )[0]
-        out = {"ground_truth": gt}
-        if "raw" in modes:
-            out["raw"] = raw
-        if "post" in modes:
-            t1 = time.perf_counter()
-            out["post"] = _post(model, raw, case)
-            post_seconds += time.perf_counter() - t1
-        gen_seconds += time.perf_counter() - t0
-        scored = {}
-        for row, m in out.items():
-            scored[row], d = score_motion(m, targets)
-            devs[row] += d
-        motions[case["id"]] = out
-        if case["kind"] == "text":
-            text_ids.append(i)
-        records.append(
-            {
-                k: case[k]
-                for k in (
-                    "id",
-                    "kind",
-                    "parts",
-                    "clip_id",
-                    "prompt",
-                    "with_text",
-                    "perturbed",
-                    "seconds",
-                    "num_keyframes",
-                )
-            }
-            | {"metrics": scored}
-        )
+        _run_case(model, i, case, _dataset(case, model, datasets), run, seed, steps, guidance)
         bar.update(1)
-    mm: dict[str, list[list[Motion]]] = {r: [] for r in modes}
-    if n_mm:
-        for k, i in enumerate(text_ids[:n_mm]):
-            case = cases[i]
-            t0 = time.perf_counter()
-            group = model.generate(
-                case["prompt"],
-                seconds=case["seconds"],
-                samples=mm_samples,
-                steps=steps,
-                guidance=guidance,
-                seed=seed * 100003 + 50021 + k,
-                postprocess=False,
-            )
-            if "raw" in modes:
-                mm["raw"].append(group)
-            if "post" in modes:
-                t1 = time.perf_counter()
-                mm["post"].append([_post(model, m, case) for m in group])
-                post_seconds += time.perf_counter() - t1
-            gen_seconds += time.perf_counter() - t0
-            bar.update(1)
+    mm = _multimodality(model, cases, run, n_mm, mm_samples, seed, steps, guidance, bar) if n_mm else {}
     bar.close()
-    summary = _summarize(records, rows, devs)
-    text_info = {
-        "cases": len(text_ids),
-        "r_batch_size": R_BATCH,
-        "mm_prompts": len(mm.get(modes[0], [])),
-        "mm_samples": mm_samples,
-        "retrieval": None,
-    }
+    summary = summarize(run.records, run.rows, run.devs)
+    text_info = {"cases": len(run.text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm.get(modes[0], [])),
+                 "mm_samples": mm_samples, "retrieval": None}  # fmt: skip
     if ret is not None:
         text_info["retrieval"] = _retrieval_name(retrieval)
-        caps = [cases[i]["prompt"] for i in text_ids]
-        train_emb = None
-        try:
-            src = cases[text_ids[0]]["source"]["data"] if text_ids else None
-            train_emb = train_embeddings(ret, src) if src else None
-        except (KinemaError, OSError, KeyError) as err:
-            warn.append(f"coverage/novelty skipped: no train split to compare with ({err})")
-        tm = text_metrics(
-            ret,
-            caps,
-            {r: [motions[cases[i]["id"]][r] for i in text_ids] for r in rows},
-            mm,
-            seed,
-            warn,
-            text_cache,
-            train_emb,
-        )
-        for r in rows:
-            summary[r].update(tm[r])
-    if timelines:
-        captions = [s["prompt"] for c in timelines for s in c["segments"]]
-        tl_records = [r for r in records if r["kind"] == "timeline"]
-        tl_table = timeline_summary(tl_records, captions, tl_segments, ret, text_cache, _embed)
+        _add_text_metrics(summary, ret, retrieval, cases, run, mm or {r: [] for r in modes}, seed, warn, text_cache)
+    tl_table = _timeline_table(run, ret, text_cache)
     t_phr = time.perf_counter()
-    phr = (
-        None
-        if not phrasings
-        else run_phrasings(
-            model,
-            cases,
-            motions,
-            datasets,
-            ret,
-            samples=phrasings,
-            seed=seed,
-            steps=steps,
-            guidance=guidance,
-            text_cache=text_cache,
-            embed=_embed,
-            warn=warn,
-            progress=progress,
-        )
-    )
-    wall, t_phr = time.perf_counter() - t_start, time.perf_counter() - t_phr
-    data = {
-        "format": "kinema-eval-report",
-        "version": 1,
-        "meta": {
-            "model": str(getattr(getattr(model, "loaded", None), "path", model)),
-            "fps": model.fps,
-            "num_cases": len(cases),
-            "kinds": {k: sum(c["kind"] == k for c in cases) for k in CASE_KINDS},
-            "modes": modes,
-            "steps": steps,
-            "seed": seed,
-            "data": sorted({c["source"]["data"] for c in cases}),
-            "split": sorted({c["source"]["split"] for c in cases}),
-            "torch_threads": torch.get_num_threads(),
-            "machine": platform.platform(),
-            "guidance": _guidance_meta(model, guidance),
-            "root_displacement": bool(getattr(model, "root_displacement", False)),
-            "root_smoothing": float(getattr(model, "root_smoothing", 0.0)),
-            "joint_sigma": float(getattr(model, "joint_sigma", 0.0)),
-            "grounding": None if getattr(model, "grounding", None) is None else model.grounding.to_dict(),
-        },
-        "timing": {
-            "wall_seconds": wall,
-            "generate_seconds": gen_seconds,
-            "postprocess_seconds": post_seconds,
-            "seconds_per_case": gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
-            "phrasings_seconds": t_phr if phrasings else None,
-        },
-        "table": {r: {c: summary[r].get(c) for c in COLUMNS} for r in rows},
-        "text": text_info,
-        "by_kind": _by_kind(records, rows),
-        "by_keyframes": _by_keyframes(records, rows),
-        "timeline": tl_table if timelines else None,
-        "phrasings": phr,
-        "cases": records,
-        "warnings": warn,
+    phr = None
+    if phrasings:
+        phr = run_phrasings(
+            model, cases, run.motions, datasets, ret, samples=phrasings, seed=seed, steps=steps, guidance=guidance,
+            text_cache=text_cache, embed=_embed, warn=warn, progress=progress,
+        )  # fmt: skip
+    timing = {
+        "wall_seconds": time.perf_counter() - t_start,
+        "generate_seconds": run.gen_seconds,
+        "postprocess_seconds": run.post_seconds,
+        "seconds_per_case": run.gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
+        "phrasings_seconds": time.perf_counter() - t_phr if phrasings else None,
     }
-    return EvalResults(_finite(data), motions, list(cases))
-
-
-def _summarize(records: list[dict], rows: list[str], devs: dict) -> dict:
-    """Table values per row: quality over text cases (pooled skate), constraint errors over cases."""
-    out = {}
-    text = [r for r in records if r["kind"] == "text"]
-    for row in rows:
-        mets = [r["metrics"][row] for r in text]
-        out[row] = {
-            "foot_skate_cm_s": _weighted([(m["foot_skate_cm_s"], m["foot_skate_samples"]) for m in mets]),
-            "contact_acc": _mean(m["contact_acc"] for m in mets),
-            "jerk": _mean(m["jerk"] for m in mets),
-            **{
-                k: _mean(r["metrics"][row][k] for r in records)
-                for k in ("fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg", "root2d_pos_cm")
-            },
-            "pelvis_p95_cm": _p95(devs[row]),
-        }
-    return out
-
-
-def _by_kind(records: list[dict], rows: list[str]) -> dict:
-    out = {}
-    for row in rows:
-        out[row] = {}
-        for kind in CASE_KINDS:
-            sel = [r["metrics"][row] for r in records if r["kind"] == kind]
-            if sel:
-                out[row][kind] = {"cases": len(sel)} | {k: _mean(m[k] for m in sel) for k in CASE_METRICS}
-    return out
-
-
-def _by_keyframes(records: list[dict], rows: list[str]) -> dict:
-    """kind -> row -> list of {num_keyframes, cases, error} (fullbody cm, end-effector cm, root 2D cm)."""
-    metric = {
-        "fullbody_sparse": "fullbody_pos_cm",
-        "inbetween": "fullbody_pos_cm",
-        "end_effector": "ee_pos_cm",
-        "waypoints": "root2d_pos_cm",
-    }
-    out: dict = {}
-    for kind, key in metric.items():
-        sel = [r for r in records if r["kind"] == kind and r["num_keyframes"]]
-        if not sel:
-            continue
-        out[kind] = {"metric": key}
-        for row in rows:
-            ks = sorted({r["num_keyframes"] for r in sel})
-            out[kind][row] = [
-                {
-                    "num_keyframes": k,
-                    "cases": sum(r["num_keyframes"] == k for r in sel),
-                    "error": _mean(r["metrics"][row][key] for r in sel if r["num_keyframes"] == k),
-                }
-                for k in ks
-            ]
-    return out
-
-
-def _finite(x):
-    """NaN/inf -> None so that report.json is strict JSON."""
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    return x
+    tables = _tables(run, summary)
+    data = {"format": "kinema-eval-report", "version": 1, "meta": _meta(model, cases, modes, steps, seed, guidance),
+            "timing": timing, "table": tables["table"], "text": text_info, "by_kind": tables["by_kind"],
+            "by_keyframes": tables["by_keyframes"], "timeline": tl_table, "phrasings": phr, "cases": run.records,
+            "warnings": warn}  # fmt: skip
+    return EvalResults(finite(data), run.motions, list(cases))
