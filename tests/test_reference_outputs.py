@@ -3,8 +3,11 @@
 tests/data/reference_outputs.npz was written by scripts/record_reference_outputs.py from the code before
 the refactor (commit f496dd2) for the fixed cases of tests/reference_cases.py: text only, full-body
 keyframes, end effectors with foot contacts, waypoints and a two-prompt timeline, each with and without
-post-processing, 5 DDIM steps, fixed seeds. Every output must match within 1e-5 m (joint positions and
-root) and 1e-5 (quaternion components); contacts exactly. The two timeline cases were re-recorded on
+post-processing, 5 DDIM steps, fixed seeds. Every output must match within 5e-5 m (joint positions and
+root) and 5e-5 (quaternion components, contact probabilities). The bound was 1e-5 with contacts exact
+until an AMD EPYC machine gave the same code's outputs up to 1.25e-5 (rotations, contacts) and 5.7e-6 m
+(positions) apart from the recording machine's: float32 rounding differs between CPUs, and a refactor
+that changes results moves them by far more. The two timeline cases were re-recorded on
 purpose (``--only timeline``) by issue 18's new joins and again when timelines became segments sampled
 on their own prompts with regenerated join windows (kinema.generate.segments).
 """
@@ -21,7 +24,7 @@ from reference_cases import cases
 import kinema
 
 FIXTURE = Path(__file__).parent / "data" / "reference_outputs.npz"
-TOL = 1e-5
+TOL = 5e-5
 
 
 @pytest.fixture(scope="module")
@@ -51,4 +54,5 @@ def test_shipped_model_matches_reference(model, reference, case) -> None:
             want = reference[f"{name}_{i}_{field}"]
             err = float(np.abs(got.float().numpy() - want).max())
             assert err <= TOL, f"{name} sample {i} {field}: max difference {err:.3g}"
-        np.testing.assert_array_equal(m.foot_contacts.float().numpy(), reference[f"{name}_{i}_contacts"])
+        contacts = float(np.abs(m.foot_contacts.float().numpy() - reference[f"{name}_{i}_contacts"]).max())
+        assert contacts <= TOL, f"{name} sample {i} contacts: max difference {contacts:.3g}"
