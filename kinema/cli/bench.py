@@ -55,8 +55,12 @@ def _register_bvh(targets) -> None:
         default=None,
         help="folder searched recursively (default: ../shared/datasets/bandai-namco, from the cwd)",
     )
-    p.add_argument("--limit", type=_positive_int, default=None, help="only the first N files (sorted by path)")
-    p.add_argument("--scale", type=float, default=0.01, help="length scale for read_bvh (default 0.01: cm -> m)")
+    p.add_argument(
+        "--limit", type=_positive_int, default=None, help="only the first N files (sorted by path)"
+    )
+    p.add_argument(
+        "--scale", type=float, default=0.01, help="length scale for read_bvh (default 0.01: cm -> m)"
+    )
     p.add_argument(
         "--threads",
         type=_positive_int,
@@ -115,13 +119,17 @@ def run_bench_bvh(args) -> int:
             frames += n
             seconds += s
         elapsed = time.perf_counter() - start
-        rows.append((label, len(files), frames, seconds / 3600, elapsed, len(files) / elapsed, megabytes / elapsed))
+        rows.append(
+            (label, len(files), frames, seconds / 3600, elapsed, len(files) / elapsed, megabytes / elapsed)
+        )
 
     print(
         f"BVH benchmark: {len(files)} files under {root} ({megabytes:.1f} MB of BVH text, "
         f"{args.threads} torch thread{'s' if args.threads > 1 else ''})"
     )
-    header = f"{'stage':<10} {'files':>6} {'frames':>9} {'hours':>7} {'seconds':>8} {'files/s':>8} {'MB/s':>7}"
+    header = (
+        f"{'stage':<10} {'files':>6} {'frames':>9} {'hours':>7} {'seconds':>8} {'files/s':>8} {'MB/s':>7}"
+    )
     print(header)
     print("-" * len(header))
     for label, n, frames, hours, elapsed, fps, mbps in rows:
@@ -133,17 +141,10 @@ def run_bench_bvh(args) -> int:
 
 
 def _register_gltf(targets) -> None:
-    p = targets.add_parser(
-        "gltf",
-        help="read every *.glb/*.gltf of a folder (container, then rig + clips)",
-        description="Time kinema.io.gltf over every glTF file under --root (kinema.bench.gltf).",
-    )
-    p.add_argument(
-        "--root",
-        type=Path,
-        default=None,
-        help="folder searched recursively (default: ../shared/datasets/quaternius, from the cwd)",
-    )
+    p = targets.add_parser("gltf", help="read every *.glb/*.gltf of a folder (container, then rig + clips)",
+                           description="Time kinema.io.gltf over every glTF file under --root (kinema.bench.gltf).")
+    p.add_argument("--root", type=Path, default=None,
+                   help="folder searched recursively (default: ../shared/datasets/quaternius, from the cwd)")
     p.add_argument("--limit", type=_positive_int, default=None, help="only the first N files (sorted by path)")
     p.set_defaults(func=run_bench_gltf)
 
@@ -160,11 +161,8 @@ def run_bench_gltf(args) -> int:
 
 
 def _register_io(targets) -> None:
-    p = targets.add_parser(
-        "io",
-        help="bench bvh and bench gltf on their default datasets",
-        description="Both file readers: `bench bvh` (Bandai Namco) then `bench gltf` (Quaternius).",
-    )
+    p = targets.add_parser("io", help="bench bvh and bench gltf on their default datasets",
+                           description="Both file readers: `bench bvh` (Bandai Namco) then `bench gltf` (Quaternius).")
     p.add_argument("--bvh-root", type=Path, default=None, help="BVH folder (default ../shared/datasets/bandai-namco)")
     p.add_argument("--gltf-root", type=Path, default=None, help="glTF folder (default ../shared/datasets/quaternius)")
     p.add_argument("--limit", type=_positive_int, default=None, help="only the first N files of each")
@@ -182,37 +180,20 @@ def run_bench_io(args) -> int:
 
 
 def _register_train(targets) -> None:
-    p = targets.add_parser(
-        "train",
-        help="training step time, samples/s and FLOPs per model preset",
-        description="Time full training steps (forward, loss, backward, AdamW) on synthetic "
-        "features of the real size; also one batch-3 inference forward pass.",
-    )
-    p.add_argument(
-        "--configs",
-        nargs="+",
-        default=["tiny", "small", "small-1stage"],
-        help="presets to time (default: tiny small small-1stage)",
-    )
+    p = targets.add_parser("train", help="training step time, samples/s and FLOPs per model preset",
+                           description="Time full training steps (forward, loss, backward, AdamW) on synthetic "
+                           "features of the real size; also one batch-3 inference forward pass.")
+    p.add_argument("--configs", nargs="+", default=["tiny", "small", "small-1stage"],
+                   help="presets to time (default: tiny small small-1stage)")
     p.add_argument("--batch-size", type=_positive_int, default=32)
     p.add_argument("--frames", type=_positive_int, default=100, help="frames per sample (100 = 5 s @ 20 fps)")
     p.add_argument("--joints", type=_positive_int, default=21)
     p.add_argument("--repeats", type=_positive_int, default=3)
-    p.add_argument(
-        "--threads",
-        type=_positive_int,
-        default=None,
-        help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)",
-    )
-    p.add_argument(
-        "--load",
-        type=int,
-        nargs="+",
-        default=None,
-        metavar="N",
-        help="also compare thread counts (--thread-counts) on the first preset's step, with N "
-        "busy-loop processes running (0 = quiet), interleaved",
-    )
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)")
+    p.add_argument("--load", type=int, nargs="+", default=None, metavar="N",
+                   help="also compare thread counts (--thread-counts) on the first preset's step, with N "
+                        "busy-loop processes running (0 = quiet), interleaved")
     p.add_argument("--thread-counts", type=_positive_int, nargs="+", default=[1, 2])
     p.set_defaults(func=_run_train)
 
@@ -225,10 +206,8 @@ def _run_train(args: argparse.Namespace) -> int:
     from kinema.runtime import configure_threads
 
     configure_threads(args.threads, cap=None)
-    rows = [
-        bench_config(c, args.joints, args.batch_size, args.frames, args.repeats)
-        for c in tqdm(args.configs, desc="bench train")
-    ]
+    rows = [bench_config(c, args.joints, args.batch_size, args.frames, args.repeats)
+            for c in tqdm(args.configs, desc="bench train")]
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     print(format_table(rows))
     if args.load:
@@ -244,12 +223,9 @@ def _run_train(args: argparse.Namespace) -> int:
 def _register_train_modes(targets) -> None:
     from kinema.bench.train_modes import MODES
 
-    p = targets.add_parser(
-        "train-modes",
-        help="training speed and loss parity: fp32 vs bf16 autocast vs torch.compile",
-        description="Train one Trainer per mode on the same data and seed, steps interleaved; "
-        "prints seconds per step, speed-up over fp32 and the loss difference.",
-    )
+    p = targets.add_parser("train-modes", help="training speed and loss parity: fp32 vs bf16 autocast vs torch.compile",
+                           description="Train one Trainer per mode on the same data and seed, steps interleaved; "
+                           "prints seconds per step, speed-up over fp32 and the loss difference.")
     p.add_argument("--data", type=Path, required=True, help="dataset folder from `kinema data build`")
     p.add_argument("--configs", nargs="+", default=["small"], help="presets (default: small)")
     p.add_argument("--modes", nargs="+", choices=list(MODES), default=["fp32", "bf16", "compile"])
@@ -258,12 +234,8 @@ def _register_train_modes(targets) -> None:
     p.add_argument("--warmup", type=_positive_int, default=20, help="first steps timed apart (compilation)")
     p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     p.add_argument("--json", type=Path, help="also write rows and loss curves to this JSON file")
-    p.add_argument(
-        "--threads",
-        type=_positive_int,
-        default=None,
-        help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)",
-    )
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)")
     p.set_defaults(func=_run_train_modes)
 
 
@@ -279,16 +251,8 @@ def _run_train_modes(args: argparse.Namespace) -> int:
     threads = configure_threads(args.threads, cap=None)
     rows, curves = [], {}
     for config in args.configs:
-        r, c = bench_train_modes(
-            args.data,
-            config,
-            args.modes,
-            args.steps,
-            args.batch_size,
-            args.warmup,
-            tail=min(100, args.steps),
-            cache_dir=args.cache_dir,
-        )
+        r, c = bench_train_modes(args.data, config, args.modes, args.steps, args.batch_size, args.warmup,
+                                 tail=min(100, args.steps), cache_dir=args.cache_dir)
         rows += r
         curves[config] = c
         print(format_modes(r, min(100, args.steps)), flush=True)
@@ -308,34 +272,19 @@ def _add_generate_options(p, model_default: str | None) -> None:
     from kinema.bench.suite import SECTIONS
 
     p.add_argument("--model", default=model_default, help="'default' or a run/checkpoint folder")
-    p.add_argument(
-        "--sections",
-        nargs="+",
-        choices=SECTIONS,
-        default=None,
-        help=f"generation sections to run (default: all of {' '.join(SECTIONS)})",
-    )
+    p.add_argument("--sections", nargs="+", choices=SECTIONS, default=None,
+                   help=f"generation sections to run (default: all of {' '.join(SECTIONS)})")
     p.add_argument("--quick", action="store_true", help="fewer settings and repeats (about a minute)")
     p.add_argument("--steps", type=_positive_int, nargs="+", default=None, help="DDIM steps (default 10 25 50 100)")
     p.add_argument("--repeats", type=_positive_int, default=None, help="repeats per steps setting (default 2)")
     p.add_argument("--samples", type=_positive_int, nargs="+", default=None, help="samples per call (1 4 16)")
     p.add_argument("--durations", type=positive_float, nargs="+", default=None, help="seconds (5 10 20 40)")
     p.add_argument("--thread-counts", type=_positive_int, nargs="+", default=None, help="threads compared (1 2)")
-    p.add_argument(
-        "--load",
-        type=int,
-        nargs="+",
-        default=None,
-        metavar="N",
-        help="busy-loop processes for the threads section; 0 = quiet (default 0 2)",
-    )
+    p.add_argument("--load", type=int, nargs="+", default=None, metavar="N",
+                   help="busy-loop processes for the threads section; 0 = quiet (default 0 2)")
     p.add_argument("--thread-repeats", type=_positive_int, default=None, help="rounds per thread count (3)")
-    p.add_argument(
-        "--threads",
-        type=_positive_int,
-        default=None,
-        help="torch threads outside the threads section (default: KINEMA_THREADS, else kinema.runtime)",
-    )
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="torch threads outside the threads section (default: KINEMA_THREADS, else kinema.runtime)")
 
 
 def _suite_options(args: argparse.Namespace, sections: tuple[str, ...]):
@@ -343,15 +292,8 @@ def _suite_options(args: argparse.Namespace, sections: tuple[str, ...]):
     from kinema.bench.suite import GenerateSuiteOptions
     from kinema.errors import KinemaError
 
-    given = {
-        "steps": args.steps,
-        "repeats": args.repeats,
-        "samples": args.samples,
-        "durations": args.durations,
-        "threads": args.thread_counts,
-        "loads": args.load,
-        "thread_repeats": args.thread_repeats,
-    }
+    given = {"steps": args.steps, "repeats": args.repeats, "samples": args.samples, "durations": args.durations,
+             "threads": args.thread_counts, "loads": args.load, "thread_repeats": args.thread_repeats}
     if args.load is not None and any(n < 0 for n in args.load):
         raise KinemaError("--load: busy-loop process counts must be >= 0")
     kw = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items() if v is not None}

@@ -16,59 +16,28 @@ def register(sub) -> None:
     p.add_argument("--data", type=Path, default=Path("cache/bandai20"), help="dataset build (default cache/bandai20)")
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="clips to draw cases from")
     p.add_argument("--cases", type=int, default=100, help="number of cases when building a suite (default 100)")
-    p.add_argument(
-        "--timeline-cases",
-        type=int,
-        default=8,
-        help="multi-prompt timeline cases added when building a suite (default 8; 0 = none)",
-    )
-    p.add_argument(
-        "--text-fraction",
-        type=float,
-        default=0.3,
-        help="share of text-only cases when building a suite (default 0.3; 1 = text cases only)",
-    )
-    p.add_argument(
-        "--phrasings",
-        type=int,
-        default=3,
-        metavar="SAMPLES",
-        help="prompts in other words: samples per probe prompt, plus the text cases again from held-out "
-        "captions (default 3; 0 = skip)",
-    )
+    p.add_argument("--timeline-cases", type=int, default=8,
+                   help="multi-prompt timeline cases added when building a suite (default 8; 0 = none)")
+    p.add_argument("--text-fraction", type=float, default=0.3,
+                   help="share of text-only cases when building a suite (default 0.3; 1 = text cases only)")
+    p.add_argument("--phrasings", type=int, default=3, metavar="SAMPLES",
+                   help="prompts in other words: samples per probe prompt, plus the text cases again from held-out "
+                        "captions (default 3; 0 = skip)")
     p.add_argument("--seed", type=seed, default=0, help="suite and generation seed")
     p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting)")
-    p.add_argument(
-        "--guidance",
-        type=non_negative_float,
-        nargs=2,
-        metavar=("W_TEXT", "W_CONSTR"),
-        help="separated guidance weights (default: the model's setting)",
-    )
+    p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="separated guidance weights (default: the model's setting)")
     add_grounding_arguments(p)
-    p.add_argument(
-        "--imputation-only",
-        action="store_true",
-        help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)",
-    )
+    p.add_argument("--imputation-only", action="store_true",
+                   help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)")
     p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
-    p.add_argument(
-        "--suite",
-        type=Path,
-        help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it",
-    )
-    p.add_argument(
-        "--retrieval", default="default", help="retrieval model folder for R@k/FID ('default' = shipped, 'none' = skip)"
-    )
+    p.add_argument("--suite", type=Path,
+                   help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it")
+    p.add_argument("--retrieval", default="default",
+                   help="retrieval model folder for R@k/FID ('default' = shipped, 'none' = skip)")
     p.add_argument("--modes", choices=("both", "raw", "post"), default="both", help="post-processing modes")
-    p.add_argument(
-        "--mm",
-        type=int,
-        nargs=2,
-        default=(3, 4),
-        metavar=("PROMPTS", "SAMPLES"),
-        help="multimodality: prompts x samples (default 3 4; SAMPLES < 2 skips it)",
-    )
+    p.add_argument("--mm", type=int, nargs=2, default=(3, 4), metavar=("PROMPTS", "SAMPLES"),
+                   help="multimodality: prompts x samples (default 3 4; SAMPLES < 2 skips it)")
     p.add_argument("--filmstrips", type=int, default=4, help="rendered cases (default 4)")
     p.add_argument("--no-progress", action="store_true")
     add_sfcontrol_arguments(p)
@@ -110,19 +79,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         if not args.data.is_dir():
             raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
-        cases = build_suite(
-            args.data, args.split, num_cases=args.cases, seed=args.seed, text_fraction=args.text_fraction
-        )
+        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed,
+                            text_fraction=args.text_fraction)
         if args.timeline_cases:
             try:
-                cases += build_timeline_cases(
-                    MotionDataset(args.data, args.split),
-                    args.data.resolve(),
-                    args.split,
-                    args.timeline_cases,
-                    args.seed,
-                    first_id=len(cases),
-                )
+                cases += build_timeline_cases(MotionDataset(args.data, args.split), args.data.resolve(), args.split,
+                                              args.timeline_cases, args.seed, first_id=len(cases))
             except ValueError as err:
                 raise KinemaError(str(err)) from None
         if args.suite is not None:
@@ -140,20 +102,10 @@ def run(args: argparse.Namespace) -> int:
         model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
     save_suite(cases, out / "suite.json")
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
-    results = run_suite(
-        model,
-        cases,
-        postprocess_modes=modes,
-        steps=args.steps,
-        seed=args.seed,
-        progress=not args.no_progress,
-        retrieval=args.retrieval,
-        mm_prompts=args.mm[0],
-        mm_samples=args.mm[1],
-        text_cache=Path("cache/text"),
-        guidance=tuple(args.guidance) if args.guidance else None,
-        phrasings=args.phrasings,
-    )
+    results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,
+                        progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
+                        mm_samples=args.mm[1], text_cache=Path("cache/text"),
+                        guidance=tuple(args.guidance) if args.guidance else None, phrasings=args.phrasings)
     data = write_report(results, out, filmstrips=args.filmstrips)
     print()
     print(format_table(data))

@@ -21,11 +21,8 @@ from kinema.cli._args import positive_int
 
 def register(sub) -> None:
     """Add the `retrieval` sub-command (with `train` and `eval`) to the top-level parser."""
-    p = sub.add_parser(
-        "retrieval",
-        help="train / evaluate the text-motion retrieval model (R@k, FID embedding)",
-        description="Train or evaluate the TMR-style text-motion retrieval model.",
-    )
+    p = sub.add_parser("retrieval", help="train / evaluate the text-motion retrieval model (R@k, FID embedding)",
+                       description="Train or evaluate the TMR-style text-motion retrieval model.")
     rsub = p.add_subparsers(dest="retrieval_command", required=True)
 
     t = rsub.add_parser("train", help="train a retrieval model on the train split of a build")
@@ -73,25 +70,13 @@ def _train(args) -> int:
 
     _threads(args)
     command = "kinema " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["retrieval"] else None
-    model = train_retrieval(
-        args.data,
-        args.out,
-        steps=args.steps,
-        batch_size=args.batch_size,
-        lr=args.lr,
-        seed=args.seed,
-        text_encoder=args.text_encoder,
-        cache_dir=args.cache_dir,
-        half=args.half,
-        progress=not args.no_progress,
-        command=command,
-        max_seconds=None if args.max_minutes is None else 60 * args.max_minutes,
-    )
+    model = train_retrieval(args.data, args.out, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
+                            seed=args.seed, text_encoder=args.text_encoder, cache_dir=args.cache_dir,
+                            half=args.half, progress=not args.no_progress, command=command,
+                            max_seconds=None if args.max_minutes is None else 60 * args.max_minutes)
     info = model.info
-    print(
-        f"wrote {args.out}: {info['steps_done']} of {info['steps']} steps in {info['wall_seconds']:.0f} s, "
-        f"final loss {info['loss_curve'][-1][1]:.3f}"
-    )
+    print(f"wrote {args.out}: {info['steps_done']} of {info['steps']} steps in {info['wall_seconds']:.0f} s, "
+          f"final loss {info['loss_curve'][-1][1]:.3f}")
     if args.eval_split != "none":
         print(format_metrics(evaluate_retrieval(model, args.data, args.eval_split, cache_dir=args.cache_dir)))
     return 0

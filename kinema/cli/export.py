@@ -19,29 +19,16 @@ def register(sub) -> None:
     p.add_argument("model", type=Path, help="run folder (its newest checkpoint) or checkpoint folder")
     p.add_argument("--out", type=Path, required=True, help="model folder to write, e.g. kinema/assets/models/default")
     p.add_argument("--dtype", default="float16", choices=("float16", "bfloat16", "float32"), help="weight precision")
-    p.add_argument(
-        "--guidance",
-        type=non_negative_float,
-        nargs=2,
-        metavar=("W_TEXT", "W_CONSTR"),
-        help="default separated guidance weights saved with the model (finite, >= 0)",
-    )
+    p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="default separated guidance weights saved with the model (finite, >= 0)")
     p.add_argument("--steps", type=positive_int, help="default DDIM steps saved with the model")
-    p.add_argument(
-        "--weights",
-        default="ema",
-        choices=("ema", "raw"),
-        help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
-        "mostly holds the starting weights)",
-    )
+    p.add_argument("--weights", default="ema", choices=("ema", "raw"),
+                   help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
+                        "mostly holds the starting weights)")
     add_grounding_arguments(p)
-    p.add_argument(
-        "--known-prompts",
-        type=Path,
-        metavar="DATA",
-        help="dataset build whose train captions the model learned: their embeddings are saved as "
-        "known_prompts.safetensors, so that `generate` warns about prompts far from all of them",
-    )
+    p.add_argument("--known-prompts", type=Path, metavar="DATA",
+                   help="dataset build whose train captions the model learned: their embeddings are saved as "
+                        "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
     p.set_defaults(func=run)
 
 
@@ -55,24 +42,15 @@ def run(args: argparse.Namespace) -> int:
     if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
         raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
-    out = export_model(
-        args.model,
-        args.out,
-        dtype=args.dtype,
-        guidance=guidance,
-        sampling_steps=args.steps,
-        ema=args.weights == "ema",
-        grounding=grounding_overrides(args),
-    )
+    out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
+                      ema=args.weights == "ema", grounding=grounding_overrides(args))
     loaded = (load_anyrig if is_anyrig_checkpoint(out) else load_denoiser)(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
-    print(
-        f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
-        f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
-        f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})"
-    )
+    print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
+          f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
+          f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")
     return 0
 
 

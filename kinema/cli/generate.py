@@ -37,87 +37,44 @@ def register(sub) -> None:
     p.add_argument("prompt", nargs="?", default=None, help='e.g. "A person walks forward, then waves." ("" = no text)')
     p.add_argument("--seconds", type=positive_float, help=f"duration (single prompt; default {DEFAULT_SECONDS:g})")
     p.add_argument("--timeline", type=Path, help="JSON list of {prompt, seconds} segments (overrides PROMPT)")
-    p.add_argument(
-        "--constraints",
-        type=Path,
-        help="constraints JSON (see docs/constraints.md); a Kimodo meta.json "
-        "next to it fills the settings not given here",
-    )
-    p.add_argument(
-        "--constraints-fps",
-        type=positive_float,
-        metavar="FPS",
-        help="frame rate the constraint file's frame_indices are at (default: the file's 'fps', "
-        "Kimodo's 30 next to a Kimodo meta.json, else the model's)",
-    )
-    p.add_argument(
-        "--samples",
-        type=positive_int,
-        help=f"number of motions (different noise; default {DEFAULT_SAMPLES}); with more than one, "
-        "the files get _00, _01, ... before the extension (out/motion_00.bvh, ...)",
-    )
-    p.add_argument(
-        "--steps",
-        type=positive_int,
-        help="DDIM steps (default: the model's setting; at most its trained diffusion steps)",
-    )
-    p.add_argument(
-        "--preview",
-        action="store_true",
-        help=f"fast draft: {PREVIEW_STEPS} DDIM steps (about 0.2 s "
-        "per 5-s clip of sampling; quality vs steps in docs/speed.md); not with --steps",
-    )
+    p.add_argument("--constraints", type=Path, help="constraints JSON (see docs/constraints.md); a Kimodo meta.json "
+                   "next to it fills the settings not given here")
+    p.add_argument("--constraints-fps", type=positive_float, metavar="FPS",
+                   help="frame rate the constraint file's frame_indices are at (default: the file's 'fps', "
+                        "Kimodo's 30 next to a Kimodo meta.json, else the model's)")
+    p.add_argument("--samples", type=positive_int,
+                   help=f"number of motions (different noise; default {DEFAULT_SAMPLES}); with more than one, "
+                        "the files get _00, _01, ... before the extension (out/motion_00.bvh, ...)")
+    p.add_argument("--steps", type=positive_int, help="DDIM steps (default: the model's setting; at most its "
+                   "trained diffusion steps)")
+    p.add_argument("--preview", action="store_true", help=f"fast draft: {PREVIEW_STEPS} DDIM steps (about 0.2 s "
+                   "per 5-s clip of sampling; quality vs steps in docs/speed.md); not with --steps")
     p.add_argument("--seed", type=seed, help=f"random seed, 0 to 2**64 - 1 (default {DEFAULT_SEED})")
-    p.add_argument(
-        "--guidance",
-        type=non_negative_float,
-        nargs=2,
-        metavar=("W_TEXT", "W_CONSTR"),
-        help="separated guidance weights, finite and >= 0 (default: the model's setting)",
-    )
-    p.add_argument("--heading", type=finite_float, default=0.0, help="first-frame facing in degrees about +Y (0 = +Z)")
-    p.add_argument(
-        "--model",
-        default="default",
-        help="'default' (shipped), 'creatures' (any rig; shipped) or a run/checkpoint folder",
-    )
-    p.add_argument(
-        "--rig",
-        help="any-rig models: a GLB/glTF or BVH file to animate, or a training rig id "
-        "(leave out to list them); a .glb output keeps the rig's skinned mesh",
-    )
-    p.add_argument(
-        "--out",
-        type=Path,
-        default=Path("out/motion.bvh"),
-        help=".bvh, .bvh.gz, .npz or .glb (with a generated bone mesh); default out/motion.bvh; "
-        "with --samples N > 1: OUT_00.bvh, OUT_01.bvh, ...",
-    )
-    p.add_argument(
-        "--fps", type=positive_float, help="resample the output, keeping its duration (default: the model's fps)"
-    )
+    p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
+                   help="separated guidance weights, finite and >= 0 (default: the model's setting)")
+    p.add_argument("--heading", type=finite_float, default=0.0,
+                   help="first-frame facing in degrees about +Y (0 = +Z)")
+    p.add_argument("--model", default="default", help="'default' (shipped), 'creatures' (any rig; shipped) or a "
+                                                      "run/checkpoint folder")
+    p.add_argument("--rig", help="any-rig models: a GLB/glTF or BVH file to animate, or a training rig id "
+                                 "(leave out to list them); a .glb output keeps the rig's skinned mesh")
+    p.add_argument("--out", type=Path, default=Path("out/motion.bvh"),
+                   help=".bvh, .bvh.gz, .npz or .glb (with a generated bone mesh); default out/motion.bvh; "
+                        "with --samples N > 1: OUT_00.bvh, OUT_01.bvh, ...")
+    p.add_argument("--fps", type=positive_float, help="resample the output, keeping its duration "
+                   "(default: the model's fps)")
     p.add_argument("--no-postprocess", action="store_true", help="raw model output (no foot lock / IK)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
-    p.add_argument(
-        "--objective-steps",
-        type=non_negative_int,
-        metavar="N",
-        help="noise-optimisation iterations for the constraints file's objectives (default 12; docs/objectives.md)",
-    )
-    p.add_argument(
-        "--keyjoint-model",
-        metavar="MODEL",
-        help="two-stage control: 'default' (the shipped keyjoint model) or a keyjoint model folder "
-        "plans pelvis, head, hands and feet from the constraints first, then the body follows "
-        "(docs/constraints.md; one prompt up to 10 s, no objectives)",
-    )
+    p.add_argument("--objective-steps", type=non_negative_int, metavar="N",
+                   help="noise-optimisation iterations for the constraints file's objectives (default 12; "
+                   "docs/objectives.md)")
+    p.add_argument("--keyjoint-model", metavar="MODEL",
+                   help="two-stage control: 'default' (the shipped keyjoint model) or a keyjoint model folder "
+                        "plans pelvis, head, hands and feet from the constraints first, then the body follows "
+                        "(docs/constraints.md; one prompt up to 10 s, no objectives)")
     add_grounding_arguments(p)
-    p.add_argument(
-        "--threads",
-        type=positive_int,
-        help="CPU threads for torch (default: KINEMA_THREADS, else "
-        "2 on a quiet machine and 1 on a busy one; see docs/speed.md)",
-    )
+    p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
+                   "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
     p.set_defaults(func=run)
 
 
@@ -137,10 +94,8 @@ def _from_kimodo_meta(args: argparse.Namespace):
     if args.prompt is None and args.timeline is None:
         what = meta.prompt_or_timeline()
         if not isinstance(what, str) and args.seconds is not None:
-            raise KinemaError(
-                f"--seconds: {path} holds a timeline of {len(meta.segments)} prompts with their own "
-                "durations; leave out --seconds, or give a PROMPT or --timeline"
-            )
+            raise KinemaError(f"--seconds: {path} holds a timeline of {len(meta.segments)} prompts with their own "
+                              "durations; leave out --seconds, or give a PROMPT or --timeline")
         args.prompt = what
         filled.append("prompt" if isinstance(what, str) else "timeline")
     if args.seconds is None and args.timeline is None and isinstance(args.prompt, str):
@@ -201,9 +156,8 @@ def run(args: argparse.Namespace) -> int:
     model_path = resolve_model_path(args.model)
     if is_anyrig_checkpoint(model_path):  # a model for any rig: its own options (kinema.cli.generate_anyrig)
         if grounding_overrides(args):
-            raise KinemaError(
-                f"--grounding: the any-rig model {args.model!r} keeps no training captions to ground prompts on"
-            )
+            raise KinemaError(f"--grounding: the any-rig model {args.model!r} keeps no training captions to ground "
+                              "prompts on")
         return run_anyrig(args, model_path)
     if args.rig is not None:
         raise KinemaError(f"--rig: the model {args.model!r} is for one skeleton; use --model creatures for any rig")
@@ -231,33 +185,21 @@ def run(args: argparse.Namespace) -> int:
         guidance = tuple(guidance)
     extra = {} if args.constraints_fps is None else {"constraints_fps": args.constraints_fps}
     motions = model.generate(
-        what,
-        seconds=seconds,
-        constraints=args.constraints,
-        samples=samples,
-        steps=args.steps,
-        guidance=guidance,
-        seed=DEFAULT_SEED if args.seed is None else args.seed,
-        postprocess=not args.no_postprocess,
-        heading=math.radians(args.heading),
-        progress=not args.no_progress,
-        objective_steps=args.objective_steps,
-        keyjoint_model=args.keyjoint_model,
-        grounding=grounding_overrides(args) or None,
-        **extra,
+        what, seconds=seconds, constraints=args.constraints, samples=samples, steps=args.steps,
+        guidance=guidance, seed=DEFAULT_SEED if args.seed is None else args.seed,
+        postprocess=not args.no_postprocess, heading=math.radians(args.heading), progress=not args.no_progress,
+        objective_steps=args.objective_steps, keyjoint_model=args.keyjoint_model,
+        grounding=grounding_overrides(args) or None, **extra,
     )
     for motion, path in zip(motions, outputs, strict=True):
         if args.fps is not None:
             motion = motion.resample(args.fps, keep_duration=True)
         motion.save(path)
-        print(
-            f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
-            f"{motion.num_joints} joints (lengths in metres)"
-        )
+        print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
+              f"{motion.num_joints} joints (lengths in metres)")
     rep = motions.report
-    print(
-        f"generated {len(motions)} motion(s), {rep.segments} segment(s), {rep.steps} DDIM steps in {rep.seconds:.2f} s"
-    )
+    print(f"generated {len(motions)} motion(s), {rep.segments} segment(s), {rep.steps} DDIM steps in "
+          f"{rep.seconds:.2f} s")
     for line in grounding_lines(rep.prompts):
         print(line)
     table = residual_table(rep.residuals)

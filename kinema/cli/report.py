@@ -31,19 +31,16 @@ def residual_table(residuals: list[dict]) -> str:
             if after is None:
                 continue
             raw = f"{before['max']:.2f} {unit}" if before else "-"
-            rows.append(
-                (str(i), what, raw, f"{after['mean']:.2f} {unit}", f"{after['max']:.2f} {unit}", str(after["count"]))
-            )
+            rows.append((str(i), what, raw, f"{after['mean']:.2f} {unit}", f"{after['max']:.2f} {unit}",
+                         str(after["count"])))
     if not rows:
         return ""
     head = ("sample", "constraint", "raw max", "mean", "max", "count")
     widths = [max(len(r[k]) for r in [head, *rows]) for k in range(len(head))]
     lines = ["constraint residuals after post-processing (raw max: the model's own output):"]
     for r in [head, *rows]:
-        lines.append(
-            "  "
-            + "  ".join(c.ljust(w) if k < 2 else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True)))
-        )
+        lines.append("  " + "  ".join(c.ljust(w) if k < 2 else c.rjust(w) for k, (c, w) in
+                                      enumerate(zip(r, widths, strict=True))))
     return "\n".join(lines)
 
 

@@ -27,76 +27,33 @@ def register(sub) -> None:
 
     d = ServerLimits()
     p = sub.add_parser("serve", help="HTTP API for tools and game engines (docs/server.md)", description=__doc__)
-    p.add_argument(
-        "--model",
-        action="append",
-        metavar="SPEC",
-        help="'default' (shipped), a run/checkpoint folder, or NAME=FOLDER; repeat to serve several "
-        "(the first is the default); default: default",
-    )
-    p.add_argument(
-        "--host",
-        default="127.0.0.1",
-        help="address to bind (default 127.0.0.1; any non-loopback address needs --api-key-file)",
-    )
+    p.add_argument("--model", action="append", metavar="SPEC",
+                   help="'default' (shipped), a run/checkpoint folder, or NAME=FOLDER; repeat to serve several "
+                        "(the first is the default); default: default")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; any non-loopback "
+                   "address needs --api-key-file)")
     p.add_argument("--port", type=_port, default=8000, help="TCP port (default 8000)")
-    p.add_argument(
-        "--workers",
-        type=positive_int,
-        default=d.workers,
-        help=f"generation threads sharing the loaded models (default {d.workers})",
-    )
-    p.add_argument(
-        "--queue",
-        type=non_negative_int,
-        default=d.queue,
-        help=f"requests that may wait for a worker; more get 429 + Retry-After (default {d.queue})",
-    )
-    p.add_argument(
-        "--api-key-file",
-        type=Path,
-        help="file with API key(s), one per line; clients send "
-        "'Authorization: Bearer KEY' or 'X-API-Key: KEY' to /v1/*",
-    )
-    p.add_argument(
-        "--cors-origin",
-        action="append",
-        default=[],
-        metavar="ORIGIN",
-        help="allow browser calls from ORIGIN (repeatable; default: CORS off)",
-    )
-    p.add_argument(
-        "--max-seconds",
-        type=positive_float,
-        default=d.max_seconds,
-        help=f"longest output per request, seconds (default {d.max_seconds:g})",
-    )
+    p.add_argument("--workers", type=positive_int, default=d.workers,
+                   help=f"generation threads sharing the loaded models (default {d.workers})")
+    p.add_argument("--queue", type=non_negative_int, default=d.queue,
+                   help=f"requests that may wait for a worker; more get 429 + Retry-After (default {d.queue})")
+    p.add_argument("--api-key-file", type=Path, help="file with API key(s), one per line; clients send "
+                   "'Authorization: Bearer KEY' or 'X-API-Key: KEY' to /v1/*")
+    p.add_argument("--cors-origin", action="append", default=[], metavar="ORIGIN",
+                   help="allow browser calls from ORIGIN (repeatable; default: CORS off)")
+    p.add_argument("--max-seconds", type=positive_float, default=d.max_seconds,
+                   help=f"longest output per request, seconds (default {d.max_seconds:g})")
     p.add_argument("--max-samples", type=positive_int, default=d.max_samples, help=f"default {d.max_samples}")
     p.add_argument("--max-steps", type=positive_int, default=d.max_steps, help=f"default {d.max_steps}")
-    p.add_argument(
-        "--max-body-bytes",
-        type=positive_int,
-        default=d.max_body_bytes,
-        help=f"largest request body (default {d.max_body_bytes}); 413 above",
-    )
-    p.add_argument(
-        "--timeout",
-        type=positive_float,
-        default=d.timeout_s,
-        help=f"seconds POST /v1/generate waits for its result (default {d.timeout_s:g}); 504 after",
-    )
+    p.add_argument("--max-body-bytes", type=positive_int, default=d.max_body_bytes,
+                   help=f"largest request body (default {d.max_body_bytes}); 413 above")
+    p.add_argument("--timeout", type=positive_float, default=d.timeout_s,
+                   help=f"seconds POST /v1/generate waits for its result (default {d.timeout_s:g}); 504 after")
     p.add_argument("--max-jobs", type=positive_int, default=d.max_jobs, help=f"jobs kept (default {d.max_jobs})")
-    p.add_argument(
-        "--job-ttl",
-        type=positive_float,
-        default=d.job_ttl_s,
-        help=f"seconds a finished job's result is kept (default {d.job_ttl_s:g})",
-    )
-    p.add_argument(
-        "--threads",
-        type=positive_int,
-        help="torch CPU threads in all (default: KINEMA_THREADS, else kinema.runtime's choice)",
-    )
+    p.add_argument("--job-ttl", type=positive_float, default=d.job_ttl_s,
+                   help=f"seconds a finished job's result is kept (default {d.job_ttl_s:g})")
+    p.add_argument("--threads", type=positive_int, help="torch CPU threads in all (default: KINEMA_THREADS, else "
+                   "kinema.runtime's choice)")
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
     p.set_defaults(func=run)
 
@@ -105,21 +62,12 @@ def build_config(args: argparse.Namespace):
     """The ServerConfig the arguments describe (raises KinemaError before anything is loaded)."""
     from kinema.server.config import ServerConfig, ServerLimits, read_api_keys
 
-    limits = ServerLimits(
-        max_seconds=args.max_seconds,
-        max_samples=args.max_samples,
-        max_steps=args.max_steps,
-        max_body_bytes=args.max_body_bytes,
-        workers=args.workers,
-        queue=args.queue,
-        timeout_s=args.timeout,
-        max_jobs=args.max_jobs,
-        job_ttl_s=args.job_ttl,
-    )
+    limits = ServerLimits(max_seconds=args.max_seconds, max_samples=args.max_samples, max_steps=args.max_steps,
+                          max_body_bytes=args.max_body_bytes, workers=args.workers, queue=args.queue,
+                          timeout_s=args.timeout, max_jobs=args.max_jobs, job_ttl_s=args.job_ttl)
     keys = read_api_keys(args.api_key_file) if args.api_key_file is not None else ()
-    return ServerConfig(
-        host=args.host, port=args.port, api_keys=keys, cors_origins=tuple(args.cors_origin), limits=limits
-    )
+    return ServerConfig(host=args.host, port=args.port, api_keys=keys, cors_origins=tuple(args.cors_origin),
+                        limits=limits)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -138,10 +86,7 @@ def run(args: argparse.Namespace) -> int:
     configure_threads(args.threads)
     registry = ModelRegistry.load(args.model or ["default"])
     app = create_app(config, registry)
-    print(
-        f"kinema serve: models {registry.names} on http://{config.host}:{config.port} "
-        f"({config.limits.workers} worker(s), queue {config.limits.queue}; docs at /docs)",
-        flush=True,
-    )
+    print(f"kinema serve: models {registry.names} on http://{config.host}:{config.port} "
+          f"({config.limits.workers} worker(s), queue {config.limits.queue}; docs at /docs)", flush=True)
     uvicorn.run(app, host=config.host, port=config.port, log_level=args.log_level, timeout_keep_alive=5)
     return 0

@@ -11,13 +11,8 @@ from kinema.cli._args import positive_float, positive_int
 def register(sub) -> None:
     """Add the `train` sub-command (runtime options: --threads, --device, --bf16, --minutes; docs/training.md)."""
     p = sub.add_parser("train", help="train a motion diffusion model (also: `kinema train plot RUN`)")
-    p.add_argument(
-        "action",
-        nargs="?",
-        default="run",
-        choices=["run", "plot"],
-        help="'plot' writes loss curves of an existing run (give the run folder with --out)",
-    )
+    p.add_argument("action", nargs="?", default="run", choices=["run", "plot"],
+                   help="'plot' writes loss curves of an existing run (give the run folder with --out)")
     p.add_argument("--config", help="model preset: tiny, small (default), small-1stage, paper")
     p.add_argument("--data", type=Path, help="dataset folder from `kinema data build`")
     p.add_argument("--out", type=Path, required=True, help="run folder, e.g. runs/NAME")
@@ -26,54 +21,34 @@ def register(sub) -> None:
     p.add_argument("--lr", type=float)
     p.add_argument("--optimizer", choices=["adamw", "adam-atan2"])
     p.add_argument("--phase1-fraction", type=float, help="share of steps in text-only phase 1 (default 0.5)")
-    p.add_argument(
-        "--content-balance",
-        type=float,
-        help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
-        "square-root balancing of rare contents",
-    )
-    p.add_argument(
-        "--foot-contact",
-        type=float,
-        help="weight of the foot-contact consistency loss (velocity of joints the data says are "
-        "planted -> 0; default 0 = off); docs/training.md",
-    )
+    p.add_argument("--content-balance", type=float,
+                   help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
+                        "square-root balancing of rare contents")
+    p.add_argument("--foot-contact", type=float,
+                   help="weight of the foot-contact consistency loss (velocity of joints the data says are "
+                        "planted -> 0; default 0 = off); docs/training.md")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
     p.add_argument("--text-encoder", help="text encoder id (default minilm-l6-v2)")
     p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
-    p.add_argument(
-        "--init-from",
-        help="fine-tune: start from this model's weights (an exported model, 'default' "
-        "for the shipped one, or a run/checkpoint folder); optimiser and step "
-        "start fresh",
-    )
+    p.add_argument("--init-from", help="fine-tune: start from this model's weights (an exported model, 'default' "
+                                       "for the shipped one, or a run/checkpoint folder); optimiser and step "
+                                       "start fresh")
     p.add_argument("--stop-after", type=int, help="stop after this many steps of this invocation")
-    p.add_argument(
-        "--minutes",
-        type=positive_float,
-        help="time budget: stop cleanly after this many minutes of training (checkpoint written; --resume continues)",
-    )
-    p.add_argument(
-        "--device",
-        default=None,
-        help="torch device to train on: cpu (default) or cuda[:N]; batches are drawn on the CPU "
-        "either way, so a run is reproducible across devices up to float rounding",
-    )
-    p.add_argument(
-        "--bf16",
-        action="store_true",
-        help="bfloat16 autocast of the forward pass (loss and weights stay float32): on CUDA, and on "
-        "CPUs with AMX for presets from 'medium' up (1.22x there; no gain at 'small'; "
-        "docs/training.md)",
-    )
-    p.add_argument(
-        "--threads",
-        type=positive_int,
-        help="torch CPU threads (default: KINEMA_THREADS, else chosen by kinema.runtime; see docs/speed.md)",
-    )
+    p.add_argument("--minutes", type=positive_float,
+                   help="time budget: stop cleanly after this many minutes of training (checkpoint written; "
+                        "--resume continues)")
+    p.add_argument("--device", default=None,
+                   help="torch device to train on: cpu (default) or cuda[:N]; batches are drawn on the CPU "
+                        "either way, so a run is reproducible across devices up to float rounding")
+    p.add_argument("--bf16", action="store_true",
+                   help="bfloat16 autocast of the forward pass (loss and weights stay float32): on CUDA, and on "
+                        "CPUs with AMX for presets from 'medium' up (1.22x there; no gain at 'small'; "
+                        "docs/training.md)")
+    p.add_argument("--threads", type=positive_int,
+                   help="torch CPU threads (default: KINEMA_THREADS, else chosen by kinema.runtime; see docs/speed.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
 
@@ -99,26 +74,17 @@ def _config_from_args(args: argparse.Namespace):
     from kinema.train.trainer import TrainConfig
 
     overrides = {
-        "model": args.config,
-        "steps": args.steps,
-        "batch_size": args.batch_size,
-        "lr": args.lr,
-        "optimizer": args.optimizer,
-        "phase1_fraction": args.phase1_fraction,
-        "ckpt_every": args.ckpt_every,
-        "content_balance": args.content_balance,
-        "log_every": args.log_every,
-        "seed": args.seed,
-        "text_encoder": args.text_encoder,
-        "init_from": _init_path(args.init_from),
+        "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
+        "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
+        "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
+        "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
         "foot_contact": args.foot_contact,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():
         base = TrainConfig.from_dict(json.loads(saved.read_text()))
-        clash = {
-            k: v for k, v in overrides.items() if v is not None and k not in _RESUME_SCHEDULE and getattr(base, k) != v
-        }
+        clash = {k: v for k, v in overrides.items()
+                 if v is not None and k not in _RESUME_SCHEDULE and getattr(base, k) != v}
         if clash:
             raise KinemaError(f"--resume keeps the run's settings; these differ from {saved}: {sorted(clash)}")
         for k in _RESUME_SCHEDULE:
@@ -158,16 +124,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"fine-tuning from {trainer.init_weights(cfg.init_from)}")
     n = trainer.model.num_parameters()
     if trainer.rank == 0:
-        print(
-            f"model {cfg.model}: {n / 1e6:.2f} M parameters; {len(trainer.dataset)} training clips; "
-            f"{cfg.steps} steps (phase 1: {trainer.phase1_steps})"
-        )
+        print(f"model {cfg.model}: {n / 1e6:.2f} M parameters; {len(trainer.dataset)} training clips; "
+              f"{cfg.steps} steps (phase 1: {trainer.phase1_steps})")
     last = trainer.run(progress=not args.no_progress, stop_after=args.stop_after, minutes=args.minutes)
     if trainer.stopped_by_budget and trainer.rank == 0:
-        print(
-            f"time budget of {args.minutes:g} min spent: stopped at step {trainer.step} of {cfg.steps} "
-            "(--resume continues)"
-        )
+        print(f"time budget of {args.minutes:g} min spent: stopped at step {trainer.step} of {cfg.steps} "
+              "(--resume continues)")
     if last is not None:
         print(f"checkpoint: {last}")
     return 0

@@ -59,18 +59,15 @@ def format_timeline_table(data: dict) -> str:
     tl = data.get("timeline")
     if not tl:
         return ""
-    lines = [
-        "| Method | Cases | Segments | R@1 (%) | R@3 (%) | Skate (cm/s) | Speed join / inside (m/s) | "
-        "Acc join / inside (m/s^2) | Acc peak join / inside p99 (m/s^2) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+    lines = ["| Method | Cases | Segments | R@1 (%) | R@3 (%) | Skate (cm/s) | Speed join / inside (m/s) | "
+             "Acc join / inside (m/s^2) | Acc peak join / inside p99 (m/s^2) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for row, v in tl.items():
         lines.append(
             f"| {ROW_LABELS.get(row, row)} | {v['cases']} | {v['segments']} | {_fmt(v['r1'], 100, 1)} | "
             f"{_fmt(v['r3'], 100, 1)} | {_fmt(v['foot_skate_cm_s'])} | {_fmt(v['join_speed'])} / "
             f"{_fmt(v['inside_speed'])} | {_fmt(v['join_acc'], 1, 1)} / {_fmt(v['inside_acc'], 1, 1)} | "
-            f"{_fmt(v['join_acc_peak'], 1, 0)} / {_fmt(v['inside_acc_p99'], 1, 0)} |"
-        )
+            f"{_fmt(v['join_acc_peak'], 1, 0)} / {_fmt(v['inside_acc_p99'], 1, 0)} |")
     return "\n".join(lines)
 
 
@@ -85,73 +82,44 @@ def format_phrasings_table(data: dict) -> str:
         return ""
     summ, cap = ph["summary"], ph["captured"]
     order = {True: "yes", False: "**no**", None: "-"}[summ["speed_ordered"]]
-    lines = [
-        "Probes and held-out captions use verb phrases that no training caption contains "
-        "(kinema.data.phrasings; docs/evaluation.md).",
-        "",
-        f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
-        "mean ± sd (min-max)):",
-        "",
-        "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |",
-        "|---|---:|---:|---|---|",
-    ]
+    lines = ["Probes and held-out captions use verb phrases that no training caption contains "
+             "(kinema.data.phrasings; docs/evaluation.md).", "",
+             f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
+             "mean ± sd (min-max)):", "",
+             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
     for g, v in summ["speed"].items():
         gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
         lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
     caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
-    lines += [
-        "",
-        f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above the one "
-        f"before): {order}. Captured "
-        f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.",
-        "",
-    ]
-    lines += [
-        "| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
-        "|---|---|---:|---:|---:|",
-    ]
-    lines += [
-        f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
-        f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |"
-        for h in summ["hand"]
-    ]
+    lines += ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above the one "
+              f"before): {order}. Captured "
+              f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.", ""]
+    lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
+              "|---|---|---:|---:|---:|"]
+    lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
+              f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |" for h in summ["hand"]]
     flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
     hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % of {v['clips']} clips" for s, v in cap["hand"].items())
-    lines += [
-        "",
-        f"Raised = the named hand gets above the head and higher than the other hand. Captured "
-        f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}. Probes the model "
-        f"warned are far from its training captions: {', '.join(flagged) or 'none'}.",
-    ]
+    lines += ["", f"Raised = the named hand gets above the head and higher than the other hand. Captured "
+              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}. Probes the model "
+              f"warned are far from its training captions: {', '.join(flagged) or 'none'}."]
     ho = ph.get("heldout")
     if ho:
-        lines += [
-            "",
-            f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
-            f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
-            "captions):",
-            "",
-            "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID | Content acc. (%) |",
-            "|---|---:|---:|---:|---:|",
-        ]
-        names = {
-            "ground_truth": "Ground truth",
-            "template": "Model (raw), template prompt",
-            "heldout": "Model (raw), held-out prompt",
-        }
+        lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
+                  f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
+                  "captions):",
+                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID | "
+                  "Content acc. (%) |", "|---|---:|---:|---:|---:|"]
+        names = {"ground_truth": "Ground truth", "template": "Model (raw), template prompt",
+                 "heldout": "Model (raw), held-out prompt"}
         for row, v in ho["rows"].items():
             r_t = f"{_fmt(v['r1_template'], 100, 1)} / {_fmt(v['r3_template'], 100, 1)}"
             r_h = f"{_fmt(v['r1_heldout'], 100, 1)} / {_fmt(v['r3_heldout'], 100, 1)}"
-            lines.append(
-                f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} | "
-                f"{_fmt(v.get('content_acc'), 100, 1)} |"
-            )
-        lines += [
-            "",
-            "Content acc. = the nearest ground-truth clip of the text cases (retrieval motion embedding) "
-            "has the case's content label (the ground truth: its nearest other clip); no captions involved, "
-            "so style words and the retrieval model's reading of paraphrases do not count.",
-        ]
+            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} | "
+                         f"{_fmt(v.get('content_acc'), 100, 1)} |")
+        lines += ["", "Content acc. = the nearest ground-truth clip of the text cases (retrieval motion embedding) "
+                  "has the case's content label (the ground truth: its nearest other clip); no captions involved, "
+                  "so style words and the retrieval model's reading of paraphrases do not count."]
     return "\n".join(lines)
 
 
@@ -159,8 +127,7 @@ def _markdown(data: dict) -> str:
     meta, timing, text = data["meta"], data["timing"], data["text"]
     rows = list(data["table"])
     out = [
-        "# kinema evaluation report",
-        "",
+        "# kinema evaluation report", "",
         f"Model `{meta['model']}` at {meta['fps']:g} fps; {meta['num_cases']} cases from "
         f"{', '.join(meta['data'])} ({', '.join(meta['split'])}); seed {meta['seed']}, "
         f"DDIM steps {meta['steps'] if meta['steps'] is not None else 'model default'}; guidance "
@@ -168,77 +135,44 @@ def _markdown(data: dict) -> str:
         f"root displacement {'on' if meta.get('root_displacement') else 'off'}, "
         f"root smoothing {meta.get('root_smoothing', 0.0):g} s, "
         f"joint displacement {meta.get('joint_sigma', 0.0):g} s. "
-        "Protocol and metric definitions: docs/evaluation.md.",
-        "",
-        "## Summary (layout of Kimodo Table 1)",
-        "",
-        format_table(data),
-        "",
+        "Protocol and metric definitions: docs/evaluation.md.", "",
+        "## Summary (layout of Kimodo Table 1)", "",
+        format_table(data), "",
         f"R@k and FID use the retrieval model over the {text['cases']} text cases (R@k 'whole' ranks among all of "
         f"them, 'b32' in random batches of {text['r_batch_size']}); skate, contact and jerk are over text cases; "
         "constraint errors average over the cases with that constraint type; pelvis p95 pools every root-2D "
-        "keyframe. FID is not scaled (Kimodo prints FID x 100).",
-        "",
-        "## Distribution",
-        "",
-        "| Method | Diversity | Multimodality | Coverage AUC | Novelty AUC |",
-        "|---|---:|---:|---:|---:|",
+        "keyframe. FID is not scaled (Kimodo prints FID x 100).", "",
+        "## Distribution", "",
+        "| Method | Diversity | Multimodality | Coverage AUC | Novelty AUC |", "|---|---:|---:|---:|---:|",
     ]
     for row in rows:
         v = data["table"][row]
-        out.append(
-            f"| {ROW_LABELS.get(row, row)} | {_fmt(v.get('diversity'), 1, 3)} | "
-            f"{_fmt(v.get('multimodality'), 1, 3)} | {_fmt(v.get('coverage_auc'), 1, 3)} | "
-            f"{_fmt(v.get('novelty_auc'), 1, 3)} |"
-        )
-    out += [
-        "",
-        "## By case kind",
-        "",
-        "| Kind | Method | Cases | Skate (cm/s) | Contact | Full-body (cm) | EE pos (cm) | EE rot (deg) | "
-        "Root 2D (cm) | Pelvis p95 (cm) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+        out.append(f"| {ROW_LABELS.get(row, row)} | {_fmt(v.get('diversity'), 1, 3)} | "
+                   f"{_fmt(v.get('multimodality'), 1, 3)} | {_fmt(v.get('coverage_auc'), 1, 3)} | "
+                   f"{_fmt(v.get('novelty_auc'), 1, 3)} |")
+    out += ["", "## By case kind", "",
+            "| Kind | Method | Cases | Skate (cm/s) | Contact | Full-body (cm) | EE pos (cm) | EE rot (deg) | "
+            "Root 2D (cm) | Pelvis p95 (cm) |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     kinds = list(dict.fromkeys(k for row in rows for k in data["by_kind"].get(row, {})))
     for kind in kinds:
         for row in rows:
             v = data["by_kind"][row].get(kind)
             if v:
-                cells = [
-                    _fmt(v[k]) if k != "contact_acc" else _fmt(v[k], 1, 3)
-                    for k in (
-                        "foot_skate_cm_s",
-                        "contact_acc",
-                        "fullbody_pos_cm",
-                        "ee_pos_cm",
-                        "ee_rot_deg",
-                        "root2d_pos_cm",
-                        "pelvis_p95_cm",
-                    )
-                ]
+                cells = [_fmt(v[k]) if k != "contact_acc" else _fmt(v[k], 1, 3)
+                         for k in ("foot_skate_cm_s", "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
+                                   "root2d_pos_cm", "pelvis_p95_cm")]
                 out.append(f"| {kind} | {ROW_LABELS.get(row, row)} | {v['cases']} | " + " | ".join(cells) + " |")
     if data.get("timeline"):
         n = next(iter(data["timeline"].values()))["segments"]
-        out += [
-            "",
-            "## Timelines",
-            "",
-            format_timeline_table(data),
-            "",
-            "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
-            f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
-            "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md).",
-        ]
+        out += ["", "## Timelines", "", format_timeline_table(data), "",
+                "Each timeline case chains 2-4 test captions; R@k ranks each segment's frames against the captions "
+                f"of all {n} timeline segments (chance R@3 {300 / max(n, 1):.1f} %); joins are the frames from "
+                "0.5 s before to 0.25 s after each segment boundary (docs/evaluation.md)."]
     out += ["", "## Prompts in other words", "", format_phrasings_table(data)] if data.get("phrasings") else []
-    out += [
-        "",
-        "## Timing",
-        "",
-        f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
-        f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "
-        f"{meta['machine']}).",
-        "",
-    ]
+    out += ["", "## Timing", "",
+            f"Wall time {timing['wall_seconds']:.1f} s, of which generation {timing['generate_seconds']:.1f} s "
+            f"({timing['seconds_per_case']:.2f} s per generated motion, {meta['torch_threads']} torch threads, "
+            f"{meta['machine']}).", ""]
     plots = data.get("plots", {})
     if plots:
         out += ["## Plots", ""]
@@ -271,11 +205,8 @@ def plot_keyframes(data: dict, path: Path) -> bool:
         info = data["by_keyframes"][kind]
         ax = fig.add_subplot(1, len(kinds), n + 1)
         for row in data["table"]:
-            pts = [
-                (c["num_keyframes"], c["metrics"][row][info["metric"]])
-                for c in data["cases"]
-                if c["kind"] == kind and c["num_keyframes"] and c["metrics"][row][info["metric"]] is not None
-            ]
+            pts = [(c["num_keyframes"], c["metrics"][row][info["metric"]]) for c in data["cases"]
+                   if c["kind"] == kind and c["num_keyframes"] and c["metrics"][row][info["metric"]] is not None]
             if pts:
                 ax.scatter(*zip(*pts, strict=True), s=12, alpha=0.4, color=COLOURS.get(row))
             line = [(p["num_keyframes"], p["error"]) for p in info[row] if p["error"] is not None]
@@ -296,10 +227,8 @@ def plot_foot_skate(data: dict, path: Path) -> bool:
     from matplotlib.figure import Figure
 
     rows = list(data["table"])
-    values = [
-        [c["metrics"][r]["foot_skate_cm_s"] for c in data["cases"] if c["metrics"][r]["foot_skate_samples"]]
-        for r in rows
-    ]
+    values = [[c["metrics"][r]["foot_skate_cm_s"] for c in data["cases"] if c["metrics"][r]["foot_skate_samples"]]
+              for r in rows]
     if not any(values):
         return False
     fig = Figure(figsize=(5.5, 3.6), dpi=100, layout="constrained")
@@ -336,9 +265,8 @@ def plot_phrasings(data: dict, path: Path) -> bool:
             ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
     for n, r in enumerate(speed):
         ax.scatter([n] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1")
-    ax.set_xticks(
-        range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right", fontsize=7
-    )
+    ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
+                  fontsize=7)
     ax.set_ylabel("pelvis ground speed (m/s)")
     ax.set_title("Speed probes (raw, every sample)")
     ax.grid(alpha=0.3, axis="y")
@@ -346,22 +274,13 @@ def plot_phrasings(data: dict, path: Path) -> bool:
         ax.legend(fontsize=7, loc="upper left")
     ax = fig.add_subplot(1, 2, 2)
     for n, r in enumerate(hand):
-        ax.scatter(
-            [n - 0.1] * len(r["hand_over_head"]),
-            r["hand_over_head"],
-            s=18,
-            color="#1f6fd1",
-            label="named hand" if n == 0 else None,
-        )
-        ax.scatter(
-            [n + 0.1] * len(r["other_over_head"]),
-            r["other_over_head"],
-            s=18,
-            color="#999999",
-            label="other hand" if n == 0 else None,
-        )
+        ax.scatter([n - 0.1] * len(r["hand_over_head"]), r["hand_over_head"], s=18, color="#1f6fd1",
+                   label="named hand" if n == 0 else None)
+        ax.scatter([n + 0.1] * len(r["other_over_head"]), r["other_over_head"], s=18, color="#999999",
+                   label="other hand" if n == 0 else None)
     ax.axhline(0.0, color="black", lw=0.8)
-    ax.set_xticks(range(len(hand)), [f"{r['group']}: {r['prompt']}" for r in hand], rotation=35, ha="right", fontsize=7)
+    ax.set_xticks(range(len(hand)), [f"{r['group']}: {r['prompt']}" for r in hand], rotation=35, ha="right",
+                  fontsize=7)
     ax.set_ylabel("highest over the head (m)")
     ax.set_title("Hand probes (raw; > 0 = above the head)")
     ax.grid(alpha=0.3, axis="y")

@@ -110,15 +110,8 @@ class RetrievalModel(nn.Module):
     sentence embeddings :meth:`encode_text` expects.
     """
 
-    def __init__(
-        self,
-        config: RetrievalConfig,
-        layout: FeatureLayout,
-        stats: NormStats,
-        fps: float,
-        text_encoder_id: str,
-        info: dict | None = None,
-    ):
+    def __init__(self, config: RetrievalConfig, layout: FeatureLayout, stats: NormStats, fps: float,
+                 text_encoder_id: str, info: dict | None = None):
         super().__init__()
         c = self.config = config
         self.layout, self.fps, self.text_encoder_id = layout, float(fps), text_encoder_id
@@ -127,17 +120,12 @@ class RetrievalModel(nn.Module):
         self.register_buffer("std", stats.std.clone().float(), persistent=False)
         self.input = nn.Linear(c.frames_per_token * layout.dim, c.width)
         self.cls = nn.Parameter(torch.randn(c.width) * 0.02)
-        layer = nn.TransformerEncoderLayer(
-            c.width, c.heads, c.ff_mult * c.width, c.dropout, activation="gelu", batch_first=True, norm_first=True
-        )
+        layer = nn.TransformerEncoderLayer(c.width, c.heads, c.ff_mult * c.width, c.dropout, activation="gelu",
+                                           batch_first=True, norm_first=True)
         self.encoder = nn.TransformerEncoder(layer, c.layers, enable_nested_tensor=False)
         self.motion_head = nn.Sequential(nn.LayerNorm(c.width), nn.Linear(c.width, c.embed_dim))
-        self.text_head = nn.Sequential(
-            nn.Linear(c.text_dim, c.text_hidden),
-            nn.GELU(),
-            nn.Dropout(c.dropout),
-            nn.Linear(c.text_hidden, c.embed_dim),
-        )
+        self.text_head = nn.Sequential(nn.Linear(c.text_dim, c.text_hidden), nn.GELU(), nn.Dropout(c.dropout),
+                                       nn.Linear(c.text_hidden, c.embed_dim))
 
     @property
     def stats(self) -> NormStats:
@@ -148,9 +136,8 @@ class RetrievalModel(nn.Module):
         x = canonicalize_start(features.float(), self.layout, angle=0.0)
         return (x - self.mean) / self.std
 
-    def encode_motion(
-        self, features: torch.Tensor, lengths: torch.Tensor | None = None, chunk: int = 32
-    ) -> torch.Tensor:
+    def encode_motion(self, features: torch.Tensor, lengths: torch.Tensor | None = None,
+                      chunk: int = 32) -> torch.Tensor:
         """(B, E) unit embeddings of unnormalised features (B, T, D); ``lengths`` (B,) marks real frames.
 
         Frames past a clip's length are ignored (masked). For speed the batch is sorted by length and
@@ -177,9 +164,8 @@ class RetrievalModel(nn.Module):
         B, T, D = x.shape
         f = self.config.frames_per_token
         last = x[torch.arange(B), lengths.to(x.device) - 1]  # frames past the end repeat the last real one,
-        x = torch.where(
-            torch.arange(T, device=x.device)[None, :, None] < lengths.to(x.device)[:, None, None], x, last[:, None]
-        )  # so what padding holds never matters
+        x = torch.where(torch.arange(T, device=x.device)[None, :, None] < lengths.to(x.device)[:, None, None],
+                        x, last[:, None])  # so what padding holds never matters
         if T % f:  # whole tokens only
             x = torch.cat([x, x[:, -1:].expand(B, f - T % f, D)], dim=1)
         x = x.reshape(B, -1, f * D)
@@ -221,9 +207,8 @@ class RetrievalModel(nn.Module):
         The encoder is built once per (id, cache_dir) and kept, since MiniLM loads its weights on first use."""
         was_training = self.training
         self.eval()
-        out = self.encode_text(
-            _text_encoder(self.text_encoder_id, None if cache_dir is None else str(cache_dir)).encode(texts)
-        )
+        out = self.encode_text(_text_encoder(self.text_encoder_id, None if cache_dir is None else str(cache_dir))
+                               .encode(texts))
         self.train(was_training)
         return out
 
@@ -278,10 +263,8 @@ def load_retrieval(path: str | Path | None = None) -> RetrievalModel:
     path = Path(path) if path is not None else default_retrieval_path()
     cfg_path, weights = path / CONFIG_FILE, path / WEIGHTS_FILE
     if not cfg_path.is_file() or not weights.is_file():
-        raise KinemaError(
-            f"{path}: no retrieval model (expected {CONFIG_FILE} and {WEIGHTS_FILE}); "
-            "train one with `kinema retrieval train`"
-        )
+        raise KinemaError(f"{path}: no retrieval model (expected {CONFIG_FILE} and {WEIGHTS_FILE}); "
+                          "train one with `kinema retrieval train`")
     try:
         meta = json.loads(cfg_path.read_text(encoding="utf-8"))
         if meta.get("format") != FORMAT:
@@ -293,9 +276,8 @@ def load_retrieval(path: str | Path | None = None) -> RetrievalModel:
         layout = FeatureLayout(int(meta["feature_layout"]["num_joints"]))
         if layout.to_dict() != meta["feature_layout"]:
             raise KinemaError(f"{cfg_path}: feature layout does not match this kinema version")
-        model = RetrievalModel(
-            config, layout, NormStats.from_dict(meta["stats"]), meta["fps"], meta["text_encoder"], meta.get("info")
-        )
+        model = RetrievalModel(config, layout, NormStats.from_dict(meta["stats"]), meta["fps"],
+                               meta["text_encoder"], meta.get("info"))
         state = load_file(str(weights))
         model.load_state_dict({k: v.float() for k, v in state.items()})
     except KinemaError:

@@ -101,13 +101,10 @@ class _Extractor:
         return x.double().tolist()
 
     def fullbody(self, frames: list[int]) -> dict:
-        return {
-            "type": "fullbody",
-            "frame_indices": frames,
-            "local_joints_rot": self._list(quat_to_axis_angle(self.m.local_rotations[frames].double())),
-            "root_positions": self._list(self.m.root_translation[frames]),
-            "smooth_root_2d": self._list(self.root_xz[frames]),
-        }
+        return {"type": "fullbody", "frame_indices": frames,
+                "local_joints_rot": self._list(quat_to_axis_angle(self.m.local_rotations[frames].double())),
+                "root_positions": self._list(self.m.root_translation[frames]),
+                "smooth_root_2d": self._list(self.root_xz[frames])}
 
     def effector(self, name: str, frames: list[int], what: str) -> dict:
         j = _joint_index(self.m, name)
@@ -179,60 +176,23 @@ def _constraints_for(kind: str, ex: _Extractor, rng: random.Random) -> tuple[lis
 
 
 # ----------------------------------------------------------------------------- the suite
-def _case(
-    idx: int,
-    kind: str,
-    rec: dict,
-    data_dir: Path,
-    split: str,
-    fps: float,
-    start: int,
-    frames: int,
-    seconds: float,
-    with_text: bool,
-    perturbed: bool,
-    heading: float,
-    offset,
-    constraints,
-    parts,
-    num_keyframes,
-) -> dict:
+def _case(idx: int, kind: str, rec: dict, data_dir: Path, split: str, fps: float, start: int, frames: int,
+          seconds: float, with_text: bool, perturbed: bool, heading: float, offset, constraints, parts,
+          num_keyframes) -> dict:
     caption = rec["captions"][0] if rec["captions"] else ""
     return {
-        "id": f"{idx:04d}-{kind}",
-        "kind": kind,
-        "parts": parts,
-        "clip_id": rec["clip_id"],
-        "caption": caption,
-        "prompt": caption if with_text else "",
-        "with_text": with_text,
-        "seconds": seconds,
-        "num_frames": round(seconds * fps),
-        "fps": fps,
-        "heading": heading,
-        "perturbed": perturbed,
-        "num_keyframes": num_keyframes,
-        "source": {
-            "data": str(data_dir),
-            "split": split,
-            "clip_id": rec["clip_id"],
-            "start": start,
-            "frames": frames,
-            "heading": heading,
-            "offset": list(offset),
-        },
+        "id": f"{idx:04d}-{kind}", "kind": kind, "parts": parts, "clip_id": rec["clip_id"],
+        "caption": caption, "prompt": caption if with_text else "", "with_text": with_text,
+        "seconds": seconds, "num_frames": round(seconds * fps), "fps": fps, "heading": heading,
+        "perturbed": perturbed, "num_keyframes": num_keyframes,
+        "source": {"data": str(data_dir), "split": split, "clip_id": rec["clip_id"], "start": start,
+                   "frames": frames, "heading": heading, "offset": list(offset)},
         "constraints": constraints,
     }
 
 
-def build_suite(
-    data_dir,
-    split: str = "test",
-    num_cases: int = 100,
-    seed: int = 0,
-    text_fraction: float = 0.3,
-    perturb_fraction: float = PERTURB_FRACTION,
-) -> list[dict]:
+def build_suite(data_dir, split: str = "test", num_cases: int = 100, seed: int = 0,
+                text_fraction: float = 0.3, perturb_fraction: float = PERTURB_FRACTION) -> list[dict]:
     """``num_cases`` cases drawn deterministically (for ``seed``) from the clips of ``split``.
 
     About ``text_fraction`` of them are ``text`` cases (distinct clips; at least one); the rest cycle
@@ -253,9 +213,8 @@ def build_suite(
     n_text = max(1, min(len(ds), round(num_cases * text_fraction))) if long_enough else num_cases
     n_text = min(n_text, num_cases)
     if num_cases > n_text and not long_enough:
-        raise KinemaError(
-            f"{data_dir}: no clip of split {split!r} lasts {MIN_SECONDS:g} s (needed for constrained cases)"
-        )
+        raise KinemaError(f"{data_dir}: no clip of split {split!r} lasts {MIN_SECONDS:g} s "
+                          "(needed for constrained cases)")
     cases: list[dict] = []
     for k in range(n_text):
         i = order[k % len(order)]
@@ -263,26 +222,8 @@ def build_suite(
         n = min(rec["length"], hi)
         start = rng.randint(0, rec["length"] - n)
         seconds = min(max(n, lo), hi) / fps
-        cases.append(
-            _case(
-                len(cases),
-                "text",
-                rec,
-                data_dir,
-                split,
-                fps,
-                start,
-                n,
-                seconds,
-                True,
-                False,
-                0.0,
-                (0.0, 0.0),
-                [],
-                [],
-                None,
-            )
-        )
+        cases.append(_case(len(cases), "text", rec, data_dir, split, fps, start, n, seconds, True, False,
+                           0.0, (0.0, 0.0), [], [], None))
     counts = dict.fromkeys(CONSTRAINED_KINDS, 0)
     for k in range(num_cases - n_text):
         kind = CONSTRAINED_KINDS[k % len(CONSTRAINED_KINDS)]
@@ -294,11 +235,8 @@ def build_suite(
         start = rng.randint(0, rec["length"] - n)
         perturbed = rng.random() < perturb_fraction
         heading = rng.uniform(-math.pi, math.pi) if perturbed else 0.0
-        offset = (
-            (rng.uniform(-PERTURB_METRES, PERTURB_METRES), rng.uniform(-PERTURB_METRES, PERTURB_METRES))
-            if perturbed
-            else (0.0, 0.0)
-        )
+        offset = (rng.uniform(-PERTURB_METRES, PERTURB_METRES), rng.uniform(-PERTURB_METRES, PERTURB_METRES)) \
+            if perturbed else (0.0, 0.0)
         feats = ds[ci]["features"][start : start + n]
         ex = _Extractor(ground_truth_motion(feats, ds, heading, offset))
         parts = sorted(rng.sample(_MIXABLE, 2), key=_MIXABLE.index) if kind == "mixed" else [kind]
@@ -307,26 +245,8 @@ def build_suite(
             cs, kk = _constraints_for(part, ex, rng)
             constraints += cs
             nk = kk if kind != "mixed" else None
-        cases.append(
-            _case(
-                len(cases),
-                kind,
-                rec,
-                data_dir,
-                split,
-                fps,
-                start,
-                n,
-                n / fps,
-                with_text,
-                perturbed,
-                heading,
-                offset,
-                constraints,
-                parts,
-                nk,
-            )
-        )
+        cases.append(_case(len(cases), kind, rec, data_dir, split, fps, start, n, n / fps, with_text, perturbed,
+                           heading, offset, constraints, parts, nk))
     return cases
 
 
@@ -374,18 +294,13 @@ def case_targets(case: dict, skeleton) -> dict:
         t = c["type"]
         if t == "fullbody":
             q = axis_angle_to_quat(torch.tensor(c["local_joints_rot"], dtype=torch.float64))
-            _, P = forward_kinematics(
-                q, torch.tensor(c["root_positions"], dtype=torch.float64), skeleton.offsets.double(), skeleton.parents
-            )
+            _, P = forward_kinematics(q, torch.tensor(c["root_positions"], dtype=torch.float64),
+                                      skeleton.offsets.double(), skeleton.parents)
             out["fullbody"].append((frames, P))
         elif t in EFFECTORS or t == "end-effector":
             name = c.get("joint", t)
-            role = {
-                "left-foot": "left_ankle",
-                "right-foot": "right_ankle",
-                "left_foot": "left_ankle",
-                "right_foot": "right_ankle",
-            }.get(name, _effector_role(name))
+            role = {"left-foot": "left_ankle", "right-foot": "right_ankle", "left_foot": "left_ankle",
+                    "right_foot": "right_ankle"}.get(name, _effector_role(name))
             j = skeleton.roles[role] if role in skeleton.roles else skeleton.index(name)
             pos = torch.tensor(c["positions"], dtype=torch.float64) if "positions" in c else None
             rot = axis_angle_to_quat(torch.tensor(c["rotations"], dtype=torch.float64)) if "rotations" in c else None

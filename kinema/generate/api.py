@@ -195,15 +195,13 @@ class KinemaModel:
         planner = self._planner(keyjoint_model, plan, bound)
         obj_report: dict = {}
         if bound:
-            settings = objective_settings(
-                self._settings(plan.segments[0].num_frames, guide, steps), steps_given, DEFAULT_DDIM_STEPS
-            )
+            settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
+                                          DEFAULT_DDIM_STEPS)
             steps = settings.steps
             opt = NoiseOptSettings(DEFAULT_ITERATIONS if objective_steps is None else objective_steps)
             text = self._text(plan.segments[0].prompt, texts)
-            raw, plans, obj_report = sample_with_objectives(
-                self, plan, settings, text, g, heading, samples, bound, opt, split_progress(progress)[0]
-            )
+            raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
+                                                            opt, split_progress(progress)[0])
         else:
             raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner, texts)
             plans = [plan] * samples
@@ -218,16 +216,9 @@ class KinemaModel:
         warnings = [m.warning() for m in matches if not m.known] + obj_warnings
         warnings += [w for r in residuals for w in r.get("warnings", [])]
         report = GenerationReport(
-            seconds=time.perf_counter() - t0,
-            segments=len(segments),
-            frames=plan.total_frames,
-            steps=steps,
-            guidance=(guide.w_text, guide.w_constr),
-            seed=seed,
-            residuals=residuals,
-            warnings=warnings,
-            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} for m in matches],
-            objectives=obj_report,
+            seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
+            guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
+            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} for m in matches], objectives=obj_report,
         )
         return GenerationResult(motions, report)
 
@@ -239,10 +230,8 @@ class KinemaModel:
         if bound:
             raise KinemaError("keyjoint_model (two-stage control) cannot be combined with objectives")
         if len(plan.segments) > 1:
-            raise KinemaError(
-                f"keyjoint_model (two-stage control) plans one segment of up to "
-                f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments"
-            )
+            raise KinemaError(f"keyjoint_model (two-stage control) plans one segment of up to "
+                              f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
         return keyjoint_model if isinstance(keyjoint_model, KeyjointPlanner) else KeyjointPlanner.load(keyjoint_model)
 
     def _check_counts(self, samples, steps, seed) -> tuple[int, int, int]:
@@ -252,10 +241,8 @@ class KinemaModel:
         if steps is None:
             steps = self.loaded.sampler.num_inference_steps
         if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= self.max_steps:
-            raise KinemaError(
-                f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
-                f"diffusion length), got {steps!r}"
-            )
+            raise KinemaError(f"steps must be an integer in [1, {self.max_steps}] (the model's trained "
+                              f"diffusion length), got {steps!r}")
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**64:
             raise KinemaError(f"seed must be an integer in [0, 2**64), got {seed!r}")
         return samples, steps, seed
@@ -283,10 +270,8 @@ class KinemaModel:
             raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {guidance!r}") from None
         for name, w in (("w_text", w_text), ("w_constr", w_constr)):
             if not (math.isfinite(w) and w >= 0):
-                raise KinemaError(
-                    f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
-                    f"conditional model alone, > 1 = stronger), got {w}"
-                )
+                raise KinemaError(f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
+                                  f"conditional model alone, > 1 = stronger), got {w}")
         return Guidance(mode="separated", w_text=w_text, w_constr=w_constr)
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
@@ -299,9 +284,8 @@ class KinemaModel:
     def ground_prompts(self, prompts: list[str], grounding=None) -> dict[str, Grounded]:
         """Per distinct non-empty prompt, the embedding to condition on (kinema.model.grounding)."""
         settings = self.grounding_settings(grounding)
-        return {
-            p: ground(p, self.encode_text(p), self.known_prompts, settings) for p in dict.fromkeys(prompts) if p.strip()
-        }
+        return {p: ground(p, self.encode_text(p), self.known_prompts, settings)
+                for p in dict.fromkeys(prompts) if p.strip()}
 
     def _text(self, prompt: str, texts: dict[str, Grounded] | None) -> torch.Tensor | None:
         """The conditioning embedding ``(1, E)`` of a prompt (None for no text), grounded by the model's
@@ -325,28 +309,13 @@ class KinemaModel:
         return plan.postprocess(motion) if postprocess else (motion, {})
 
     def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
-        return SampleSettings(
-            num_frames,
-            guide,
-            steps,
-            root_displacement=self.root_displacement,
-            anchor_start=self.root_displacement,
-            root_smoothing=self.root_smoothing,
-            joint_sigma=self.joint_sigma,
-        )
+        return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,
+                              anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
+                              joint_sigma=self.joint_sigma)
 
-    def _sample_batch(
-        self,
-        plan: SegmentPlan,
-        guide,
-        steps,
-        g,
-        heading,
-        samples: int,
-        progress,
-        planner: KeyjointPlanner | None = None,
-        texts: dict[str, Grounded] | None = None,
-    ) -> list[Motion]:
+    def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress,
+                      planner: KeyjointPlanner | None = None,
+                      texts: dict[str, Grounded] | None = None) -> list[Motion]:
         """``samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every
         join's window regenerated between the two (kinema.generate.segments), one batch of all samples per pass.
 
@@ -372,21 +341,9 @@ class KinemaModel:
             motions = [splice(m, w, jn.lo, jn.fade_in, jn.fade_out) for m, w in zip(motions, windows, strict=True)]
         return motions
 
-    def _sample_pass(
-        self,
-        prompt: str,
-        rows,
-        num_frames: int,
-        on_step,
-        *,
-        guide,
-        steps,
-        g,
-        bar,
-        planner: KeyjointPlanner | None,
-        texts: dict[str, Grounded] | None = None,
-        strength: float = 1.0,
-    ) -> list[Motion]:
+    def _sample_pass(self, prompt: str, rows, num_frames: int, on_step, *, guide, steps, g, bar,
+                     planner: KeyjointPlanner | None, texts: dict[str, Grounded] | None = None,
+                     strength: float = 1.0) -> list[Motion]:
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
         rep, L = self.representation, self.loaded
         targets, shift = stack_targets(rows)
@@ -419,9 +376,8 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     return path
 
 
-def load_model(
-    name_or_path: str | Path = "default", text_cache: Path | None = None, text_memory: int = TEXT_MEMORY_ENTRIES
-) -> KinemaModel | AnyRigModel:
+def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
+               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel | AnyRigModel:
     """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
@@ -437,8 +393,6 @@ def load_model(
         return AnyRigModel(loaded, encoder)  # a model for any rig (kinema.generate.anyrig_api)
     known = KnownPrompts.load(loaded.path)
     if known is not None and known.encoder_id != loaded.text_encoder_id:
-        raise KinemaError(
-            f"{path}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
-            f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)"
-        )
+        raise KinemaError(f"{path}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
+                          f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)")
     return KinemaModel(loaded, encoder, known)

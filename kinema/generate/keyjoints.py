@@ -40,14 +40,8 @@ class KeyjointTargets:
     x/z target.
     """
 
-    def __init__(
-        self,
-        rep: FlatRepresentation,
-        x_tgt: torch.Tensor,
-        mask: torch.Tensor,
-        world_xz: torch.Tensor | None = None,
-        world_mask: torch.Tensor | None = None,
-    ):
+    def __init__(self, rep: FlatRepresentation, x_tgt: torch.Tensor, mask: torch.Tensor,
+                 world_xz: torch.Tensor | None = None, world_mask: torch.Tensor | None = None):
         jp = rep.split(x_tgt)["joint_pos"]
         m = (rep.split(mask)["joint_pos"] > 0).clone()
         rx, rz = rep.root_xz
@@ -85,9 +79,8 @@ def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames:
     return spread / norm[..., None]
 
 
-def joint_displacement(
-    feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation, sigma_frames: float
-) -> torch.Tensor:
+def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation,
+                       sigma_frames: float) -> torch.Tensor:
     """Metres to add to the ``joint_pos`` channels of unnormalised ``feats (B, T, D)``: ``(B, T, J, 3)``.
 
     Keyjoint residuals (target - FK joint, posed by ``rep.pose``) spread over time (see module); frames
@@ -100,9 +93,8 @@ def joint_displacement(
     return gaussian_spread(residual, m.amax(-1) > 0, sigma_frames)
 
 
-def displace_joints(
-    feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation, sigma_frames: float
-) -> torch.Tensor:
+def displace_joints(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepresentation,
+                    sigma_frames: float) -> torch.Tensor:
     """Unnormalised ``feats (B, T, D)`` with :func:`joint_displacement` added to ``joint_pos``."""
     out = feats.clone()
     jp = rep.joint_pos

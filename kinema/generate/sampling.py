@@ -68,12 +68,8 @@ JOINT_SIGMA_SECONDS = 0.6
 
 
 def displace_root(
-    x0: torch.Tensor,
-    tgt: torch.Tensor | None,
-    mask: torch.Tensor | None,
-    anchor_start: bool = True,
-    origin: tuple[float, float] = (0.0, 0.0),
-    channels: Sequence[int] = (0, 2),
+    x0: torch.Tensor, tgt: torch.Tensor | None, mask: torch.Tensor | None, anchor_start: bool = True,
+    origin: tuple[float, float] = (0.0, 0.0), channels: Sequence[int] = (0, 2),
 ) -> torch.Tensor:
     """Move the predicted smoothed-root x/z trajectory onto its targets with a smooth displacement.
 
@@ -126,11 +122,7 @@ def displace_root(
 
 
 def pelvis_offset_targets(
-    x0: torch.Tensor,
-    tgt: torch.Tensor,
-    mask: torch.Tensor,
-    rep: FlatRepresentation,
-    sigma_frames: float,
+    x0: torch.Tensor, tgt: torch.Tensor, mask: torch.Tensor, rep: FlatRepresentation, sigma_frames: float,
 ) -> torch.Tensor:
     """Root x/z targets for :func:`displace_root` that put the *smoothed pelvis* on the target.
 
@@ -183,20 +175,9 @@ class SampleTargets:
 
     def rows(self, lo: int, hi: int) -> SampleTargets:
         """Rows ``[lo, hi)`` of every tensor."""
-        return SampleTargets(
-            *(
-                None if v is None else v[lo:hi]
-                for v in (
-                    self.c_dir,
-                    self.x_tgt,
-                    self.mask,
-                    self.world_xz,
-                    self.world_mask,
-                    self.context_mask,
-                    self.start,
-                )
-            )
-        )
+        return SampleTargets(*(None if v is None else v[lo:hi] for v in
+                               (self.c_dir, self.x_tgt, self.mask, self.world_xz, self.world_mask,
+                                self.context_mask, self.start)))
 
     def pruned(self) -> SampleTargets:
         """Without world targets when none is set, and without a mask that constrains nothing."""
@@ -226,17 +207,9 @@ class SampleSettings:
 
 @torch.no_grad()
 def sample_features(
-    denoiser: Denoiser,
-    sampler: DDIMSampler,
-    rep: FlatRepresentation,
-    text_emb: torch.Tensor | None,
-    targets: SampleTargets,
-    settings: SampleSettings,
-    *,
-    generator: torch.Generator | None = None,
-    progress: bool = False,
-    init_noise: torch.Tensor | None = None,
-    max_batch_frames: int = MAX_BATCH_FRAMES,
+    denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+    targets: SampleTargets, settings: SampleSettings, *, generator: torch.Generator | None = None,
+    progress: bool = False, init_noise: torch.Tensor | None = None, max_batch_frames: int = MAX_BATCH_FRAMES,
     on_step: Callable[[int, int], None] | None = None,
 ) -> torch.Tensor:
     """Run the reverse process for ``targets.batch_size`` motions of ``settings.num_frames`` frames;
@@ -269,28 +242,15 @@ def sample_features(
         step = _StepCorrections(denoiser, rep, text, targets.rows(lo, lo + chunk), settings)
         count = None if on_step is None else (lambda d, n, c=c: on_step(c * n + d, len(starts) * n))
         start = None if targets.start is None else rep.normalize(targets.start[lo : lo + chunk].float())
-        x = sampler.sample(
-            step,
-            (step.batch, T, D),
-            generator=generator,
-            progress=progress,
-            num_inference_steps=settings.steps,
-            init_noise=init_noise[lo : lo + chunk],
-            on_step=count,
-            start_x0=start,
-            strength=settings.strength,
-        )
+        x = sampler.sample(step, (step.batch, T, D), generator=generator, progress=progress,
+                           num_inference_steps=settings.steps, init_noise=init_noise[lo : lo + chunk], on_step=count,
+                           start_x0=start, strength=settings.strength)
         out.append(rep.denormalize(x))
     return torch.cat(out)
 
 
-def clean_estimate_fn(
-    denoiser: Denoiser,
-    rep: FlatRepresentation,
-    text_emb: torch.Tensor | None,
-    targets: SampleTargets,
-    settings: SampleSettings,
-):
+def clean_estimate_fn(denoiser: Denoiser, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+                      targets: SampleTargets, settings: SampleSettings):
     """The clean-estimate function ``(x_t, t) -> x0`` (normalised) that :func:`sample_features` hands to
     DDIM: guided denoiser plus the corrections of the module docstring. For callers that run their own
     DDIM loop, e.g. a differentiable one (kinema.objectives.optimize); every operation is differentiable."""
@@ -310,14 +270,8 @@ class _StepCorrections:
     """The clean-estimate function DDIM calls at every step for one chunk of rows: guided denoiser, then
     root smoothing, root displacement, keyjoint displacement and world-target refresh (module docstring)."""
 
-    def __init__(
-        self,
-        denoiser: Denoiser,
-        rep: FlatRepresentation,
-        text_emb: torch.Tensor | None,
-        targets: SampleTargets,
-        settings: SampleSettings,
-    ):
+    def __init__(self, denoiser: Denoiser, rep: FlatRepresentation, text_emb: torch.Tensor | None,
+                 targets: SampleTargets, settings: SampleSettings):
         self.denoiser, self.rep, self.text_emb, self.settings = denoiser, rep, text_emb, settings
         self.batch, T = targets.batch_size, settings.num_frames
         self.c_dir, self.has_world = targets.c_dir, targets.has_world
@@ -334,30 +288,16 @@ class _StepCorrections:
                 self.guidance = Guidance(mode="none")
         self.keys = None
         if self.mask is not None and settings.joint_sigma > 0:
-            keys = KeyjointTargets(
-                rep,
-                self.tgt,
-                self.mask,
-                self.world_xz if self.has_world else None,
-                self.world_mask if self.has_world else None,
-            )
+            keys = KeyjointTargets(rep, self.tgt, self.mask, self.world_xz if self.has_world else None,
+                                   self.world_mask if self.has_world else None)
             self.keys = keys if keys.any else None
 
     def __call__(self, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         rep, s, mask = self.rep, self.settings, self.mask
         tgt_n = None if mask is None else rep.normalize(self.tgt) * mask
-        x0 = self.denoiser.forward_guided(
-            x_t,
-            t,
-            self.text_emb,
-            self.c_dir,
-            tgt_n,
-            mask,
-            None,
-            self.guidance,
-            text_mask=self.text_mask,
-            context_mask=None if mask is None else self.context_mask,
-        )
+        x0 = self.denoiser.forward_guided(x_t, t, self.text_emb, self.c_dir, tgt_n, mask, None, self.guidance,
+                                          text_mask=self.text_mask,
+                                          context_mask=None if mask is None else self.context_mask)
         rxz = rep.root_xz
         if self.smooth_frames > 0:
             x0 = x0.clone()
@@ -375,9 +315,8 @@ class _StepCorrections:
         return x0
 
 
-def _working_targets(
-    B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: torch.Tensor | None, has_world: bool
-) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+def _working_targets(B: int, T: int, D: int, x_tgt: torch.Tensor | None, mask: torch.Tensor | None,
+                     has_world: bool) -> tuple[torch.Tensor | None, torch.Tensor | None]:
     """(mask, targets) the sampler may update in place: float copies, NaN targets zeroed; zeros when
     only world-frame targets exist (their channels are filled by :func:`_refresh_world`); (None, None)
     without constraints."""
@@ -390,14 +329,8 @@ def _working_targets(
     return mask.float().clone(), torch.nan_to_num(x_tgt.float()).clone()
 
 
-def _refresh_world(
-    rep: FlatRepresentation,
-    x0_norm: torch.Tensor,
-    world_xz: torch.Tensor,
-    world_mask: torch.Tensor,
-    tgt: torch.Tensor,
-    mask: torch.Tensor,
-) -> tuple[torch.Tensor, torch.Tensor]:
+def _refresh_world(rep: FlatRepresentation, x0_norm: torch.Tensor, world_xz: torch.Tensor, world_mask: torch.Tensor,
+                   tgt: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Re-target world-frame joints against the current root estimate: new ``(tgt, mask)`` (unnormalised).
 
     New tensors rather than in-place edits, so a differentiable chain (kinema.objectives) can reuse the

@@ -110,20 +110,12 @@ class SegmentTargets:
 def stack_targets(rows: list[SegmentTargets]) -> tuple[SampleTargets, torch.Tensor]:
     """Per-sample segment targets stacked on a leading batch axis: the sampler's `SampleTargets` and
     the shifts ``(B, 2)``."""
-
     def stack(name):
         values = [getattr(r, name) for r in rows]
         return None if values[0] is None else torch.stack(values)
 
-    return SampleTargets(
-        stack("c_dir"),
-        stack("x_tgt"),
-        stack("mask"),
-        stack("world_xz"),
-        stack("world_mask"),
-        stack("join"),
-        stack("start"),
-    ), stack("shift")
+    return SampleTargets(stack("c_dir"), stack("x_tgt"), stack("mask"), stack("world_xz"),
+                         stack("world_mask"), stack("join"), stack("start")), stack("shift")
 
 
 @dataclass
@@ -198,10 +190,8 @@ def segment_bounds(segments, fps: float) -> list[int]:
         total += s.seconds
         bounds.append(int(math.floor(total * fps + 0.5)))
         if bounds[-1] <= bounds[-2]:
-            raise KinemaError(
-                f"timeline segment {i} ({s.prompt!r}) lasts {s.seconds:g} s, shorter than one "
-                f"frame at {fps:g} fps ({1 / fps:.3f} s)"
-            )
+            raise KinemaError(f"timeline segment {i} ({s.prompt!r}) lasts {s.seconds:g} s, shorter than one "
+                              f"frame at {fps:g} fps ({1 / fps:.3f} s)")
     return bounds
 
 
@@ -227,13 +217,13 @@ def plan_joins(segments: list[PlannedSegment], fps: float) -> list[PlannedJoin]:
     return joins
 
 
-def plan_segments(rep: FlatRepresentation, segments, constraints, constraints_fps: float | None = None) -> SegmentPlan:
+def plan_segments(rep: FlatRepresentation, segments, constraints,
+                  constraints_fps: float | None = None) -> SegmentPlan:
     """Frame ranges for every segment and join window (at ``rep.fps``) and the encoded user
     constraints for the whole output."""
     bounds = segment_bounds(segments, rep.fps)
-    planned = [
-        PlannedSegment(s.prompt, start, end) for s, start, end in zip(segments, bounds[:-1], bounds[1:], strict=True)
-    ]
+    planned = [PlannedSegment(s.prompt, start, end)
+               for s, start, end in zip(segments, bounds[:-1], bounds[1:], strict=True)]
     total_frames = bounds[-1]
     cons, targets = encode_user_constraints(rep, constraints, total_frames, constraints_fps)
     return SegmentPlan(rep, planned, total_frames, targets, cons, plan_joins(planned, rep.fps))

@@ -44,9 +44,8 @@ class UserTargets:
     world_mask: torch.Tensor | None = None
 
 
-def encode_user_constraints(
-    rep: FlatRepresentation, constraints, total_frames: int, constraints_fps: float | None = None
-) -> tuple[list, UserTargets]:
+def encode_user_constraints(rep: FlatRepresentation, constraints, total_frames: int,
+                            constraints_fps: float | None = None) -> tuple[list, UserTargets]:
     """(constraint objects, their `UserTargets`) at ``rep.fps``.
 
     ``constraints_fps``: the rate a file's ``frame_indices`` were written at (default: the file's own
@@ -58,9 +57,8 @@ def encode_user_constraints(
         constraints = Path(constraints)
     elif isinstance(constraints, list):  # constraint objects go through the same checks as their JSON form
         constraints = [constraint_to_json(c) if isinstance(c, Constraint) else c for c in constraints]
-    if constraints_fps is not None and not (
-        isinstance(constraints_fps, (int, float)) and math.isfinite(constraints_fps) and constraints_fps > 0
-    ):
+    if constraints_fps is not None and not (isinstance(constraints_fps, (int, float)) and
+                                            math.isfinite(constraints_fps) and constraints_fps > 0):
         raise KinemaError(f"constraints_fps must be a positive number, got {constraints_fps!r}")
     cons = load_constraints(constraints, rep.skeleton, rep.fps, total_frames, source_fps=constraints_fps)
     enc = rep.encode(cons, total_frames)

@@ -75,9 +75,8 @@ def _check_keys(item: dict, source: str, i: int) -> None:
             continue
         close = difflib.get_close_matches(str(key), SEGMENT_KEYS, n=1)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
-        raise KinemaError(
-            f"{source}: segment {i}: unknown key {key!r}{hint}; expected 'prompt' and 'seconds' (and 'comment', '_...')"
-        )
+        raise KinemaError(f"{source}: segment {i}: unknown key {key!r}{hint}; expected 'prompt' and 'seconds' "
+                          "(and 'comment', '_...')")
 
 
 def split_long(prompt: str, seconds: float, max_seconds: float) -> list[Segment]:
