@@ -11,14 +11,9 @@ import numpy as np
 import torch
 
 from kinema.constraints.types import resolve_joint
-from kinema.geometry.rotations import axis_angle_to_quat, quat_inverse, quat_mul
+from kinema.geometry.rotations import axis_angle_to_quat, quat_angle_deg
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
-
-
-def _angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> float:
-    rel = quat_mul(quat_inverse(q_target), q)
-    return float(torch.rad2deg(2 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs())).max())
 
 
 def residual(c: dict, motion: Motion) -> str:
@@ -40,7 +35,7 @@ def residual(c: dict, motion: Motion) -> str:
             out.append(f"{100 * float((P[frames, j] - torch.tensor(c['positions'])).norm(dim=-1).max()):.1f} cm")
         if "rotations" in c:
             q = axis_angle_to_quat(torch.tensor(c["rotations"], dtype=torch.float64))
-            out.append(f"{_angle_deg(G[frames, j], q):.0f} deg")
+            out.append(f"{float(quat_angle_deg(G[frames, j], q).max()):.0f} deg")
         return ", ".join(out)
     if c["type"] == "fullbody":
         rots = torch.tensor(c["local_joints_rot"], dtype=torch.float64)

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import torch
 
 from kinema.errors import KinemaError
-from kinema.geometry.rotations import quat_conjugate, quat_mul, quat_normalize
+from kinema.geometry.rotations import quat_angle_deg
 from kinema.motion.contacts import ContactThresholds, contact_joints, foot_contacts
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
@@ -195,12 +195,9 @@ def end_effector_position_error(motion: Motion, joint: Joint | Sequence[Joint], 
 
 
 def rotation_angle_deg(q_a: torch.Tensor, q_b: torch.Tensor) -> torch.Tensor:
-    """Geodesic angle in degrees between unit quaternions ``(..., 4)`` (q and -q are the same rotation).
-
-    ``angle = 2 * atan2(|v|, |w|)`` for ``(w, v) = conj(q_b) * q_a``, in [0, 180].
-    """
-    rel = quat_mul(quat_conjugate(quat_normalize(q_b)), quat_normalize(q_a))
-    return torch.rad2deg(2.0 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs()))
+    """Geodesic angle in degrees between unit quaternions ``(..., 4)`` (q and -q are the same rotation):
+    kinema.geometry.rotations.quat_angle_deg, in [0, 180]."""
+    return quat_angle_deg(q_a, q_b)
 
 
 def end_effector_rotation_error(motion: Motion, joint: Joint | Sequence[Joint], frames: Frames, target_quats) -> float:

@@ -12,7 +12,7 @@ from dataclasses import replace
 import torch
 
 from kinema.generate.anyrig_feet import floor_root_children
-from kinema.geometry.rotations import quat_inverse, quat_rotate
+from kinema.geometry.rotations import quat_angle_deg, quat_inverse, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.guard import DEFAULT_BOUNDS, plausibility, violations
 from kinema.postprocess.ik import spread_corrections
@@ -156,9 +156,8 @@ def reach_by_translation(
 def rotation_errors_deg(m: Motion, targets: PostTargets) -> list[float]:
     """Angle (degrees) between each joint-rotation target and the joint's global rotation in ``m`` (any
     uniform scale of ``m`` leaves rotations alone, so targets of the rig in its units apply)."""
-    G = m.global_rotations
+    G = m.global_rotations.to(torch.float64)
     out: list[float] = []
     for j, (frames, q) in targets.joint_rotations.items():
-        dot = (G[frames, j].to(torch.float64) * q.to(torch.float64)).sum(-1).abs().clamp(max=1.0)
-        out += torch.rad2deg(2 * torch.acos(dot)).tolist()
+        out += quat_angle_deg(G[frames, j], q.to(torch.float64)).tolist()
     return out

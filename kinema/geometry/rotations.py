@@ -338,6 +338,14 @@ def quat_to_euler(q: torch.Tensor, order: str) -> torch.Tensor:
     return matrix_to_euler(quat_to_matrix(q), order)
 
 
+def quat_angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> torch.Tensor:
+    """Geodesic angle in degrees between quaternions ``(..., 4)`` (normalised first; q and -q are the
+    same rotation): ``2 atan2(|v|, |w|)`` for ``(w, v) = conj(q_target) q``, in [0, 180] (accurate for
+    nearly equal inputs, unlike ``acos``)."""
+    rel = quat_mul(quat_conjugate(quat_normalize(q_target)), quat_normalize(q))
+    return torch.rad2deg(2.0 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs()))
+
+
 # ----------------------------------------------------------------------------- interpolation, mirror
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.geometry.rotations import quat_inverse, quat_mul
+from kinema.geometry.rotations import quat_angle_deg
 from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
@@ -18,11 +18,6 @@ from kinema.postprocess.targets import PostTargets
 UNMET_POSITION_CM = 1.0
 UNMET_ROTATION_DEG = 2.0
 UNMET_ROOT_CM = 5.0
-
-
-def _angle_deg(q: torch.Tensor, q_target: torch.Tensor) -> torch.Tensor:
-    rel = quat_mul(quat_inverse(q_target), q)
-    return torch.rad2deg(2 * torch.atan2(rel[..., 1:].norm(dim=-1), rel[..., 0].abs()))
 
 
 def _stats(x: torch.Tensor) -> dict:
@@ -37,7 +32,7 @@ def constraint_residuals(motion: Motion, targets: PostTargets) -> dict:
     errs: dict[str, list[torch.Tensor]] = {}
     for kind, table, err in (
         ("position_cm", targets.joint_positions, lambda f, j, v: (P[f, j] - v).norm(dim=-1) * 100),
-        ("rotation_deg", targets.joint_rotations, lambda f, j, v: _angle_deg(G[f, j], v)),
+        ("rotation_deg", targets.joint_rotations, lambda f, j, v: quat_angle_deg(G[f, j], v)),
     ):
         for j, (f, v) in table.items():
             on_fb = torch.tensor([int(k) in fb for k in f.tolist()], dtype=torch.bool)
@@ -98,7 +93,7 @@ def unmet_targets(motion: Motion, targets: PostTargets) -> list[str]:
         if hit:
             out.append(line(_joint_label(skel, j), hit, f"is {_distance(hit[1])} out of reach"))
     for j, (f, q) in sorted(targets.joint_rotations.items()):
-        hit = _worst(_angle_deg(G[f, j], q), f, UNMET_ROTATION_DEG)
+        hit = _worst(quat_angle_deg(G[f, j], q), f, UNMET_ROTATION_DEG)
         if hit:
             out.append(line(_joint_label(skel, j) + " rotation", hit, f"is missed by {hit[1]:.1f} degrees"))
     if targets.root_xz is not None and targets.root_xz[0].numel():
