@@ -265,7 +265,7 @@ def _multimodality(model, cases, run: _SuiteRun, n_mm: int, mm_samples: int, see
     return mm
 
 
-def _add_text_metrics(summary, ret, retrieval, cases, run: _SuiteRun, mm, seed: int, warn, text_cache) -> None:
+def _add_text_metrics(summary, ret, cases, run: _SuiteRun, mm, seed: int, warn, text_cache) -> None:
     """R-precision, FID, diversity, multimodality, coverage/novelty of the text cases into ``summary``."""
     caps = [cases[i]["prompt"] for i in run.text_ids]
     train_emb = None
@@ -357,14 +357,14 @@ def run_suite(
     for i, case in enumerate(cases):
         _run_case(model, i, case, _dataset(case, model, datasets), run, seed, steps, guidance)
         bar.update(1)
-    mm = _multimodality(model, cases, run, n_mm, mm_samples, seed, steps, guidance, bar) if n_mm else {}
+    mm = _multimodality(model, cases, run, n_mm, mm_samples, seed, steps, guidance, bar)
     bar.close()
     summary = summarize(run.records, run.rows, run.devs)
-    text_info = {"cases": len(run.text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm.get(modes[0], [])),
+    text_info = {"cases": len(run.text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm[modes[0]]),
                  "mm_samples": mm_samples, "retrieval": None}  # fmt: skip
     if ret is not None:
         text_info["retrieval"] = _retrieval_name(retrieval)
-        _add_text_metrics(summary, ret, retrieval, cases, run, mm or {r: [] for r in modes}, seed, warn, text_cache)
+        _add_text_metrics(summary, ret, cases, run, mm, seed, warn, text_cache)
     tl_table = _timeline_table(run, ret, text_cache)
     t_phr = time.perf_counter()
     phr = None
@@ -377,7 +377,7 @@ def run_suite(
         "wall_seconds": time.perf_counter() - t_start,
         "generate_seconds": run.gen_seconds,
         "postprocess_seconds": run.post_seconds,
-        "seconds_per_case": run.gen_seconds / max(1, len(cases) + len(mm.get(modes[0], [])) * mm_samples),
+        "seconds_per_case": run.gen_seconds / max(1, len(cases) + len(mm[modes[0]]) * mm_samples),
         "phrasings_seconds": time.perf_counter() - t_phr if phrasings else None,
     }
     tables = _tables(run, summary)
