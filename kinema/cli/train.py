@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--foot-contact", type=float,
                    help="weight of the foot-contact consistency loss (velocity of joints the data says are "
                         "planted -> 0; default 0 = off); docs/training.md")
+    p.add_argument("--text-whiten", type=float,
+                   help="train the text projection in whitened caption-embedding coordinates, eigenvalues shrunk "
+                        "by X * the largest (0 < X <= 1; default 0 = off); docs/training.md")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -78,7 +81,7 @@ def _config_from_args(args: argparse.Namespace):
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
-        "foot_contact": args.foot_contact,
+        "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

@@ -37,6 +37,7 @@ from kinema.train.checkpoint import load_checkpoint, load_init_weights, load_opt
 from kinema.train.constraints import max_keyframes_at, sample_batch_masks
 from kinema.train.losses import LossWeights, motion_loss
 from kinema.train.optim import build_optimizer, lr_at, make_ema, update_ema
+from kinema.train.text_whitening import whiten_text_projections
 
 
 @dataclass
@@ -73,6 +74,9 @@ class TrainConfig:
     # weight of the foot-contact consistency term (kinema.train.losses.foot_contact_term, MDM's foot
     # loss); 0 trains with Eq. 1 (+ the constraint term) only, as every run before issue 18 did
     foot_contact: float = 0.0
+    # > 0: train the text projection in whitened caption coordinates with this eigenvalue shrinkage
+    # (kinema.train.text_whitening; a reparametrisation, saved folded, so models stay plain)
+    text_whiten: float = 0.0
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -145,6 +149,8 @@ class Trainer:
         self.model.set_normalization(self.stats.mean, self.stats.std)
         lr_stats = local_root_stats(clips, self.fps)
         self.model.set_local_root_normalization(lr_stats.mean, lr_stats.std)
+        if cfg.text_whiten:
+            whiten_text_projections(self.model, self.text_table, cfg.text_whiten)
         self.model.to(self.device)
         self.ema = make_ema(self.model)
         self.optimizer = build_optimizer(cfg.optimizer, self.model.parameters(), cfg.lr, cfg.weight_decay)
