@@ -52,6 +52,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--min-steps", type=int, default=5000, help="auto preset: fewest steps worth training")
     p.add_argument("--calibrate", type=int, default=20, help="real steps timed before fixing the run length")
     p.add_argument("--text-encoder", default=None, help="text encoder id (default: kinema's)")
+    p.add_argument("--text-whiten", type=float, default=0.0,
+                   help="kinema train --text-whiten: whitened text projection (0 = off; 0.03 deepened bows in the\n"
+                        "default model's issue-18 fine-tune, see its model card)")
+    p.add_argument("--content-balance", type=float, default=0.0, help="kinema train --content-balance")
+    p.add_argument("--foot-contact", type=float, default=0.0, help="kinema train --foot-contact")
     p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: kinema.runtime)")
     return p.parse_args(argv)
@@ -131,7 +136,9 @@ def train(args, data: Path, device, preset: str, batch: int, deadline: float) ->
     if (run_dir / "latest").exists():
         raise SystemExit(f"{run_dir} already holds a run: choose another --name, or continue it with "
                          f"`kinema train --resume --out {run_dir} --data {data}`")
-    cfg = TrainConfig(model=preset, batch_size=batch, steps=10**9, ckpt_every=2000, log_every=50)
+    cfg = TrainConfig(model=preset, batch_size=batch, steps=10**9, ckpt_every=2000, log_every=50,
+                      text_whiten=args.text_whiten, content_balance=args.content_balance,
+                      foot_contact=args.foot_contact)
     if args.text_encoder:
         cfg.text_encoder = args.text_encoder
     trainer = Trainer(cfg, data, run_dir, cache_dir=args.cache_dir, device=device, bf16=device.type == "cuda")

@@ -151,6 +151,8 @@ def test_gpu_script_cpu_smoke_run(bandai_root, tmp_path):
         "2",
         "--threads",
         "1",
+        "--text-whiten",
+        "0.05",
     ]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path)
@@ -160,6 +162,7 @@ def test_gpu_script_cpu_smoke_run(bandai_root, tmp_path):
     model_dir = tmp_path / "models" / "smoke"
     info = json.loads((model_dir / "checkpoint.json").read_text())
     assert info["model_config"]["width"] == 64 and info["step"] >= 1
+    assert info["train_config"]["text_whiten"] == 0.05  # trained whitened, exported as a plain model
     import kinema
 
     motions = kinema.load_model(model_dir).generate("A person walks.", seconds=1.0, steps=2, postprocess=False)
