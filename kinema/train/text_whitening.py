@@ -79,7 +79,8 @@ class WhitenedLinear(nn.Module):
         return self.raw_bias - self.weight @ self.mu
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return F.linear(x, self.weight, self.bias)
+        weight = self.weight  # once: the bias property would multiply W' A a second time
+        return F.linear(x, weight, self.raw_bias - weight @ self.mu)
 
     @staticmethod
     def _fold_hook(module: WhitenedLinear, state: dict, prefix: str, local_metadata) -> dict:
