@@ -66,5 +66,7 @@ def test_blender_import_matches_kinema_fk(walk_clip, tmp_path, order):
     assert err.max() < 1e-3, (
         f"joint {motion.skeleton.names[worst[1]]} at frame {frames[worst[0]]} is off by {err.max() * 1000:.3f} mm"
     )
-    # the check is not vacuous: the character walks several metres and the limbs move
-    assert np.ptp(want[:, 0, 2]) > 5 and np.ptp(want[:, 15, 1]) > 0.05
+    # the check is not vacuous: the character walks several metres and, relative to the hips, some limb
+    # moves over 10 cm between the compared frames (real walk: the left toes 0.43 m; synthetic: 0.25 m)
+    limbs = want - want[:, :1]
+    assert np.ptp(want[:, 0, 2]) > 5 and np.ptp(limbs, axis=0).max() > 0.1

@@ -106,7 +106,9 @@ def test_batched_samples_equal_independent_rows(model, monkeypatch, what, constr
     rows = model.generate(what, **kw)
     for a, b in zip(batched, rows, strict=True):
         diff = float((a.positions - b.positions).abs().max())
-        assert diff < 1e-4, diff
+        # float32 GEMMs over 3 rows and over 1 differ in the last bits, and the DDIM steps amplify that:
+        # measured up to 0.35 mm on some machines; different samples differ by far more (below)
+        assert diff < 1e-3, diff
     assert not torch.allclose(batched[0].positions, batched[1].positions, atol=1e-3)
     assert not torch.allclose(batched[1].positions, batched[2].positions, atol=1e-3)
 
