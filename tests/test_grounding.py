@@ -189,7 +189,7 @@ def test_cli_flag_reports_grounding_and_rejects_bad_values(tmp_path, capsys):
     ]
     assert main([*args, "--grounding", "0.5", "--grounding-top-k", "2"]) == 0
     text = capsys.readouterr().out
-    assert "grounded 'Someone strolls slowly ahead.' (own weight 0.50) on 'A person walks straight ahead.'" in text
+    assert "grounded 'Someone strolls slowly ahead.' (own weight 0.50) on 'Someone walks slowly ahead.'" in text
     for flag, value in (("--grounding", "1.5"), ("--grounding-top-k", "0"), ("--grounding-temperature", "-1")):
         with pytest.raises(SystemExit) as exit_:
             main([*args, flag, value])

@@ -70,7 +70,7 @@ def test_files_look_like_bandai_and_are_reproducible(synthetic_bandai, tmp_path)
 def test_every_content_loads_on_the_floor_with_finite_features(synthetic_bandai, content):
     info = next(c for c in list_clips(synthetic_bandai) if c.content == content)
     motion = load_clip(info, 20)  # also checks that walks and runs travel
-    assert motion.skeleton.num_joints == 21 and 2.5 < motion.num_frames / 20 < 5.0
+    assert motion.skeleton.num_joints == 21 and 2.5 < motion.num_frames / 20 < 6.0  # the dance is pinned at 5.5 s
     assert 0.03 < min_toe_height(motion) < 0.06  # toes on the floor, as on Bandai (about 4 cm)
     assert torch.isfinite(motion_to_features(motion)).all()
 
