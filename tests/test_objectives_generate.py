@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,8 @@ import torch
 import kinema
 from kinema.errors import KinemaError
 from kinema.objectives import ObjectiveError, Reach
+from kinema.objectives.io import bind_objectives, load_objectives
+from kinema.objectives.sample import add_final
 
 PROMPT = "A person walks forward."
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -180,11 +183,6 @@ def test_postprocessing_never_silently_undoes_an_objective(model) -> None:
     Now the raw motion is kept for such a sample and a warning names the objective and both values. The
     stop-28 default's post-processed walk stays on the path (3.4 cm vs 3.3 raw), so the guard itself is
     also driven directly: a 'post-processed' motion moved 0.7 m off the path."""
-    from dataclasses import replace
-
-    from kinema.objectives.io import bind_objectives, load_objectives
-    from kinema.objectives.sample import add_final
-
     spec = json.loads((EXAMPLES / "objectives" / "path_time_agnostic.json").read_text())
     res = model.generate("A person walks forward.", seconds=5, objectives=spec["objectives"])
     o = res.report.objectives["objectives"][0]
