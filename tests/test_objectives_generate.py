@@ -188,10 +188,10 @@ def test_postprocessing_never_silently_undoes_an_objective(model) -> None:
     o = res.report.objectives["objectives"][0]
     assert o["after"][0] < 0.05
     assert o["final"][0] <= o["after"][0] + 0.02 or any("objective 0" in w for w in res.report.warnings)
-    raw = res[0]
-    bound = bind_objectives(load_objectives(spec["objectives"]), raw.skeleton, raw.fps, raw.num_frames)
-    moved = replace(raw, root_translation=raw.root_translation + torch.tensor([0.7, 0.0, 0.0]))
+    on_path = res[0]  # stands in for the raw motion; `moved` for a post-processing that left the path
+    bound = bind_objectives(load_objectives(spec["objectives"]), on_path.skeleton, on_path.fps, on_path.num_frames)
+    moved = replace(on_path, root_translation=on_path.root_translation + torch.tensor([0.7, 0.0, 0.0]))
     report = {"objectives": [dict(o, after=[o["final"][0]])]}
-    out, report, warnings = add_final(report, bound, [moved], [raw])
-    assert out[0] is raw and report["objectives"][0]["final"][0] < 0.05
+    out, report, warnings = add_final(report, bound, [moved], [on_path])
+    assert out[0] is on_path and report["objectives"][0]["final"][0] < 0.05
     assert any("post-processing moved objective 0 (path-time-agnostic)" in w for w in warnings), warnings
