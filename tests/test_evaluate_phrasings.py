@@ -19,6 +19,7 @@ from kinema.evaluate.phrasings import (
     heldout_prompt,
     probe_summary,
     raises_hand,
+    window_speed,
 )
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.motion.core import Motion
@@ -96,11 +97,27 @@ def test_probe_summary_orders_speed_groups_and_counts_raised_hands():
     sprint = s["speed"]["4 sprint"]
     assert sprint["gap"] == pytest.approx(2.1) and sprint["separated"] and "gap" not in s["speed"]["1 slow walk"]
     assert sprint["gap_se"] == pytest.approx(math.sqrt(0.01 / 1 + 0.25 / 1))  # sample variances over n - 1
+    assert s["speed_short"] == {} and s["speed_short_ordered"] is None  # no record has short samples
+    records[0]["speeds_short"], records[3]["speeds_short"] = [1.0, 1.2], [1.1, 1.3]
+    short = probe_summary(records)
+    assert list(short["speed_short"]) == ["1 slow walk", "4 sprint"] and short["speed_short_ordered"] is False
+    assert short["speed_short"]["4 sprint"]["gap"] == pytest.approx(0.1) and short["speed"] == s["speed"]
     records[3]["speeds"] = [1.2]  # the sprint now slower than the walk
     assert probe_summary(records)["speed_ordered"] is False
     records[3]["speeds"] = [1.45, 1.55]  # faster than the walk by 0.1 m/s, within the noise (se 0.11)
     summary = probe_summary(records)
     assert summary["speed"]["4 sprint"]["gap"] > 0 and summary["speed_ordered"] is False
+
+
+def test_window_speed_averages_fixed_length_windows():
+    steady = _motion((1.2, 0.9))  # 1.5 m/s throughout, 2 s long (41 frames at 20 fps)
+    assert window_speed(steady, 1.0) == pytest.approx(1.5, rel=1e-6)
+    assert window_speed(steady, 2.0) == pytest.approx(1.5, rel=1e-6)  # one window: the whole motion
+    assert window_speed(steady, 2.5) is None  # shorter than a window
+    t = torch.arange(T, dtype=torch.float64) / FPS
+    root = torch.stack([torch.zeros(T, dtype=torch.float64), torch.zeros(T, dtype=torch.float64), t**2 / 2], -1)
+    accel = Motion(_body(), FPS, root, _motion().local_rotations)  # from rest at 1 m/s^2
+    assert window_speed(accel, 1.0) == pytest.approx(1.0, abs=0.03)  # windows centred at 0.5, 1.0, 1.5 s
 
 
 def test_content_accuracy_takes_the_label_of_the_nearest_ground_truth_clip():
@@ -135,7 +152,7 @@ def test_captured_reference_measures_the_splits_raise_up_clips(tiny_data):
 
     ref = captured_reference(MotionDataset(tiny_data, "all"))
     # the six-clip build holds raise-up-left-hand and raise-up-right-hand, each with its mirror, no locomotion
-    assert ref["speed"] == {} and set(ref["hand"]) == {"left", "right"}
+    assert ref["speed"] == {} and ref["window_speed"] == {} and set(ref["hand"]) == {"left", "right"}
     assert all(v["clips"] == 2 and 0.0 <= v["raised_fraction"] <= 1.0 for v in ref["hand"].values())
 
 
@@ -165,6 +182,8 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     assert ph["samples"] == 1 and [p["prompt"] for p in ph["probes"]] == [p.prompt for p in PROBES]
     assert list(ph["summary"]["speed"]) == ["1 slow walk", "2 walk", "3 jog", "4 sprint"]
     assert isinstance(ph["summary"]["speed_ordered"], bool)
+    assert list(ph["summary"]["speed_short"]) == list(ph["summary"]["speed"]) and ph["short_seconds"] == 2.0
+    assert all(len(r["speeds_short"]) == 1 for r in ph["probes"] if r["kind"] == "speed")
     for g in ph["summary"]["speed"].values():
         assert g["n"] == g["probes"] >= 2 and 0.0 <= g["min"] <= g["mean"] <= g["max"] < 20.0
     assert len(ph["summary"]["hand"]) == sum(p.kind == "hand" for p in PROBES)
@@ -191,6 +210,7 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     nested = [
         ph,
         ph["probes"][-1],
+        ph["probes"][0],
         ph["summary"],
         ph["summary"]["speed"]["4 sprint"],
         ph["summary"]["hand"][0],

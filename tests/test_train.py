@@ -194,6 +194,33 @@ def test_batch_sampler_draws_clips_in_proportion_to_their_weights():
         BatchSampler(clips, ranges, layout, stats, 8, 20, clip_weights=[1.0, 0.0, 1.0, 1.0], **kw)
 
 
+def test_crop_min_fraction_sets_the_shortest_training_window(tiny_data, tmp_path):
+    from kinema.errors import KinemaError
+    from kinema.representation.layout import FeatureLayout
+    from kinema.representation.stats import NormStats
+    from kinema.train.batching import BatchSampler
+
+    layout = FeatureLayout(3)
+    clips = [torch.zeros(100, layout.dim)]
+    stats = NormStats(torch.zeros(layout.dim), torch.ones(layout.dim))
+    kw = dict(num_buckets=1, text_dropout=0.0, random_heading=False)
+
+    def lengths(frac: float) -> set[int]:
+        s = BatchSampler(clips, [(0, 1)], layout, stats, 2, 100, crop_min_fraction=frac, **kw)
+        g = torch.Generator().manual_seed(0)
+        return {int(s.sample(g).lengths[0]) for _ in range(300)}
+
+    half, fifth = lengths(0.5), lengths(0.2)
+    assert min(half) == 50 and max(half) == 100  # the default: windows of half the clip or longer
+    assert min(fifth) < 25 and min(fifth) >= 20 and max(fifth) == 100
+    assert lengths(1.0) == {100}
+    with pytest.raises(ValueError, match="crop_min_fraction"):
+        BatchSampler(clips, [(0, 1)], layout, stats, 2, 100, crop_min_fraction=0.0, **kw)
+    assert Trainer(_cfg(crop_min_fraction=0.25, steps=2), tiny_data, tmp_path / "r").batches.crop_min_fraction == 0.25
+    with pytest.raises(KinemaError, match="crop_min_fraction"):
+        Trainer(_cfg(crop_min_fraction=1.5), tiny_data, tmp_path / "bad")
+
+
 def test_fine_tune_starts_from_the_given_weights(tiny_data, tmp_path):
     Trainer(_cfg(steps=6), tiny_data, tmp_path / "base").run(progress=False)
     base = load_denoiser(tmp_path / "base")  # EMA weights, float32

@@ -30,6 +30,9 @@ def register(sub) -> None:
     p.add_argument("--text-whiten", type=float,
                    help="train the text projection in whitened caption-embedding coordinates, eigenvalues shrunk "
                         "by X * the largest (0 < X <= 1; default 0 = off); docs/training.md")
+    p.add_argument("--crop-min-fraction", type=float,
+                   help="shortest training window as a fraction of the longest clip in its length bucket "
+                        "(0 < X <= 1; default 0.5); docs/training.md")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -82,6 +85,7 @@ def _config_from_args(args: argparse.Namespace):
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
         "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
+        "crop_min_fraction": args.crop_min_fraction,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

@@ -75,25 +75,38 @@ def _pm(stats: dict | None) -> str:
     return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
 
 
+def _speed_table(groups: dict, ordered, samples: int, seconds: float, captured: str) -> list[str]:
+    """Markdown lines of one speed-probe table (groups of kinema.evaluate.phrasings.speed_groups)."""
+    order = {True: "yes", False: "**no**", None: "-"}[ordered]
+    lines = [f"Speed probes ({samples} samples of {seconds:g} s each, raw; pelvis ground speed, m/s, "
+             "mean ± sd (min-max)):", "",
+             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
+    for g, v in groups.items():
+        gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
+        lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
+    return lines + ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above "
+                    f"the one before): {order}. {captured}", ""]
+
+
 def format_phrasings_table(data: dict) -> str:
     """The "Prompts in other words" tables (markdown; kinema.evaluate.phrasings), or "" when not run."""
     ph = data.get("phrasings")
     if not ph:
         return ""
     summ, cap = ph["summary"], ph["captured"]
-    order = {True: "yes", False: "**no**", None: "-"}[summ["speed_ordered"]]
     lines = ["Probes and held-out captions use verb phrases that no training caption contains "
-             "(kinema.data.phrasings; docs/evaluation.md).", "",
-             f"Speed probes ({ph['samples']} samples of {ph['seconds']:g} s each, raw; pelvis ground speed, m/s, "
-             "mean ± sd (min-max)):", "",
-             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
-    for g, v in summ["speed"].items():
-        gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
-        lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
+             "(kinema.data.phrasings; docs/evaluation.md).", ""]
     caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
-    lines += ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above the one "
-              f"before): {order}. Captured "
-              f"({', '.join(data['meta']['split'])} split, same measure): {caps or 'no walk/run/dash clips'}.", ""]
+    lines += _speed_table(summ["speed"], summ["speed_ordered"], ph["samples"], ph["seconds"],
+                          f"Captured ({', '.join(data['meta']['split'])} split, same measure): "
+                          f"{caps or 'no walk/run/dash clips'}.")
+    if summ.get("speed_short"):
+        wins = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap.get("window_speed", {}).items())
+        lines += _speed_table(summ["speed_short"], summ["speed_short_ordered"], ph["samples"], ph["short_seconds"],
+                              f"Captured {ph['short_seconds']:g}-s windows (every 0.5 s, mean per clip): "
+                              f"{wins or 'none'}. Every captured run covers the ~8 m capture room, so the "
+                              f"captured runs that last {ph['seconds']:g} s are mostly the slow ones; at "
+                              f"{ph['short_seconds']:g} s they hold slow, medium and fast runs.")
     lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
               "|---|---|---:|---:|---:|"]
     lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
@@ -264,14 +277,17 @@ def plot_phrasings(data: dict, path: Path) -> bool:
             ax.axhspan(v["mean"] - v["std"], v["mean"] + v["std"], color=colour, alpha=0.12)
             ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
     for n, r in enumerate(speed):
-        ax.scatter([n] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1")
+        ax.scatter([n - 0.12] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1",
+                   label=f"{ph['seconds']:g}-s samples" if n == 0 else None)
+        if "speeds_short" in r:
+            ax.scatter([n + 0.12] * len(r["speeds_short"]), r["speeds_short"], s=18, color="#f08c00",
+                       label=f"{ph['short_seconds']:g}-s samples" if n == 0 else None)
     ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
                   fontsize=7)
     ax.set_ylabel("pelvis ground speed (m/s)")
     ax.set_title("Speed probes (raw, every sample)")
     ax.grid(alpha=0.3, axis="y")
-    if ph["captured"]["speed"]:
-        ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, loc="upper left")
     ax = fig.add_subplot(1, 2, 2)
     for n, r in enumerate(hand):
         ax.scatter([n - 0.1] * len(r["hand_over_head"]), r["hand_over_head"], s=18, color="#1f6fd1",

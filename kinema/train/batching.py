@@ -56,7 +56,11 @@ class BatchSampler:
         rank: int = 0,
         world_size: int = 1,
         clip_weights: list[float] | None = None,
+        crop_min_fraction: float = 0.5,
     ):
+        if not 0.0 < crop_min_fraction <= 1.0:
+            raise ValueError(f"crop_min_fraction must be in (0, 1], got {crop_min_fraction}")
+        self.crop_min_fraction = crop_min_fraction
         mine = [i for i in range(len(clips)) if i % world_size == rank and clips[i].shape[0] >= min_frames]
         if not mine:
             raise ValueError("no training clips long enough for this rank")
@@ -89,7 +93,10 @@ class BatchSampler:
             picks = torch.multinomial(self.clip_weights[bucket], self.batch_size, replacement=True, generator=g)
         idx = [bucket[int(k)] for k in picks]
         longest = min(self.max_frames, max(self.clips[i].shape[0] for i in idx))
-        target = int(torch.randint(max(self.min_frames, longest // 2), longest + 1, (1,), generator=g))
+        # window length: uniform in [crop_min_fraction * longest, longest]; short windows of long clips
+        # decouple a clip's speed from its length (room-limited runs: slow ones are the long ones)
+        shortest = max(self.min_frames, int(longest * self.crop_min_fraction))
+        target = int(torch.randint(min(shortest, longest), longest + 1, (1,), generator=g))
         lengths = [min(target, self.clips[i].shape[0]) for i in idx]
         T = max(lengths)
         raw = torch.zeros(self.batch_size, T, self.layout.dim)

@@ -77,6 +77,10 @@ class TrainConfig:
     # > 0: train the text projection in whitened caption coordinates with this eigenvalue shrinkage
     # (kinema.train.text_whitening; a reparametrisation, saved folded, so models stay plain)
     text_whiten: float = 0.0
+    # training windows are uniform in [crop_min_fraction, 1] x the longest clip of the batch's length
+    # bucket: 0.5 as before issue 18; smaller lets a run's speed be learned apart from its clip's length
+    # (docs/training.md: the captured runs all cover the ~8 m capture room, so slow runs are long clips)
+    crop_min_fraction: float = 0.5
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -135,10 +139,12 @@ class Trainer:
         self.text_encoder_id = encoder.id
         self.text_table = encoder.encode(captions).float()
         max_frames = int(round(cfg.max_seconds * self.fps))
+        if not 0.0 < cfg.crop_min_fraction <= 1.0:
+            raise KinemaError(f"crop_min_fraction must be in (0, 1], got {cfg.crop_min_fraction}")
         self.batches = BatchSampler(
             clips, ranges, self.layout, self.stats, cfg.batch_size, max_frames,
             text_dropout=cfg.text_dropout, random_heading=cfg.random_heading, rank=self.rank, world_size=self.world,
-            clip_weights=content_weights(ds.clips, cfg.content_balance),
+            clip_weights=content_weights(ds.clips, cfg.content_balance), crop_min_fraction=cfg.crop_min_fraction,
         )
         self.model_config = get_config(
             cfg.model, num_joints=self.skeleton.num_joints, text_dim=encoder.dim, fps=self.fps,
