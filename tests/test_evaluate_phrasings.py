@@ -14,13 +14,10 @@ from kinema.data.phrasings import PROBES, heldout_captions
 from kinema.evaluate.phrasings import (
     captured_reference,
     content_accuracy,
-    ground_speed,
-    hand_heights,
     heldout_prompt,
     probe_summary,
-    raises_hand,
-    window_speed,
 )
+from kinema.evaluate.probe_measures import follows_side, ground_speed, hand_heights, raises_hand, window_speed
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
@@ -62,11 +59,15 @@ def test_hand_heights_see_the_raised_hand():
     named, other = hand_heights(up, "left")
     assert named == pytest.approx(0.3, abs=1e-4) and other == pytest.approx(-0.7, abs=1e-4)
     assert raises_hand(named, other) and not raises_hand(*hand_heights(up, "right"))
+    assert follows_side(named, other) and not follows_side(*hand_heights(up, "right"))
     side = _motion(left_up_deg=90.0)  # arm horizontal: hand at shoulder height, below the head
     assert hand_heights(side, "left")[0] == pytest.approx(-0.2, abs=1e-4)
     assert not raises_hand(*hand_heights(side, "left"))
+    assert follows_side(*hand_heights(side, "left"))  # 0.5 m above the hanging right hand: the side is right
+    assert not follows_side(*hand_heights(_motion(left_up_deg=30.0), "left"))  # a small lift: 0.07 m
     both = _motion(left_up_deg=150.0, right_up_deg=180.0)  # both above the head, the right one higher
     assert raises_hand(*hand_heights(both, "right")) and not raises_hand(*hand_heights(both, "left"))
+    assert not follows_side(*hand_heights(both, "right"))  # 0.07 m higher only: both hands went up
     with pytest.raises(ValueError, match="left' or 'right"):
         hand_heights(up, "up")
 
@@ -83,6 +84,7 @@ def test_probe_summary_orders_speed_groups_and_counts_raised_hands():
             "prompt": "e",
             "speeds": [0.0, 0.0, 0.0],
             "raised": [True, False, True],
+            "side_followed": [True, True, False],
             "hand_over_head": [0.2, -0.1, 0.3],
             "other_over_head": [-0.5, -0.5, -0.5],
         },
@@ -93,7 +95,8 @@ def test_probe_summary_orders_speed_groups_and_counts_raised_hands():
     assert walk["probes"] == 2 and walk["n"] == 2 and walk["mean"] == pytest.approx(1.4)
     assert walk["std"] == pytest.approx(0.1) and (walk["min"], walk["max"]) == (1.3, 1.5)
     (hand,) = s["hand"]
-    assert hand["raised_fraction"] == pytest.approx(2 / 3) and hand["hand_over_head_m"] == pytest.approx(0.4 / 3)
+    assert hand["raised_fraction"] == pytest.approx(2 / 3) and hand["side_fraction"] == pytest.approx(2 / 3)
+    assert hand["hand_over_head_m"] == pytest.approx(0.4 / 3)
     sprint = s["speed"]["4 sprint"]
     assert sprint["gap"] == pytest.approx(2.1) and sprint["separated"] and "gap" not in s["speed"]["1 slow walk"]
     assert sprint["gap_se"] == pytest.approx(math.sqrt(0.01 / 1 + 0.25 / 1))  # sample variances over n - 1
@@ -154,6 +157,7 @@ def test_captured_reference_measures_the_splits_raise_up_clips(tiny_data):
     # the six-clip build holds raise-up-left-hand and raise-up-right-hand, each with its mirror, no locomotion
     assert ref["speed"] == {} and ref["window_speed"] == {} and set(ref["hand"]) == {"left", "right"}
     assert all(v["clips"] == 2 and 0.0 <= v["raised_fraction"] <= 1.0 for v in ref["hand"].values())
+    assert all(0.0 <= v["side_fraction"] <= 1.0 for v in ref["hand"].values())
 
 
 def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_path):

@@ -32,47 +32,23 @@ import torch
 
 from kinema.data.phrasings import PROBES, Probe, heldout_captions
 from kinema.evaluate import distribution as D
+from kinema.evaluate.probe_measures import (
+    SHORT_SPEED_SECONDS,
+    follows_side,
+    ground_speed,
+    hand_heights,
+    raises_hand,
+    window_speed,
+)
 from kinema.motion.core import Motion
 from kinema.representation.kimodo import features_to_motion
 
 PROBE_SECONDS = 4.0
-# Speed probes are generated again at this length: every captured run covers the ~8 m capture room
-# (5.7-9.8 m), so slow runs are the long clips (5.7 s on average) and fast runs and dashes the short
-# ones (2.4 / 2.7 s). A 4-s motion's mean speed is then capped near 2.4 m/s for anything that runs, by
-# the data; at 2 s the captures hold slow, medium and fast runs alike (docs/evaluation.md).
-SHORT_SPEED_SECONDS = 2.0
 SPEED_CONTENTS = ("walk", "run", "dash")
 HAND_CONTENTS = {"left": "raise-up-left-hand", "right": "raise-up-right-hand"}
 PROBE_ROLES = ("pelvis", "head", "left_hand", "right_hand")  # skeleton roles the measures need
 PROBE_SEED = 70001  # probe k is generated with seed * 100003 + PROBE_SEED + k
 SEPARATION = 2.0  # a speed group is faster than the one before when its mean is this many standard errors above
-
-
-# ----------------------------------------------------------------------------- measures
-def ground_speed(motion: Motion) -> float:
-    """Mean ground speed of the pelvis (m/s): horizontal start-to-end distance over the duration."""
-    pelvis = motion.skeleton.require_roles(("pelvis",))["pelvis"]
-    p = motion.positions[:, pelvis].double()
-    travel = (p[-1, [0, 2]] - p[0, [0, 2]]).norm()
-    return float(travel) * motion.fps / max(motion.num_frames - 1, 1)
-
-
-def hand_heights(motion: Motion, side: str) -> tuple[float, float]:
-    """(named hand, other hand): the most each gets above the head joint over the motion (m; < 0 = below).
-
-    ``side`` is 'left' or 'right' (the character's own side, as the skeleton's roles name it)."""
-    if side not in HAND_CONTENTS:
-        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
-    other = "right" if side == "left" else "left"
-    roles = motion.skeleton.require_roles(("head", f"{side}_hand", f"{other}_hand"))
-    y = motion.positions[..., 1].double()  # (T, J), Y up
-    head = y[:, roles["head"]]
-    return float((y[:, roles[f"{side}_hand"]] - head).max()), float((y[:, roles[f"{other}_hand"]] - head).max())
-
-
-def raises_hand(named: float, other: float) -> bool:
-    """Whether a motion with these :func:`hand_heights` raises the named hand (above head and other hand)."""
-    return named > 0.0 and named > other
 
 
 # ----------------------------------------------------------------------------- probes
@@ -110,6 +86,7 @@ def run_probes(
                 hand_over_head=[h for h, _ in heights],
                 other_over_head=[o for _, o in heights],
                 raised=[raises_hand(h, o) for h, o in heights],
+                side_followed=[follows_side(h, o) for h, o in heights],
             )
         out.append(rec)
         if on_probe is not None:
@@ -158,6 +135,7 @@ def probe_summary(records: list[dict]) -> dict:
             "hand": r["group"],
             "samples": len(r["raised"]),
             "raised_fraction": sum(r["raised"]) / len(r["raised"]),
+            "side_fraction": sum(r["side_followed"]) / len(r["side_followed"]),
             "hand_over_head_m": _stats(r["hand_over_head"])["mean"],
             "other_over_head_m": _stats(r["other_over_head"])["mean"],
         }
@@ -173,19 +151,6 @@ def probe_summary(records: list[dict]) -> dict:
     }
 
 
-def window_speed(motion: Motion, seconds: float = SHORT_SPEED_SECONDS) -> float | None:
-    """Mean :func:`ground_speed` of the motion's ``seconds``-long windows (every 0.5 s), or None when it is
-    shorter: what a generated motion of that length could do, by the captures."""
-    n = int(round(seconds * motion.fps))
-    if motion.num_frames < n + 1:
-        return None
-    stride = max(1, int(round(0.5 * motion.fps)))
-    pelvis = motion.skeleton.require_roles(("pelvis",))["pelvis"]
-    p = motion.positions[:, pelvis][:, [0, 2]].double()
-    starts = torch.arange(0, motion.num_frames - n, stride)
-    return float((p[starts + n] - p[starts]).norm(dim=-1).mean()) * motion.fps / n
-
-
 def captured_reference(dataset) -> dict:
     """The split's captured clips measured as the probes are: ground speed of every walk / run / dash
     clip (``speed``) and of its :data:`SHORT_SPEED_SECONDS` windows (``window_speed``, clips at least that
@@ -193,6 +158,7 @@ def captured_reference(dataset) -> dict:
     speeds: dict[str, list[float]] = {c: [] for c in SPEED_CONTENTS}
     windows: dict[str, list[float]] = {c: [] for c in SPEED_CONTENTS}
     raised: dict[str, list[bool]] = {s: [] for s in HAND_CONTENTS}
+    sides: dict[str, list[bool]] = {s: [] for s in HAND_CONTENTS}
     for i, rec in enumerate(dataset.clips):
         side = next((s for s, c in HAND_CONTENTS.items() if c == rec["content"]), None)
         if rec["content"] not in speeds and side is None:
@@ -204,11 +170,17 @@ def captured_reference(dataset) -> dict:
             if w is not None:
                 windows[rec["content"]].append(w)
         else:
-            raised[side].append(raises_hand(*hand_heights(m, side)))
+            heights = hand_heights(m, side)
+            raised[side].append(raises_hand(*heights))
+            sides[side].append(follows_side(*heights))
     return {
         "speed": {c: _stats(v) for c, v in speeds.items() if v},
         "window_speed": {c: _stats(v) for c, v in windows.items() if v},
-        "hand": {s: {"clips": len(v), "raised_fraction": sum(v) / len(v)} for s, v in raised.items() if v},
+        "hand": {
+            s: {"clips": len(v), "raised_fraction": sum(v) / len(v), "side_fraction": sum(sides[s]) / len(v)}
+            for s, v in raised.items()
+            if v
+        },
     }
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinema.evaluate.probe_measures import SIDE_MARGIN
 from kinema.io.atomic import atomic_write_bytes
 
 ROW_LABELS = {"ground_truth": "Ground truth", "raw": "Model (raw)", "post": "Model (post-processed)"}
@@ -75,6 +76,11 @@ def _pm(stats: dict | None) -> str:
     return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
 
 
+def _of(fraction: float | None, n: int) -> str:
+    """``k/n`` for a fraction of n samples ('-' when absent: a report written before the measure)."""
+    return "-" if fraction is None else f"{round(fraction * n)}/{n}"
+
+
 def _speed_table(groups: dict, ordered, samples: int, seconds: float, captured: str) -> list[str]:
     """Markdown lines of one speed-probe table (groups of kinema.evaluate.phrasings.speed_groups)."""
     order = {True: "yes", False: "**no**", None: "-"}[ordered]
@@ -107,14 +113,18 @@ def format_phrasings_table(data: dict) -> str:
                               f"{wins or 'none'}. Every captured run covers the ~8 m capture room, so the "
                               f"captured runs that last {ph['seconds']:g} s are mostly the slow ones; at "
                               f"{ph['short_seconds']:g} s they hold slow, medium and fast runs.")
-    lines += ["| Hand probe | Hand | Raised | Hand over head (m) | Other hand over head (m) |",
-              "|---|---|---:|---:|---:|"]
-    lines += [f"| {h['prompt']} | {h['hand']} | {round(h['raised_fraction'] * h['samples'])}/{h['samples']} | "
-              f"{h['hand_over_head_m']:.2f} | {h['other_over_head_m']:.2f} |" for h in summ["hand"]]
+    lines += ["| Hand probe | Hand | Side followed | Raised | Hand over head (m) | Other hand over head (m) |",
+              "|---|---|---:|---:|---:|---:|"]
+    lines += [f"| {h['prompt']} | {h['hand']} | {_of(h.get('side_fraction'), h['samples'])} | "
+              f"{_of(h['raised_fraction'], h['samples'])} | {h['hand_over_head_m']:.2f} | "
+              f"{h['other_over_head_m']:.2f} |" for h in summ["hand"]]
     flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
-    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % of {v['clips']} clips" for s, v in cap["hand"].items())
-    lines += ["", f"Raised = the named hand gets above the head and higher than the other hand. Captured "
-              f"raise-up-*-hand clips raised by this measure: {hands or 'none in the split'}. Probes the model "
+    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % raised, {v.get('side_fraction', 0) * 100:.0f} % "
+                      f"side followed, of {v['clips']} clips" for s, v in cap["hand"].items())
+    lines += ["", f"Side followed = the named hand gets {SIDE_MARGIN:g} m higher than the other hand; raised = it gets "
+              f"above the head and higher than the other hand. Captured raise-up-*-hand clips by these measures: "
+              f"{hands or 'none in the split'} (the feminine style's captures raise the hand to 0.14 m below the "
+              f"head: docs/evaluation.md). Probes the model "
               f"warned are far from its training captions: {', '.join(flagged) or 'none'}."]
     ho = ph.get("heldout")
     if ho:

@@ -1,0 +1,65 @@
+"""What the phrasing probes measure on a motion (kinema.evaluate.phrasings; docs/evaluation.md).
+
+Positions in metres, Y up; the joints come from the skeleton's roles (``pelvis``, ``head``,
+``left_hand``, ``right_hand``); speeds in m/s at the motion's fps.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.motion.core import Motion
+
+# Speed probes are generated again at this length: every captured run covers the ~8 m capture room
+# (5.7-9.8 m), so slow runs are the long clips (5.7 s on average) and fast runs and dashes the short
+# ones (2.4 / 2.7 s). A 4-s motion's mean speed is then capped near 2.4 m/s for anything that runs, by
+# the data; at 2 s the captures hold slow, medium and fast runs alike (docs/evaluation.md).
+SHORT_SPEED_SECONDS = 2.0
+# A sample follows a hand probe's side when the named hand gets this much higher than the other hand:
+# half the smallest gap of any captured raise-up-*-hand style (feminine, 0.41 m; docs/evaluation.md).
+SIDE_MARGIN = 0.2
+
+
+def ground_speed(motion: Motion) -> float:
+    """Mean ground speed of the pelvis (m/s): horizontal start-to-end distance over the duration."""
+    pelvis = motion.skeleton.require_roles(("pelvis",))["pelvis"]
+    p = motion.positions[:, pelvis].double()
+    travel = (p[-1, [0, 2]] - p[0, [0, 2]]).norm()
+    return float(travel) * motion.fps / max(motion.num_frames - 1, 1)
+
+
+def hand_heights(motion: Motion, side: str) -> tuple[float, float]:
+    """(named hand, other hand): the most each gets above the head joint over the motion (m; < 0 = below).
+
+    ``side`` is 'left' or 'right' (the character's own side, as the skeleton's roles name it)."""
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    other = "right" if side == "left" else "left"
+    roles = motion.skeleton.require_roles(("head", f"{side}_hand", f"{other}_hand"))
+    y = motion.positions[..., 1].double()  # (T, J), Y up
+    head = y[:, roles["head"]]
+    return float((y[:, roles[f"{side}_hand"]] - head).max()), float((y[:, roles[f"{other}_hand"]] - head).max())
+
+
+def raises_hand(named: float, other: float) -> bool:
+    """Whether a motion with these :func:`hand_heights` raises the named hand (above head and other hand)."""
+    return named > 0.0 and named > other
+
+
+def follows_side(named: float, other: float) -> bool:
+    """Whether a motion with these :func:`hand_heights` raises the named hand and not the other: the named
+    hand gets :data:`SIDE_MARGIN` higher than the other one does (above the head or not)."""
+    return named - other >= SIDE_MARGIN
+
+
+def window_speed(motion: Motion, seconds: float = SHORT_SPEED_SECONDS) -> float | None:
+    """Mean :func:`ground_speed` of the motion's ``seconds``-long windows (every 0.5 s), or None when it is
+    shorter: what a generated motion of that length could do, by the captures."""
+    n = int(round(seconds * motion.fps))
+    if motion.num_frames < n + 1:
+        return None
+    stride = max(1, int(round(0.5 * motion.fps)))
+    pelvis = motion.skeleton.require_roles(("pelvis",))["pelvis"]
+    p = motion.positions[:, pelvis][:, [0, 2]].double()
+    starts = torch.arange(0, motion.num_frames - n, stride)
+    return float((p[starts + n] - p[starts]).norm(dim=-1).mean()) * motion.fps / n
