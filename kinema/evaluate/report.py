@@ -76,6 +76,11 @@ def _pm(stats: dict | None) -> str:
     return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
 
 
+def _clip_speeds(by_content: dict) -> str:
+    """'walk 1.20 ± ... over n clips; run ...' for captured speed stats by content ('' when none)."""
+    return "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in by_content.items())
+
+
 def _of(fraction: float | None, n: int) -> str:
     """``k/n`` for a fraction of n samples ('-' when absent: a report written before the measure)."""
     return "-" if fraction is None else f"{round(fraction * n)}/{n}"
@@ -102,15 +107,14 @@ def format_phrasings_table(data: dict) -> str:
     summ, cap = ph["summary"], ph["captured"]
     lines = ["Probes and held-out captions use verb phrases that no training caption contains "
              "(kinema.data.phrasings; docs/evaluation.md).", ""]
-    caps = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap["speed"].items())
     lines += _speed_table(summ["speed"], summ["speed_ordered"], ph["samples"], ph["seconds"],
                           f"Captured ({', '.join(data['meta']['split'])} split, same measure): "
-                          f"{caps or 'no walk/run/dash clips'}.")
+                          f"{_clip_speeds(cap['speed']) or 'no walk/run/dash clips'}.")
     if summ.get("speed_short"):
-        wins = "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in cap.get("window_speed", {}).items())
         lines += _speed_table(summ["speed_short"], summ["speed_short_ordered"], ph["samples"], ph["short_seconds"],
                               f"Captured {ph['short_seconds']:g}-s windows (every 0.5 s, mean per clip): "
-                              f"{wins or 'none'}. Every captured run covers the ~8 m capture room, so the "
+                              f"{_clip_speeds(cap.get('window_speed', {})) or 'none'}. Every captured run covers "
+                              "the ~8 m capture room, so the "
                               f"captured runs that last {ph['seconds']:g} s are mostly the slow ones; at "
                               f"{ph['short_seconds']:g} s they hold slow, medium and fast runs.")
     lines += ["| Hand probe | Hand | Side followed | Raised | Hand over head (m) | Other hand over head (m) |",
@@ -119,8 +123,9 @@ def format_phrasings_table(data: dict) -> str:
               f"{_of(h['raised_fraction'], h['samples'])} | {h['hand_over_head_m']:.2f} | "
               f"{h['other_over_head_m']:.2f} |" for h in summ["hand"]]
     flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
-    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % raised, {v.get('side_fraction', 0) * 100:.0f} % "
-                      f"side followed, of {v['clips']} clips" for s, v in cap["hand"].items())
+    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % raised, "
+                      + ("" if "side_fraction" not in v else f"{v['side_fraction'] * 100:.0f} % side followed, ")
+                      + f"of {v['clips']} clips" for s, v in cap["hand"].items())
     lines += ["", f"Side followed = the named hand gets {SIDE_MARGIN:g} m higher than the other hand; raised = it gets "
               f"above the head and higher than the other hand. Captured raise-up-*-hand clips by these measures: "
               f"{hands or 'none in the split'} (the feminine style's captures raise the hand to 0.14 m below the "
