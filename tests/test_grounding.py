@@ -88,6 +88,41 @@ def test_only_captions_that_name_the_same_sides_are_blended_in():
     assert ground("Somebody lifts the left arm up high.", e, right_only, Grounding(weight=0.5)).status == "unmatched"
 
 
+def test_grounding_keeps_the_manner_the_prompt_names_or_does_not_name():
+    """The nearest caption of "A person walks forward." is a weary walk: a prompt that names no manner must
+    be grounded on captions that name none, and one that names a manner on captions that name one."""
+    caps = ["A person walks forward wearily.", "A person walks ahead.", "An elderly person walks forward."]
+    emb = torch.tensor([[1.0, 0, 0, 0], [0.7, 0.7, 0, 0], [0.6, 0, 0.8, 0]])
+    known = KnownPrompts(caps, emb, "x", ("wearily", "An elderly person", "like a giant"))
+    assert known.mannered.tolist() == [True, False, True]
+    assert known.names_manner("AN ELDERLY PERSON strolls.") and not known.names_manner("A person strolls wearyly.")
+    e = torch.nn.functional.normalize(torch.tensor([[0.99, 0.1, 0, 0]]), dim=-1)
+    assert known.match("p", e).nearest[0][0] == caps[0]  # nearest overall: the weary walk
+    out = ground("A person walks on.", e, known, Grounding(weight=1.0, top_k=3))
+    assert [c for c, _ in out.captions] == [caps[1]]
+    out = ground("A giant walks on, like a giant.", e, known, Grounding(weight=1.0, top_k=3))
+    assert [c for c, _ in out.captions] == [caps[0], caps[2]]
+    plain = KnownPrompts(caps, emb, "x")  # a file without style phrases: no manner rule
+    assert [c for c, _ in ground("A person walks on.", e, plain, Grounding(weight=1.0)).captions] == [caps[0]]
+
+
+def test_known_prompts_keep_the_manner_phrases_their_captions_use(tmp_path):
+    from kinema.data.captions import captions_for, style_phrases
+
+    phrases = style_phrases()
+    assert "wearily" in phrases and "An elderly person" in phrases and "with his chest puffed out" in phrases
+    assert "in a neutral way" not in phrases and "A person" not in phrases  # the neutral style names no manner
+    caps = captions_for("walk", "tired") + captions_for("walk", "normal")
+    known = KnownPrompts.build(caps, get_text_encoder("hash-test-32"), phrases)
+    assert set(known.manner_phrases) < set(phrases) and "An elderly person" not in known.manner_phrases
+    assert {c: bool(s) for c, s in zip(known.captions, known.mannered, strict=True)} == {
+        c: c in captions_for("walk", "tired") for c in known.captions
+    }
+    known.save(tmp_path)
+    again = KnownPrompts.load(tmp_path)
+    assert again.manner_phrases == known.manner_phrases and torch.equal(again.mannered, known.mannered)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
@@ -151,7 +186,10 @@ def test_generate_grounds_paraphrases_and_reports_the_captions(model):
     half, rep = _positions(model, prompt, grounding={"weight": 0.5, "top_k": 2})
     g = rep.prompts[0]["grounding"]
     assert g["status"] == "grounded" and g["prompt_weight"] == pytest.approx(0.5)
-    assert [c["caption"] for c in g["captions"]] == [n["caption"] for n in rep.prompts[0]["nearest"][:2]]
+    # "slowly" names a manner: of the nearest captions, "A person walks ahead." (none named) is passed over
+    near = [n["caption"] for n in rep.prompts[0]["nearest"]]
+    assert near[1] == "A person walks ahead." and not model.known_prompts.names_manner(near[1])
+    assert [c["caption"] for c in g["captions"]] == [near[0], near[2]]
     assert sum(c["weight"] for c in g["captions"]) == pytest.approx(0.5, abs=1e-3)
     assert not torch.equal(plain, half)
     # weight 1 on one caption conditions the denoiser as the caption itself does (float16-stored embedding)

@@ -140,3 +140,14 @@ def test_probes_are_well_formed():
         if p.kind == "hand":
             other = "right" if p.group == "left" else "left"
             assert p.group in p.prompt and other not in p.prompt
+
+
+def test_every_speed_phrase_names_a_speed_manner():
+    from kinema.data.phrasings import SPEED_MANNERS, manner_phrases
+
+    for vp in [vp for vps in SPEED_PHRASES.values() for vp in vps] + list(EXTRA_PHRASES["dash"]):
+        assert any(re.search(rf"\b{re.escape(m)}\b", vp) for m in SPEED_MANNERS), vp
+    assert set(SPEED_MANNERS) < set(manner_phrases()) and "wearily" in manner_phrases()
+    # the plain verb phrases of walks and runs name no manner: grounding may put a plain prompt on them
+    for vp in EXTRA_PHRASES["walk"] + EXTRA_PHRASES["run"]:
+        assert not any(re.search(rf"\b{re.escape(m)}\b", vp) for m in manner_phrases()), vp

@@ -57,11 +57,13 @@ def run(args: argparse.Namespace) -> int:
 def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
     """Embed the train captions of ``data`` with the model's text encoder into ``out``."""
     from kinema.data.dataset import MotionDataset
+    from kinema.data.phrasings import manner_phrases
     from kinema.model.vocabulary import KnownPrompts
     from kinema.text import get_text_encoder
 
     captions = [c for rec in MotionDataset(data, "train").clips for c in rec["captions"]]
-    known = KnownPrompts.build(captions, get_text_encoder(encoder_id, cache_dir=Path("cache/text")))
+    encoder = get_text_encoder(encoder_id, cache_dir=Path("cache/text"))
+    known = KnownPrompts.build(captions, encoder, manner_phrases())
     print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")
 
 

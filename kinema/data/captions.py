@@ -295,6 +295,21 @@ def _compose(vps: tuple[str, ...], words: StyleWords) -> list[str]:
     return out
 
 
+def style_phrases(neutral: tuple[str, ...] = ("normal",)) -> tuple[str, ...]:
+    """Every phrase that names a manner in these captions (subjects other than "A person" / "Someone",
+    manner phrases, clauses; each possessive spelled out), except the ``neutral`` styles' own: a caption
+    with none of them says what is done and not how (kinema.model.grounding grounds a prompt that names
+    no manner only on such captions)."""
+    out: set[str] = set()
+    for style, words in STYLE_PHRASES.items():
+        if style in neutral:
+            continue
+        out.update(s for s in words.subjects if s not in ("A person", "Someone"))
+        for phrase in words.manners + words.clauses:
+            out.update(phrase.replace("{their}", p) for p in ("their", "his", "her"))
+    return tuple(sorted(out))
+
+
 def captions_for(content: str, style: str, mirrored: bool = False) -> list[str]:
     """Deterministic English captions for one clip's (content, style) labels.
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinema.data.captions import CONTENT_PHRASES, mirror_caption, mirror_content
+from kinema.data.captions import CONTENT_PHRASES, mirror_caption, mirror_content, style_phrases
 
 # (slow below, fast above) m/s of mean pelvis ground speed, per locomotion content.
 SPEED_BANDS: dict[str, tuple[float, float]] = {"walk": (0.95, 1.40), "run": (2.10, 3.00), "dash": (0.0, 0.0)}
@@ -36,6 +36,14 @@ SPEED_PHRASES: dict[tuple[str, str], tuple[str, ...]] = {
 }
 
 SPEED_SENTENCES = ("A person {vp}.", "Someone {vp}.")
+
+# The words of SPEED_PHRASES (and of the extra dash caption) that say how fast: every speed phrase holds
+# one (tested). With the styles' phrases they are the captions' manner phrases (:func:`manner_phrases`).
+SPEED_MANNERS: tuple[str, ...] = (
+    "slowly", "at a slow, leisurely pace", "at an easy pace", "at a gentle pace", "at a normal pace",
+    "at an everyday pace", "quickly", "briskly", "at a fast pace", "at a steady pace", "at a moderate speed",
+    "fast", "at high speed", "at full speed", "very fast", "flat out", "at top speed",
+)
 
 
 # More training verb phrases for the labels users ask for most (subject "A person"/"Someone").
@@ -54,6 +62,13 @@ EXTRA_PHRASES: dict[str, tuple[str, ...]] = {
 }
 for _label in [k for k in EXTRA_PHRASES if "left" in k.split("-")]:
     EXTRA_PHRASES[mirror_content(_label)] = tuple(mirror_caption(p) for p in EXTRA_PHRASES[_label])
+
+
+def manner_phrases() -> tuple[str, ...]:
+    """Phrases that say *how* something is done in the training captions: the styles' (except the neutral
+    one's; kinema.data.captions.style_phrases) and the speed words. Saved with a model's known prompts so
+    that prompt grounding keeps a prompt that names no manner off captions that name one."""
+    return tuple(sorted(set(style_phrases()) | set(SPEED_MANNERS)))
 
 
 def extra_captions(content: str, style: str, speed: float | None, mirrored: bool = False) -> list[str]:

@@ -30,12 +30,15 @@ from collections.abc import Callable
 
 import torch
 
+from kinema.data.dataset import MotionDataset
 from kinema.data.phrasings import PROBES, Probe, heldout_captions
 from kinema.evaluate import distribution as D
+from kinema.evaluate.probe_expectations import follows_captures, probe_expectations
 from kinema.evaluate.probe_measures import (
     SHORT_SPEED_SECONDS,
     follows_side,
     ground_speed,
+    group_step,
     hand_heights,
     raises_hand,
     window_speed,
@@ -117,9 +120,8 @@ def speed_groups(records: list[dict], key: str = "speeds") -> tuple[dict, bool |
         for g in groups
     }
     for prev, g in zip(groups, groups[1:], strict=False):
-        a, b = speed[prev], speed[g]
-        se = math.sqrt(a["std"] ** 2 / max(a["n"] - 1, 1) + b["std"] ** 2 / max(b["n"] - 1, 1))
-        b.update(gap=b["mean"] - a["mean"], gap_se=se, separated=b["mean"] - a["mean"] > SEPARATION * se)
+        gap, se, separated = group_step(speed[prev], speed[g], SEPARATION)
+        speed[g].update(gap=gap, gap_se=se, separated=separated)
     return speed, None if len(groups) < 2 else all(speed[g]["separated"] for g in groups[1:])
 
 
@@ -308,6 +310,17 @@ def generate_heldout(
 
 
 # ----------------------------------------------------------------------------- the part of the run
+def _expected(model, probes: list[dict], samples: int, datasets: dict, data) -> dict | None:
+    """kinema.evaluate.probe_expectations on the data's train split (what the model learned from)."""
+    lengths = {"speed": PROBE_SECONDS, "speed_short": SHORT_SPEED_SECONDS}
+    known, encoder = getattr(model, "known_prompts", None), getattr(model, "text_encoder", None)
+    if known is None or encoder is None:
+        return None
+    if (data, "train") not in datasets:
+        datasets[(data, "train")] = MotionDataset(data, "train")
+    return probe_expectations(probes, known, encoder.encode, datasets[(data, "train")], samples, SEPARATION, lengths)
+
+
 def run_phrasings(
     model,
     cases: list[dict],
@@ -344,8 +357,14 @@ def run_phrasings(
         "probes": probes,
         "summary": probe_summary(probes),
         "captured": captured_reference(datasets[(src["data"], src["split"])]),
+        "expected": _expected(model, probes, samples, datasets, src["data"]),
         "heldout": None,
     }
+    if out["expected"] is not None:
+        for key in ("speed", "speed_short"):
+            out["summary"][f"{key}_follows_captures"] = follows_captures(
+                out["summary"][key], out["expected"]["groups"][key], SEPARATION
+            )
     pairs, rows = generate_heldout(
         model, cases, motions, datasets, seed=seed, steps=steps, guidance=guidance, on_case=lambda: bar.update(1)
     )

@@ -6,6 +6,8 @@ Positions in metres, Y up; the joints come from the skeleton's roles (``pelvis``
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from kinema.motion.core import Motion
@@ -63,3 +65,11 @@ def window_speed(motion: Motion, seconds: float = SHORT_SPEED_SECONDS) -> float 
     p = motion.positions[:, pelvis][:, [0, 2]].double()
     starts = torch.arange(0, motion.num_frames - n, stride)
     return float((p[starts + n] - p[starts]).norm(dim=-1).mean()) * motion.fps / n
+
+
+def group_step(a: dict, b: dict, separation: float) -> tuple[float, float, bool]:
+    """(gap, its standard error, separated) from speed group ``a`` to ``b`` (each ``mean``, ``std`` over
+    ``n`` samples): b is faster when its mean is more than ``separation`` standard errors above a's."""
+    se = math.sqrt(a["std"] ** 2 / max(a["n"] - 1, 1) + b["std"] ** 2 / max(b["n"] - 1, 1))
+    gap = b["mean"] - a["mean"]
+    return gap, se, gap > separation * se

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kinema.evaluate.probe_measures import SIDE_MARGIN
+from kinema.evaluate.report_phrasings import fmt as _fmt
+from kinema.evaluate.report_phrasings import format_phrasings_table
 from kinema.io.atomic import atomic_write_bytes
 
 ROW_LABELS = {"ground_truth": "Ground truth", "raw": "Model (raw)", "post": "Model (post-processed)"}
@@ -38,10 +39,6 @@ TABLE = (
     ("jerk", "Jerk (m/s^3)", 1.0, 1),
 )
 COLOURS = {"ground_truth": "#555555", "raw": "#e0452b", "post": "#1f6fd1"}
-
-
-def _fmt(value, scale: float = 1.0, decimals: int = 2) -> str:
-    return "-" if value is None else f"{value * scale:.{decimals}f}"
 
 
 def format_table(data: dict) -> str:
@@ -69,85 +66,6 @@ def format_timeline_table(data: dict) -> str:
             f"{_fmt(v['r3'], 100, 1)} | {_fmt(v['foot_skate_cm_s'])} | {_fmt(v['join_speed'])} / "
             f"{_fmt(v['inside_speed'])} | {_fmt(v['join_acc'], 1, 1)} / {_fmt(v['inside_acc'], 1, 1)} | "
             f"{_fmt(v['join_acc_peak'], 1, 0)} / {_fmt(v['inside_acc_p99'], 1, 0)} |")
-    return "\n".join(lines)
-
-
-def _pm(stats: dict | None) -> str:
-    return "-" if not stats else f"{stats['mean']:.2f} ± {stats['std']:.2f} ({stats['min']:.2f}-{stats['max']:.2f})"
-
-
-def _clip_speeds(by_content: dict) -> str:
-    """'walk 1.20 ± ... over n clips; run ...' for captured speed stats by content ('' when none)."""
-    return "; ".join(f"{c} {_pm(v)} over {v['n']} clips" for c, v in by_content.items())
-
-
-def _of(fraction: float | None, n: int) -> str:
-    """``k/n`` for a fraction of n samples ('-' when absent: a report written before the measure)."""
-    return "-" if fraction is None else f"{round(fraction * n)}/{n}"
-
-
-def _speed_table(groups: dict, ordered, samples: int, seconds: float, captured: str) -> list[str]:
-    """Markdown lines of one speed-probe table (groups of kinema.evaluate.phrasings.speed_groups)."""
-    order = {True: "yes", False: "**no**", None: "-"}[ordered]
-    lines = [f"Speed probes ({samples} samples of {seconds:g} s each, raw; pelvis ground speed, m/s, "
-             "mean ± sd (min-max)):", "",
-             "| Group | Probes | Samples | Speed (m/s) | Faster than the one above (m/s) |", "|---|---:|---:|---|---|"]
-    for g, v in groups.items():
-        gap = "-" if "gap" not in v else f"{v['gap']:+.2f} ± {v['gap_se']:.2f}" + ("" if v["separated"] else " (no)")
-        lines.append(f"| {g} | {v['probes']} | {v['n']} | {_pm(v)} | {gap} |")
-    return lines + ["", f"Groups in order (slow walk < walk < jog < sprint, each mean over 2 standard errors above "
-                    f"the one before): {order}. {captured}", ""]
-
-
-def format_phrasings_table(data: dict) -> str:
-    """The "Prompts in other words" tables (markdown; kinema.evaluate.phrasings), or "" when not run."""
-    ph = data.get("phrasings")
-    if not ph:
-        return ""
-    summ, cap = ph["summary"], ph["captured"]
-    lines = ["Probes and held-out captions use verb phrases that no training caption contains "
-             "(kinema.data.phrasings; docs/evaluation.md).", ""]
-    lines += _speed_table(summ["speed"], summ["speed_ordered"], ph["samples"], ph["seconds"],
-                          f"Captured ({', '.join(data['meta']['split'])} split, same measure): "
-                          f"{_clip_speeds(cap['speed']) or 'no walk/run/dash clips'}.")
-    if summ.get("speed_short"):
-        lines += _speed_table(summ["speed_short"], summ["speed_short_ordered"], ph["samples"], ph["short_seconds"],
-                              f"Captured {ph['short_seconds']:g}-s windows (every 0.5 s, mean per clip): "
-                              f"{_clip_speeds(cap.get('window_speed', {})) or 'none'}. Every captured run covers "
-                              "the ~8 m capture room, so the "
-                              f"captured runs that last {ph['seconds']:g} s are mostly the slow ones; at "
-                              f"{ph['short_seconds']:g} s they hold slow, medium and fast runs.")
-    lines += ["| Hand probe | Hand | Side followed | Raised | Hand over head (m) | Other hand over head (m) |",
-              "|---|---|---:|---:|---:|---:|"]
-    lines += [f"| {h['prompt']} | {h['hand']} | {_of(h.get('side_fraction'), h['samples'])} | "
-              f"{_of(h['raised_fraction'], h['samples'])} | {h['hand_over_head_m']:.2f} | "
-              f"{h['other_over_head_m']:.2f} |" for h in summ["hand"]]
-    flagged = [f'"{r["prompt"]}"' for r in ph["probes"] if r.get("unknown_warning")]
-    hands = "; ".join(f"{s} {v['raised_fraction'] * 100:.0f} % raised, "
-                      + ("" if "side_fraction" not in v else f"{v['side_fraction'] * 100:.0f} % side followed, ")
-                      + f"of {v['clips']} clips" for s, v in cap["hand"].items())
-    lines += ["", f"Side followed = the named hand gets {SIDE_MARGIN:g} m higher than the other hand; raised = it gets "
-              f"above the head and higher than the other hand. Captured raise-up-*-hand clips by these measures: "
-              f"{hands or 'none in the split'} (the feminine style's captures raise the hand to 0.14 m below the "
-              f"head: docs/evaluation.md). Probes the model "
-              f"warned are far from its training captions: {', '.join(flagged) or 'none'}."]
-    ho = ph.get("heldout")
-    if ho:
-        lines += ["", f"Text cases again from held-out captions ({ho['cases']} cases, same seeds; "
-                  f"{ho['distinct_template']} distinct template / {ho['distinct_heldout']} distinct held-out "
-                  "captions):",
-                  "", "| Motions | R@1 / R@3 template captions (%) | R@1 / R@3 held-out captions (%) | FID | "
-                  "Content acc. (%) |", "|---|---:|---:|---:|---:|"]
-        names = {"ground_truth": "Ground truth", "template": "Model (raw), template prompt",
-                 "heldout": "Model (raw), held-out prompt"}
-        for row, v in ho["rows"].items():
-            r_t = f"{_fmt(v['r1_template'], 100, 1)} / {_fmt(v['r3_template'], 100, 1)}"
-            r_h = f"{_fmt(v['r1_heldout'], 100, 1)} / {_fmt(v['r3_heldout'], 100, 1)}"
-            lines.append(f"| {names.get(row, row)} | {r_t} | {r_h} | {_fmt(v['fid'], 1, 3)} | "
-                         f"{_fmt(v.get('content_acc'), 100, 1)} |")
-        lines += ["", "Content acc. = the nearest ground-truth clip of the text cases (retrieval motion embedding) "
-                  "has the case's content label (the ground truth: its nearest other clip); no captions involved, "
-                  "so style words and the retrieval model's reading of paraphrases do not count."]
     return "\n".join(lines)
 
 

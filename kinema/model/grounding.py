@@ -18,6 +18,16 @@ left hand.", 0.89), so blending the nearest captions as they come would swap sid
 candidate only when the set of side words it uses ({left, right}, also as leftward(s) / rightward(s))
 equals the prompt's; a prompt that names no side is grounded on captions that name none.
 
+Same manner, likewise: the nearest caption of "A person walks forward." is "A person walks forward
+wearily." (an exhausted style), of "A person bows." "A person bows wearily.", so a blend of the nearest
+captions as they come would give a user who named no manner a tired walk. When the known prompts list
+the phrases that name a manner in their captions (``manner_phrases``: styles such as "wearily" or "An
+elderly person" and speed words such as "slowly" or "at full speed"; kinema.data.phrasings.manner_phrases,
+written by ``kinema export --known-prompts``), a prompt that names none of them is grounded only on
+captions that name none ("A person walks ahead.", the neutral style's "A person walks forward in a
+neutral way."), and one that names one only on captions that name one ("Someone strolls slowly ahead."
+-> "Someone walks slowly ahead.").
+
 Four cases are left alone:
 
 - a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`): the model knows
@@ -160,6 +170,8 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     unit = torch.nn.functional.normalize(e, dim=-1)
     want = sides(prompt)
     same = torch.tensor([sides(c) == want for c in known.captions])
+    if known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none, and so on
+        same &= known.mannered == known.names_manner(prompt)
     sims = torch.where(same, known.embeddings @ unit[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
     if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:

@@ -18,6 +18,7 @@ up a box." 0.369).
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -62,7 +63,9 @@ class PromptMatch:
 class KnownPrompts:
     """Training captions and their unit-length embeddings ``(N, E)`` from text encoder ``encoder_id``."""
 
-    def __init__(self, captions: list[str], embeddings: torch.Tensor, encoder_id: str):
+    def __init__(
+        self, captions: list[str], embeddings: torch.Tensor, encoder_id: str, manner_phrases: tuple[str, ...] = ()
+    ):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
             raise KinemaError(
                 f"known prompts: {len(captions)} captions but embeddings of shape {tuple(embeddings.shape)}"
@@ -71,14 +74,26 @@ class KnownPrompts:
         self.embeddings = torch.nn.functional.normalize(embeddings.float(), dim=-1)
         self.encoder_id = encoder_id
         self.caption_set = frozenset(c.strip() for c in self.captions)
+        # phrases that say how a caption's action is done ("wearily", "An elderly person", "slowly"); empty = not known
+        self.manner_phrases = tuple(manner_phrases)
+        longest_first = sorted(self.manner_phrases, key=len, reverse=True)
+        self._manner = re.compile(r"\b(?:" + "|".join(map(re.escape, longest_first)) + r")\b", re.IGNORECASE)
+        self.mannered = torch.tensor([self.names_manner(c) for c in self.captions], dtype=torch.bool)
+
+    def names_manner(self, text: str) -> bool:
+        """Whether ``text`` contains one of :attr:`manner_phrases` (False when there are none)."""
+        return bool(self.manner_phrases) and self._manner.search(text) is not None
 
     @classmethod
-    def build(cls, captions, encoder) -> KnownPrompts:
-        """Embed the unique ``captions`` (sorted) with ``encoder`` (a kinema.text encoder)."""
+    def build(cls, captions, encoder, manner_phrases: tuple[str, ...] = ()) -> KnownPrompts:
+        """Embed the unique ``captions`` (sorted) with ``encoder`` (a kinema.text encoder); ``manner_phrases``
+        are the words that name a manner in them (kinema.data.phrasings.manner_phrases for kinema's captions;
+        those no caption uses are dropped)."""
         unique = sorted({c.strip() for c in captions if c and c.strip()})
         if not unique:
             raise KinemaError("known prompts: no captions to embed")
-        return cls(unique, encoder.encode(unique).float(), encoder.id)
+        used = tuple(p for p in manner_phrases if any(p.lower() in c.lower() for c in unique))
+        return cls(unique, encoder.encode(unique).float(), encoder.id, used)
 
     def save(self, folder: str | Path) -> Path:
         """Write ``folder/known_prompts.safetensors`` atomically (float16 embeddings)."""
@@ -86,6 +101,7 @@ class KnownPrompts:
             "format": "kinema-known-prompts-1",
             "text_encoder": self.encoder_id,
             "captions": json.dumps(self.captions),
+            "manner_phrases": json.dumps(list(self.manner_phrases)),
         }
         path = Path(folder) / FILE_NAME
         atomic_write_bytes(path, save({"embeddings": self.embeddings.half().contiguous()}, metadata=meta))
@@ -102,8 +118,8 @@ class KnownPrompts:
                 meta = f.metadata() or {}
                 emb = f.get_tensor("embeddings")
             captions = json.loads(meta["captions"])
-            return cls(captions, emb, meta["text_encoder"])
-        except (OSError, KeyError, ValueError, RuntimeError, SafetensorError) as err:
+            return cls(captions, emb, meta["text_encoder"], tuple(json.loads(meta.get("manner_phrases", "[]"))))
+        except (OSError, KeyError, TypeError, ValueError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
     def nearest(self, embedding: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
