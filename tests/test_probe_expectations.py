@@ -82,3 +82,29 @@ def test_probe_expectations_name_each_speed_probes_nearest_caption(tiny_data):
     assert set(exp["groups"]) == {"speed", "speed_short"} and list(exp["groups"]["speed"]) == ["1 x", "2 y"]
     assert all(g["mean"] is None for g in exp["groups"]["speed_short"].values())  # no clip lasts 1e4 s
     assert probe_expectations(records[2:], known, enc.encode, ds, 3, SEP, {"speed": 1.0}) is None
+
+
+def test_report_shows_what_the_captures_say(tmp_path):
+    from kinema.evaluate.phrasings import probe_summary
+    from kinema.evaluate.report import format_phrasings_table, plot_phrasings
+
+    recs = [{"prompt": f"p{g}{k}", "kind": "speed", "group": g, "speeds": [v + 0.01 * k, v - 0.01 * k, v],
+             "speeds_short": [v, v, v + 0.02]} for g, v in (("1 slow", 0.8), ("2 walk", 1.5), ("3 run", 1.52))
+            for k in range(2)]
+    speeds = {"slow": {4.0: [0.7, 0.8], 2.0: [0.7]}, "walk": {4.0: [1.2, 1.3], 2.0: [1.2]},
+              "run": {4.0: [], 2.0: [1.25]}}
+    probes = [{"prompt": r["prompt"], "group": r["group"], "caption": r["group"].split()[1]} for r in recs]
+    for p in probes:
+        p["window_speed"] = {"speed": None, "speed_short": sum(speeds[p["caption"]][2.0]) / 1}
+    groups = {k: expected_groups(probes, speeds, s, 3, SEP) for k, s in (("speed", 4.0), ("speed_short", 2.0))}
+    summary = probe_summary(recs)
+    summary["speed_follows_captures"] = follows_captures(summary["speed"], groups["speed"], SEP)
+    summary["speed_short_follows_captures"] = follows_captures(summary["speed_short"], groups["speed_short"], SEP)
+    assert summary["speed_follows_captures"] is True  # the only step the 4-s captures make: slow -> walk
+    ph = {"samples": 3, "seconds": 4.0, "short_seconds": 2.0, "probes": recs, "summary": summary,
+          "captured": {"speed": {}, "window_speed": {}, "hand": {}}, "expected": {"probes": probes, "groups": groups},
+          "heldout": None}
+    table = format_phrasings_table({"phrasings": ph, "meta": {"split": ["test"]}})
+    assert "| 2 walk | 2 | 6 |" in table and "1.25 ± 0.05, step |" in table and "no captured clip this long |" in table
+    assert "the model makes every step the captures make: yes." in table
+    assert plot_phrasings({"phrasings": ph}, tmp_path / "p.png") and (tmp_path / "p.png").stat().st_size > 1000

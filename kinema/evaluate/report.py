@@ -192,6 +192,37 @@ def plot_foot_skate(data: dict, path: Path) -> bool:
     return True
 
 
+def _plot_speed_probes(ax, ph: dict, speed: list[dict]) -> None:
+    """Every speed-probe sample at both lengths against the captured walk/run/dash speeds, and a bar at
+    what the captures of each probe's nearest training caption do (kinema.evaluate.probe_expectations)."""
+    for content, colour in (("walk", "#2a9d4b"), ("run", "#e0452b"), ("dash", "#7b3fbf")):
+        v = ph["captured"]["speed"].get(content)
+        if v:
+            ax.axhspan(v["mean"] - v["std"], v["mean"] + v["std"], color=colour, alpha=0.12)
+            ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
+    expected = {p["prompt"]: p["window_speed"] for p in (ph.get("expected") or {}).get("probes", [])}
+    labelled = False
+    for n, r in enumerate(speed):
+        ax.scatter([n - 0.12] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1",
+                   label=f"{ph['seconds']:g}-s samples" if n == 0 else None)
+        if "speeds_short" in r:
+            ax.scatter([n + 0.12] * len(r["speeds_short"]), r["speeds_short"], s=18, color="#f08c00",
+                       label=f"{ph['short_seconds']:g}-s samples" if n == 0 else None)
+        for dx, key in ((-0.12, "speed"), (0.12, "speed_short")):
+            v = expected.get(r["prompt"], {}).get(key)
+            if v is not None:
+                ax.scatter([n + dx], [v], marker="_", s=220, color="black", linewidths=2,
+                           label=None if labelled else "captures of its nearest caption, same length")
+                labelled = True
+    ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("pelvis ground speed (m/s)")
+    ax.set_title("Speed probes (raw, every sample)")
+    ax.grid(alpha=0.3, axis="y")
+    ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]), top=ax.get_ylim()[1] * 1.45)  # headroom for the legend
+    ax.legend(fontsize=6, loc="upper left", ncol=2)
+
+
 def plot_phrasings(data: dict, path: Path) -> bool:
     """Probes: speed of every sample per speed probe against the captured walk/run speeds (left), and
     the named vs other hand's height over the head per hand probe sample (right)."""
@@ -202,25 +233,8 @@ def plot_phrasings(data: dict, path: Path) -> bool:
         return False
     speed = [r for r in ph["probes"] if r["kind"] == "speed"]
     hand = [r for r in ph["probes"] if r["kind"] == "hand"]
-    fig = Figure(figsize=(11, 4.4), dpi=100, layout="constrained")
-    ax = fig.add_subplot(1, 2, 1)
-    for content, colour in (("walk", "#2a9d4b"), ("run", "#e0452b"), ("dash", "#7b3fbf")):
-        v = ph["captured"]["speed"].get(content)
-        if v:
-            ax.axhspan(v["mean"] - v["std"], v["mean"] + v["std"], color=colour, alpha=0.12)
-            ax.axhline(v["mean"], color=colour, ls="--", lw=1, label=f"captured {content}: mean ± sd, {v['n']} clips")
-    for n, r in enumerate(speed):
-        ax.scatter([n - 0.12] * len(r["speeds"]), r["speeds"], s=18, color="#1f6fd1",
-                   label=f"{ph['seconds']:g}-s samples" if n == 0 else None)
-        if "speeds_short" in r:
-            ax.scatter([n + 0.12] * len(r["speeds_short"]), r["speeds_short"], s=18, color="#f08c00",
-                       label=f"{ph['short_seconds']:g}-s samples" if n == 0 else None)
-    ax.set_xticks(range(len(speed)), [f"{r['group']}: {r['prompt']}" for r in speed], rotation=35, ha="right",
-                  fontsize=7)
-    ax.set_ylabel("pelvis ground speed (m/s)")
-    ax.set_title("Speed probes (raw, every sample)")
-    ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=7, loc="upper left")
+    fig = Figure(figsize=(12.5, 4.6), dpi=100, layout="constrained")
+    _plot_speed_probes(fig.add_subplot(1, 2, 1), ph, speed)
     ax = fig.add_subplot(1, 2, 2)
     for n, r in enumerate(hand):
         ax.scatter([n - 0.1] * len(r["hand_over_head"]), r["hand_over_head"], s=18, color="#1f6fd1",
@@ -233,7 +247,8 @@ def plot_phrasings(data: dict, path: Path) -> bool:
     ax.set_ylabel("highest over the head (m)")
     ax.set_title("Hand probes (raw; > 0 = above the head)")
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(fontsize=7)
+    if hand:
+        ax.legend(fontsize=7)
     _save_fig(fig, path)
     return True
 
