@@ -25,7 +25,7 @@ def main() -> int:
     old = KnownPrompts.load(args.model)
     if old is None:
         raise SystemExit(f"{args.model}: no known_prompts.safetensors")
-    used = tuple(p for p in manner_phrases() if any(p.lower() in c.lower() for c in old.captions))
+    used = KnownPrompts.phrases_in(manner_phrases(), old.captions)
     KnownPrompts(old.captions, old.embeddings, old.encoder_id, used).save(args.model)
     new = KnownPrompts.load(args.model)
     assert new.captions == old.captions and torch.equal(new.embeddings, old.embeddings)

@@ -92,8 +92,13 @@ class KnownPrompts:
         unique = sorted({c.strip() for c in captions if c and c.strip()})
         if not unique:
             raise KinemaError("known prompts: no captions to embed")
-        used = tuple(p for p in manner_phrases if any(p.lower() in c.lower() for c in unique))
-        return cls(unique, encoder.encode(unique).float(), encoder.id, used)
+        return cls(unique, encoder.encode(unique).float(), encoder.id, cls.phrases_in(manner_phrases, unique))
+
+    @staticmethod
+    def phrases_in(phrases, captions) -> tuple[str, ...]:
+        """The ``phrases`` that occur (case-insensitively) in at least one of ``captions``, in order."""
+        lowered = [c.lower() for c in captions]
+        return tuple(p for p in phrases if any(p.lower() in c for c in lowered))
 
     def save(self, folder: str | Path) -> Path:
         """Write ``folder/known_prompts.safetensors`` atomically (float16 embeddings)."""
