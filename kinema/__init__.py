@@ -19,7 +19,7 @@ __version__ = "0.1.0"
 __all__ = ["load_model", "load_motion", "Motion", "Skeleton", "__version__"]
 
 if TYPE_CHECKING:  # pragma: no cover
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
     from kinema.motion.core import Motion
     from kinema.skeleton import Skeleton
 
@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # pragma: no cover
 def __getattr__(name: str):
     """Import lazily so that `import kinema` (and the CLI) start fast."""
     if name == "load_model":
-        from kinema.generate.api import load_model
+        from kinema.generate import load_model
 
         return load_model
     if name == "Motion":

@@ -14,7 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from kinema.generate.api import load_model
+from kinema.generate import load_model
 
 #: (file under the Quaternius root, prompt, picture name); the alpaca and the apatosaurus are held-out rigs
 #: (the T-rex trains since the build keeps the biped dinosaur in train)

@@ -19,7 +19,7 @@ from pathlib import Path
 from anyrig_gallery import base_parser, film
 from PIL import Image
 
-from kinema.generate.api import load_model
+from kinema.generate import load_model
 
 #: rig name -> (file under the Quaternius root, split, [(action, prompt), ...])
 SHEETS: dict[str, tuple[str, str, list[tuple[str, str]]]] = {

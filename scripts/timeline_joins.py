@@ -21,7 +21,7 @@ import json
 import torch
 
 import kinema
-from kinema.generate.targets import run_postprocess
+from kinema.human.targets import run_postprocess
 
 WALK, BOW, WAVE = "A person walks forward.", "A person bows.", "A person waves their right hand."
 TIMELINES = {"walk_bow_wave": [WALK, BOW, WAVE], "bow_wave_walk": [BOW, WAVE, WALK]}

@@ -51,7 +51,7 @@ class FakeModel:
 def fake_model(monkeypatch):
     """The generate calls the CLI makes, recorded by a `FakeModel` that stands in for load_model."""
     calls: list = []
-    monkeypatch.setattr("kinema.generate.api.load_model", lambda *a, **k: FakeModel(calls))
+    monkeypatch.setattr("kinema.human.pipeline.load_model", lambda *a, **k: FakeModel(calls))
     return calls
 
 
@@ -62,7 +62,7 @@ def no_model(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("the model was loaded before the bad input was reported")
 
-    monkeypatch.setattr("kinema.generate.api.load_model", boom)
+    monkeypatch.setattr("kinema.human.pipeline.load_model", boom)
 
 
 @pytest.fixture

@@ -1,26 +1,26 @@
 """``kinema generate --model <any-rig> --rig R --constraints FILE``: the human model's constraint files
 (docs/constraints.md, world frame) and the any-rig list, checked against the rig before generating;
-world targets are met after post-processing (kinema.generate.anyrig_world)."""
+world targets are met after post-processing (kinema.anyrig.world)."""
 
 from __future__ import annotations
 
 import json
 import math
 
-import anyrig_fixtures
+import creature_fixtures
 import pytest
 import torch
 from app_rig_data import synthetic_rig_glb
 from rig_fixtures import quadruped, walking
 
+from kinema.anyrig.world import json_form, load_constraints_file
 from kinema.cli import main
-from kinema.generate.anyrig_world import json_form, load_constraints_file
 from kinema.geometry.rotations import quat_mul
 from kinema.io.registry import load_motion
 from kinema.representation.joint import JointRepresentation, yaw_quat
 from kinema.rig import Rig
 
-creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
+creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
 
 
 @pytest.fixture(scope="module")

@@ -1,14 +1,13 @@
-"""Held-out rigs classified against the training rigs (kinema.evaluate.anyrig_groups), the grouped
-table, and caption retrieval per rig (kinema.evaluate.anyrig)."""
+"""Held-out rigs classified against the training rigs (kinema.evaluate.anyrig.groups), the grouped
+table, and caption retrieval per rig (kinema.evaluate.anyrig.suite)."""
 
 from __future__ import annotations
 
-import anyrig_fixtures
+import creature_fixtures
 import torch
 from rig_fixtures import fish, hexapod, quadruped, walking
 
-from kinema.evaluate.anyrig import caption_retrieval, evaluate_split, format_row
-from kinema.evaluate.anyrig_groups import (
+from kinema.evaluate.anyrig.groups import (
     CLASSES,
     classify,
     rig_shape,
@@ -17,11 +16,12 @@ from kinema.evaluate.anyrig_groups import (
     training_shapes,
     tree_code,
 )
+from kinema.evaluate.anyrig.suite import caption_retrieval, evaluate_split, format_row
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
-creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
+creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
 
 
 def _renamed(s: Skeleton, suffix: str) -> Skeleton:
@@ -101,7 +101,7 @@ def test_caption_retrieval_finds_the_clip_of_the_caption() -> None:
 
 
 def test_evaluate_split_classifies_held_out_rigs(trained, creature_cache) -> None:
-    model = anyrig_fixtures.tiny_model(trained)
+    model = creature_fixtures.tiny_model(trained)
     shapes = training_shapes(model.loaded.train_rigs)
     rows = []
     for split in ("val", "test"):

@@ -9,11 +9,11 @@ import pytest
 import torch
 
 import kinema
+from kinema.anyrig.constraints import JointTarget
+from kinema.anyrig.feet import REACH, descendants, lock_translated_feet, translated_feet
+from kinema.anyrig.ground import ground_motion, ground_offsets, leg_ends, settle_offsets, steady_height
+from kinema.anyrig.post import dejitter, reach_by_translation
 from kinema.evaluate.metrics import position_jerk
-from kinema.generate.anyrig_constraints import JointTarget
-from kinema.generate.anyrig_feet import REACH, descendants, lock_translated_feet, translated_feet
-from kinema.generate.anyrig_ground import ground_motion, ground_offsets, leg_ends, settle_offsets, steady_height
-from kinema.generate.anyrig_post import dejitter, reach_by_translation
 from kinema.io.gltf import read_gltf
 from kinema.motion.core import Motion
 from kinema.postprocess import postprocess

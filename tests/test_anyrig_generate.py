@@ -2,19 +2,19 @@
 
 from __future__ import annotations
 
-import anyrig_fixtures
+import creature_fixtures
 import pytest
 import torch
 from rig_fixtures import hexapod, quadruped, snake2, walking
 
+from kinema.anyrig.constraints import encode_constraints, post_targets
+from kinema.anyrig.feet import lock_translated_feet, translated_feet
+from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
+from kinema.anyrig.post import pin_root, root_pins, unmet_warnings
+from kinema.anyrig.sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
-from kinema.generate.anyrig_constraints import encode_constraints, post_targets
-from kinema.generate.anyrig_feet import lock_translated_feet, translated_feet
-from kinema.generate.anyrig_post import pin_root, root_pins, unmet_warnings
-from kinema.generate.anyrig_sampling import FeatureTargets, sample_features, window_starts, window_weights
-from kinema.model.anyrig_config import get_anyrig_config
-from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
+from kinema.model.anyrig.config import get_anyrig_config
+from kinema.model.anyrig.loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
@@ -22,9 +22,9 @@ from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 from kinema.text import get_text_encoder
-from kinema.train.anyrig_trainer import AnyRigTrainConfig, AnyRigTrainer
+from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
 
-creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
+creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
 
 
 def test_training_writes_resumable_checkpoints(trained, creature_cache) -> None:
@@ -223,7 +223,7 @@ def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:
 
 def test_per_rig_evaluation_rows(trained, creature_cache) -> None:
     from kinema.bench.anyrig import pick_rigs
-    from kinema.evaluate.anyrig import evaluate_split
+    from kinema.evaluate.anyrig.suite import evaluate_split
 
     model = _model(trained)
     rows = evaluate_split(model, creature_cache, "train", clips=1, steps=2, log=lambda s: None)

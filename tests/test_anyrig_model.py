@@ -7,8 +7,8 @@ import torch
 from rig_fixtures import fish, hexapod, quadruped, snake2, walking
 
 from kinema.errors import KinemaError
-from kinema.model.anyrig import AnyRigDenoiser
-from kinema.model.anyrig_config import AnyRigConfig, get_anyrig_config
+from kinema.model.anyrig.config import AnyRigConfig, get_anyrig_config
+from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.rig import Rig
 from kinema.train import anyrig_augment as aug

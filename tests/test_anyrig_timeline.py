@@ -1,5 +1,5 @@
 """Timelines for any-rig models: windows per segment, each with its segment's prompt, cross-faded over
-the frames a segment re-plays of the previous one (kinema.generate.anyrig_windows), through the sampler,
+the frames a segment re-plays of the previous one (kinema.anyrig.windows), through the sampler,
 the Python API and ``kinema generate --timeline``."""
 
 from __future__ import annotations
@@ -7,22 +7,22 @@ from __future__ import annotations
 import json
 from types import SimpleNamespace
 
-import anyrig_fixtures
+import creature_fixtures
 import pytest
 import torch
 from rig_fixtures import fish, quadruped
 
 import kinema
+from kinema.anyrig.sampling import sample_features
+from kinema.anyrig.windows import segment_overlap, segment_plan, single_plan, window_weights
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_sampling import sample_features
-from kinema.generate.anyrig_windows import segment_overlap, segment_plan, single_plan, window_weights
-from kinema.model.anyrig_config import get_anyrig_config
+from kinema.model.anyrig.config import get_anyrig_config
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.rig import Rig
 
-creature_cache, trained = anyrig_fixtures.creature_cache, anyrig_fixtures.trained  # module-scoped fixtures
+creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
 
 
 def test_segment_plan_places_windows_and_crossfades_the_shared_frames() -> None:
@@ -98,7 +98,7 @@ def _displacement(m) -> torch.Tensor:
 
 
 def test_timeline_frames_prompts_and_joins(trained) -> None:
-    model = anyrig_fixtures.tiny_model(trained)
+    model = creature_fixtures.tiny_model(trained)
     rig = Rig.from_skeleton(quadruped())
     a = [{"prompt": "A quadruped does a walk.", "seconds": 1.5}, {"prompt": "A quadruped does a sway.", "seconds": 1.0}]
     b = [a[0], {"prompt": "A fish does a walk.", "seconds": 1.0}]

@@ -9,12 +9,12 @@ import torch
 
 pytest.importorskip("viser", reason="pip install 'kinema[app]'")
 
+from kinema.anyrig.pipeline import AnyRigModel, AnyRigReport, AnyRigResult  # noqa: E402
 from kinema.app.generation import cannot_generate, outcome  # noqa: E402
 from kinema.app.mesh_view import MeshView, SkinPool, skin_parts  # noqa: E402
 from kinema.app.rigs import load_rig, load_rig_bytes, model_rig  # noqa: E402
 from kinema.cli import build_parser, main  # noqa: E402
 from kinema.errors import KinemaError  # noqa: E402
-from kinema.generate.anyrig_api import AnyRigModel, AnyRigReport, AnyRigResult  # noqa: E402
 from kinema.io.gltf_writer import rest_world  # noqa: E402
 from kinema.skeleton import Skeleton  # noqa: E402
 from tests.app_rig_data import NAMES, quad_motion, synthetic_rig_glb  # noqa: E402
@@ -128,7 +128,7 @@ def test_any_rig_model_gets_the_timeline_and_the_shown_rig(tmp_path):
     timeline = [{"prompt": "A dog walks.", "seconds": 2.0}, {"prompt": "A dog sits.", "seconds": 1.5}]
     contacts = {"type": "foot-contact", "frame_indices": [0, 1], "contacts": [[1, 1, 0, 0]] * 2}
     out = outcome(model, rig, timeline, constraints=[contacts], samples=2, steps=3, seed=4, progress=None)
-    assert model.calls == [(timeline, rig.skeleton, 2, 3, 4)]  # every segment (kinema.generate.anyrig_windows)
+    assert model.calls == [(timeline, rig.skeleton, 2, 3, 4)]  # every segment (kinema.anyrig.windows)
     assert len(out.motions) == 2 and out.motions[0].foot_contacts.shape == (clip.num_frames, 4)
     assert out.notes == ["the any-rig model cannot take foot-contact constraints; they were left out"]
     assert out.text.startswith("2 sample(s) on quad.glb")

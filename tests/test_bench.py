@@ -35,7 +35,7 @@ def test_threads_are_timed_interleaved_and_restored():
 
 @pytest.fixture(scope="module")
 def tiny_model(tiny_checkpoint):
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     return load_model(tiny_checkpoint)
 

@@ -140,7 +140,7 @@ def test_cli_end_to_end(tiny_checkpoint, tiny_data, tmp_path, capsys):
 def test_text_metrics_with_a_retrieval_model(tiny_checkpoint, tiny_data, tmp_path):
     from kinema.data.dataset import MotionDataset
     from kinema.evaluate.retrieval import RetrievalConfig, RetrievalModel
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     ds = MotionDataset(tiny_data, "train")
     cfg = RetrievalConfig(width=16, layers=1, heads=2, ff_mult=2, embed_dim=8, text_dim=32, text_hidden=16)
@@ -186,7 +186,7 @@ def test_timeline_cases_are_deterministic_and_scored_per_segment(tiny_checkpoint
     from kinema.data.dataset import MotionDataset
     from kinema.evaluate.retrieval import RetrievalConfig, RetrievalModel
     from kinema.evaluate.timeline import SEGMENT_SECONDS, build_timeline_cases, segment_bounds
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     ds = MotionDataset(tiny_data, "train")
     cases = build_timeline_cases(ds, tiny_data, "train", 2, seed=3, first_id=7)

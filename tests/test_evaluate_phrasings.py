@@ -166,7 +166,7 @@ def test_run_suite_phrasings_part_and_report(tiny_checkpoint, tiny_data, tmp_pat
     from kinema.evaluate.retrieval import RetrievalConfig, RetrievalModel
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     ds = MotionDataset(tiny_data, "train")
     cfg = RetrievalConfig(width=16, layers=1, heads=2, ff_mult=2, embed_dim=8, text_dim=32, text_hidden=16)

@@ -49,7 +49,7 @@ def test_suite_ee_part_runs_the_suites_end_effector_cases_both_ways(tiny_data) -
     import kinema
     from kinema.evaluate.sfcontrol_suite import ee_cases, evaluate_suite_ee, has_ee_positions, summarize_suite
     from kinema.evaluate.suite import build_suite
-    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.human.keyjoint_planning import KeyjointPlanner
 
     cases = build_suite(tiny_data, "all", num_cases=12, seed=0)
     picked = ee_cases(cases)

@@ -11,7 +11,7 @@ from safetensors.torch import load_file
 from kinema.cli import main
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.generate.api import load_model
+from kinema.generate import load_model
 from kinema.model.export import export_model
 from kinema.model.loading import find_checkpoint, load_denoiser
 

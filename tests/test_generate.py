@@ -10,7 +10,7 @@ import torch
 
 from kinema.cli import main
 from kinema.errors import KinemaError
-from kinema.generate.api import load_model
+from kinema.generate import load_model
 from kinema.io import load_motion
 
 
@@ -207,7 +207,7 @@ def test_bench_all_writes_a_report(tiny_checkpoint, tmp_path):
 
 
 def test_displace_root_meets_root_targets_smoothly() -> None:
-    from kinema.generate.sampling import displace_root
+    from kinema.human.sampling import displace_root
 
     T, D = 40, 9
     x0 = torch.zeros(2, T, D)
@@ -240,7 +240,7 @@ def test_displace_root_meets_root_targets_smoothly() -> None:
 def test_root_targets_compensate_the_smoothed_pelvis_offset() -> None:
     """Where only the root is targeted, the root is aimed so that root + smoothed pelvis offset lands on
     the target; a frame that also targets the pelvis keeps its own (root, offset) pair."""
-    from kinema.generate.sampling import pelvis_offset_targets
+    from kinema.human.sampling import pelvis_offset_targets
     from kinema.model.config import get_config
     from kinema.model.denoiser import Denoiser
     from kinema.representation.flat import FlatRepresentation
@@ -279,7 +279,7 @@ def _three_joint_skeleton():
 
 
 def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
-    from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
+    from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 
     L = model.loaded
     text = model.encode_text("a person walks")

@@ -7,8 +7,8 @@ import torch
 
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
-from kinema.generate.api import load_model
-from kinema.generate.progress import StepProgress
+from kinema.generate import load_model
+from kinema.pipeline.progress import StepProgress
 
 
 @pytest.fixture(scope="module")

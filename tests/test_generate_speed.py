@@ -7,9 +7,9 @@ import threading
 import pytest
 import torch
 
-import kinema.generate.api as api
+import kinema.human.pipeline as api
 from kinema.diffusion.guidance import Guidance
-from kinema.generate.api import load_model
+from kinema.generate import load_model
 from kinema.text import HashTestEncoder, MemoryCachedEncoder
 
 PROMPT = "A person walks forward."
@@ -138,7 +138,7 @@ def test_segments_on_their_own_then_each_samples_join_window(model, monkeypatch)
     assert not torch.allclose(xw[0, :keys], xw[1, :keys], atol=1e-4)  # each sample's own join
 
 def test_chunked_batches_give_the_same_rows(model, batch_sizes):
-    from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
+    from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 
     L = model.loaded
     text = model.encode_text(PROMPT).expand(5, -1)

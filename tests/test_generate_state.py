@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from kinema.errors import KinemaError
-from kinema.generate.api import GenerationResult, load_model
+from kinema.generate import GenerationResult, load_model
 
 
 @pytest.fixture(scope="module")

@@ -36,7 +36,7 @@ def test_deep_constraints_json_is_one_line_error(tmp_path, capsys):
 
 def test_deep_json_in_timeline_meta_and_render_constraints(tmp_path, bvh_file, capsys, no_model):
     from kinema.constraints import find_kimodo_meta, read_kimodo_meta
-    from kinema.generate.timeline import parse_timeline
+    from kinema.pipeline.timeline import parse_timeline
 
     deep = tmp_path / "deep.json"
     deep.write_text(DEEP)

@@ -148,7 +148,7 @@ def test_steps_above_the_trained_length_is_an_error(tmp_path, capsys):
 
 # ---------------------------------------------------------------------------- timelines
 def test_timeline_unknown_key_is_an_error_with_a_suggestion(tmp_path, capsys, no_model):
-    from kinema.generate.timeline import parse_timeline
+    from kinema.pipeline.timeline import parse_timeline
 
     with pytest.raises(KinemaError, match=r"segment 1: unknown key 'promt' \(did you mean 'prompt'\?\)"):
         parse_timeline([{"prompt": "a", "seconds": 1}, {"prompt": "b", "seconds": 4, "promt": "c"}])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from kinema.generate.keyjoints import KeyjointTargets, displace_joints, gaussian_spread
+from kinema.human.keyjoints import KeyjointTargets, displace_joints, gaussian_spread
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.kimodo import features_to_motion
 from kinema.representation.layout import FeatureLayout
@@ -117,7 +117,7 @@ def test_displace_joints_moves_the_keyjoint_but_not_full_body_frames() -> None:
 @pytest.mark.parametrize("sigma", [0.0, 0.6])
 def test_end_effector_displacement_switch(tiny_checkpoint, sigma) -> None:
     """joint_sigma = 0 turns the displacement off; text-only requests are never touched."""
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     model = load_model(tiny_checkpoint)
     cons = [{"type": "left-hand", "times": [1.0], "positions": [[0.3, 1.2, 0.5]]}]

@@ -7,7 +7,7 @@ import torch
 
 from kinema.constraints.io import poses_from_bvh
 from kinema.constraints.retarget import rest_alignment
-from kinema.generate.api import resolve_model_path
+from kinema.generate import resolve_model_path
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.io.bvh import read_bvh
 from kinema.kinematics import forward_kinematics

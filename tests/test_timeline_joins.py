@@ -1,13 +1,13 @@
-"""Join windows of a timeline (kinema.generate.segments.plan_joins) and how a window is spliced into the
-motion around it (kinema.generate.timeline.splice); no model needed."""
+"""Join windows of a timeline (kinema.human.segments.plan_joins) and how a window is spliced into the
+motion around it (kinema.pipeline.timeline.splice); no model needed."""
 
 from __future__ import annotations
 
 import torch
 
-from kinema.generate.segments import PlannedSegment, plan_joins
-from kinema.generate.timeline import splice
+from kinema.human.segments import PlannedSegment, plan_joins
 from kinema.motion.core import Motion
+from kinema.pipeline.timeline import splice
 from kinema.skeleton import Skeleton
 
 FPS = 20.0

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
+from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 from kinema.model.loading import load_denoiser
 from kinema.representation.kimodo import features_to_motion
 from kinema.representation.transform import canonicalize_start

@@ -1,4 +1,4 @@
-"""Two-stage control (kinema.generate.twostage): stage-1 targets, the keyjoint displacement, the plan
+"""Two-stage control (kinema.human.keyjoint_planning): stage-1 targets, the keyjoint displacement, the plan
 handed to the body sampler, and generate(keyjoint_model=...) with the shipped models."""
 
 from __future__ import annotations
@@ -13,16 +13,16 @@ import torch
 import kinema
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
-from kinema.generate.segments import plan_segments, stack_targets
-from kinema.generate.timeline import Segment
-from kinema.generate.twostage import (
+from kinema.human.keyjoint_planning import (
     KeyjointPlanner,
     KeyjointPlanTargets,
     displace_keyjoints,
     sample_keyjoints,
     with_keyjoint_plan,
 )
+from kinema.human.segments import plan_segments, stack_targets
 from kinema.model.keyjoint import KeyjointConfig, KeyjointDenoiser
+from kinema.pipeline.timeline import Segment
 from kinema.representation.keyjoint import KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices
 
 PROMPT = "A person walks forward."

@@ -16,8 +16,8 @@ import math
 
 from kinema.app import edits
 from kinema.app import generation as gen
-from kinema.app.anyrig_bridge import waypoint_residual
 from kinema.app.residuals import residual
+from kinema.app.rig_constraints import waypoint_residual
 from kinema.errors import KinemaError
 
 CLICK_MODES = ("off", "waypoint", "path")
@@ -143,7 +143,7 @@ class ConstraintPanel:
 
     def _residual(self, c: dict, motion) -> str:
         """Measured in the world as for the human model; the any-rig model takes no rotations or foot
-        contacts (kinema.app.anyrig_bridge), which is said instead."""
+        contacts (kinema.app.rig_constraints), which is said instead."""
         if not gen.is_any_rig(self.host.model) or c["type"] == "fullbody":
             return residual(c, motion)
         if c["type"] == "root2d":

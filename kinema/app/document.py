@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from kinema.constraints import constraint_to_json, load_constraints
 from kinema.errors import KinemaError
-from kinema.generate.timeline import parse_timeline
+from kinema.pipeline.timeline import parse_timeline
 
 SESSION_VERSION = 1
 SESSION_KEYS = ("kinema_session", "fps", "timeline", "constraints", "settings")
@@ -53,7 +53,7 @@ class Document:
         return float(sum(s["seconds"] for s in self.timeline))
 
     def num_frames(self, fps: float) -> int:
-        """Frames the generated motion will have (segments add up; see kinema.generate.timeline)."""
+        """Frames the generated motion will have (segments add up; see kinema.pipeline.timeline)."""
         return sum(round(s["seconds"] * fps) for s in self.timeline)
 
     def to_json(self, fps: float) -> str:

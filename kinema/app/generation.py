@@ -1,6 +1,6 @@
 """What the app asks of a model, for both kinds kinema has: the human model (`KinemaModel`: its own
 skeleton, timelines, the constraints of docs/constraints.md, step progress) and the any-rig model
-(`AnyRigModel`, ``--model creatures``: any rig, timelines, the constraints kinema.generate.anyrig_world
+(`AnyRigModel`, ``--model creatures``: any rig, timelines, the constraints kinema.anyrig.world
 translates; the rest are named in a note).
 
 `outcome` runs one generation and returns the motions with the status text and warnings, so that the
@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from kinema.anyrig.pipeline import AnyRigModel
+from kinema.anyrig.world import generate_world
 from kinema.app.rigs import AppRig
-from kinema.generate.anyrig_api import AnyRigModel
-from kinema.generate.anyrig_world import generate_world
-from kinema.generate.progress import ProgressFn
 from kinema.motion.core import Motion
+from kinema.pipeline.progress import ProgressFn
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 Rows are rebuilt after every structural change (the list is short); typing only updates the document.
 Durations are seconds, at least ``MIN_SECONDS``; the total may exceed the model's window (long
-segments are split and joined by the generator, kinema.generate.timeline).
+segments are split and joined by the generator, kinema.pipeline.timeline).
 """
 
 from __future__ import annotations

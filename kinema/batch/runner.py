@@ -38,7 +38,7 @@ class BatchSummary:
 
 def driver_model_sha(model_spec: str) -> str:
     """The fingerprint of the model the driver sees (workers report theirs; a mismatch fails the job)."""
-    from kinema.generate.api import resolve_model_path
+    from kinema.generate import resolve_model_path
     from kinema.model.loading import find_checkpoint
     from kinema.server.models import model_sha256
 

@@ -22,7 +22,7 @@ class Worker:
     """A loaded model plus its fingerprint; `run` does one job. Used in-process, per pool process, per Ray actor."""
 
     def __init__(self, model_spec: str, threads: int = 1):
-        from kinema.generate.api import load_model
+        from kinema.generate import load_model
         from kinema.runtime import configure_threads
         from kinema.server.models import model_sha256
 

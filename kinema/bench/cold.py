@@ -62,8 +62,8 @@ def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_p
     """
     import torch
 
-    from kinema.generate.api import load_model
-    from kinema.generate.segments import plan_segments
+    from kinema.generate import load_model
+    from kinema.human.segments import plan_segments
 
     times: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -90,7 +90,7 @@ def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_p
 _CHILD = """
 import json, sys, time
 t0 = time.perf_counter()
-import kinema.cli, kinema.generate.api
+import kinema.cli, kinema.human.pipeline
 imports = time.perf_counter() - t0
 from kinema.runtime import configure_threads
 configure_threads()

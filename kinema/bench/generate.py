@@ -30,7 +30,7 @@ def example_constraints(seconds: float) -> list[dict]:
 def bench_generate(model_path: str, steps_list=(10, 25, 50, 100), seconds: float = 5.0, repeats: int = 2,
                    prompt: str = "A person walks forward.") -> list[GenerateBenchRow]:
     """Time ``model.generate`` (warm: model already loaded, text cached) for each setting."""
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     model = load_model(model_path)
     model.generate(prompt, seconds=1.0, steps=2)  # warm-up: text encoder, allocator

@@ -55,7 +55,7 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
 
     model = None
     if {"sweeps", "threads"} & set(opts.sections):
-        from kinema.generate.api import load_model
+        from kinema.generate import load_model
 
         model = load_model(opts.model)
     if "steps" in opts.sections:

@@ -1,5 +1,5 @@
 """``kinema bench twostage``: seconds and raw target error of explicit sparse control, single-stage
-against two-stage (the keyjoint model plans first; kinema.generate.twostage), per DDIM step count.
+against two-stage (the keyjoint model plans first; kinema.human.keyjoint_planning), per DDIM step count.
 
 The constraints are a sparse-control set like the SFControl protocol's: one frame every 1.5 s, a hand
 or the pelvis on each, on a walk that drifts to the side (a body that does not plan the walk misses

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(MISSING_EXTRA) from None
     from kinema.app.files_panel import UNITS
     from kinema.app.rigs import load_rig
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
     from kinema.runtime import configure_threads
 
     if args.rig is not None and not args.rig.is_file():

@@ -330,8 +330,8 @@ def _run_generate(args: argparse.Namespace) -> int:
 
 def _is_anyrig(model: str | None) -> bool:
     from kinema.errors import KinemaError
-    from kinema.generate.api import resolve_model_path
-    from kinema.model.anyrig_loading import is_anyrig_checkpoint
+    from kinema.generate import resolve_model_path
+    from kinema.model.anyrig.loading import is_anyrig_checkpoint
 
     try:
         return model is not None and is_anyrig_checkpoint(resolve_model_path(model))
@@ -343,7 +343,7 @@ def _run_anyrig(args: argparse.Namespace, threads: int) -> int:
     import torch
 
     from kinema.bench.anyrig import bench_anyrig, format_anyrig_bench
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     model = load_model(args.model)
     steps = tuple(args.steps) if args.steps else ((20,) if args.quick else (10, 20, 30))

@@ -29,7 +29,7 @@ def register_bench(targets) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
     from kinema.runtime import configure_threads
 
     settings = parse_settings(args.settings)

@@ -29,8 +29,8 @@ def register_bench(targets) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from kinema.generate.api import load_model
-    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.generate import load_model
+    from kinema.human.keyjoint_planning import KeyjointPlanner
     from kinema.io.atomic import check_output_path
     from kinema.runtime import configure_threads
 

@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from kinema.evaluate.runner import run_suite
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
     from kinema.evaluate.timeline import build_timeline_cases
-    from kinema.generate.api import load_model, resolve_model_path
+    from kinema.generate import load_model, resolve_model_path
 
     if args.protocol == "sfcontrol":
         return run_sfcontrol(args)

@@ -1,5 +1,5 @@
 """`kinema evaluate-anyrig`: per-rig metrics of an any-rig model on train and held-out rigs, and a table
-of the held-out rigs grouped by their similarity to the training rigs (kinema.evaluate.anyrig_groups)."""
+of the held-out rigs grouped by their similarity to the training rigs (kinema.evaluate.anyrig.groups)."""
 
 from __future__ import annotations
 
@@ -28,11 +28,11 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from kinema.anyrig.pipeline import AnyRigModel
     from kinema.errors import KinemaError
-    from kinema.evaluate.anyrig import TABLE_HEADER, evaluate_split
-    from kinema.evaluate.anyrig_groups import similarity_table, split_summary, training_shapes
-    from kinema.generate.anyrig_api import AnyRigModel
-    from kinema.generate.api import load_model
+    from kinema.evaluate.anyrig.groups import similarity_table, split_summary, training_shapes
+    from kinema.evaluate.anyrig.suite import TABLE_HEADER, evaluate_split
+    from kinema.generate import load_model
     from kinema.io.atomic import atomic_write_text, check_output_path
     from kinema.runtime import configure_threads
 
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     print(split_summary(rows))
     held = [r for r in rows if r["split"] != "train"]
     if held:
-        print("\nheld-out rigs by similarity to the training rigs (kinema/evaluate/anyrig_groups.py):\n")
+        print("\nheld-out rigs by similarity to the training rigs (kinema/evaluate/anyrig/groups.py):\n")
         print(similarity_table(held))
     if args.out is not None:
         atomic_write_text(args.out, json.dumps(rows, indent=1) + "\n")

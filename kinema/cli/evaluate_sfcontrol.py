@@ -79,7 +79,7 @@ TASK_COLS = [
 def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     from kinema.evaluate import sfcontrol as S
     from kinema.evaluate.retrieval import default_retrieval_path, load_retrieval
-    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.human.keyjoint_planning import KeyjointPlanner
 
     rows, kj = list(args.sparse_rows), None
     if args.keyjoint_model is not None:
@@ -114,7 +114,7 @@ EE_COLS = [
 def _ee(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     from kinema.evaluate import sfcontrol_suite as E
     from kinema.evaluate.suite import build_suite, load_suite, save_suite
-    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.human.keyjoint_planning import KeyjointPlanner
 
     if args.suite is not None and args.suite.exists():
         cases = load_suite(args.suite)
@@ -146,7 +146,7 @@ def _tasks(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
 
 
 def run_sfcontrol(args: argparse.Namespace) -> int:
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
 
     t0 = time.perf_counter()
     out = args.out or Path("out/eval/sfcontrol")

@@ -35,7 +35,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
-    from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
+    from kinema.model.anyrig.loading import is_anyrig_checkpoint, load_anyrig
     from kinema.model.export import export_model
     from kinema.model.loading import load_denoiser
 

@@ -114,9 +114,9 @@ def _from_kimodo_meta(args: argparse.Namespace):
 def _check_inputs(args: argparse.Namespace) -> None:
     """Output suffix, constraint and timeline files: checked before anything is loaded."""
     from kinema.errors import KinemaError
-    from kinema.generate.timeline import parse_timeline
-    from kinema.generate.twostage import KeyjointPlanner
+    from kinema.human.keyjoint_planning import KeyjointPlanner
     from kinema.objectives.io import load_objectives
+    from kinema.pipeline.timeline import parse_timeline
 
     if args.preview:
         if args.steps is not None:
@@ -147,9 +147,9 @@ def run(args: argparse.Namespace) -> int:
     from kinema.cli.report import grounding_lines, print_warnings, residual_table, use_plain_warnings
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
-    from kinema.generate.api import load_model, resolve_model_path
+    from kinema.generate import load_model, resolve_model_path
     from kinema.io.atomic import check_output_path
-    from kinema.model.anyrig_loading import is_anyrig_checkpoint
+    from kinema.model.anyrig.loading import is_anyrig_checkpoint
     from kinema.runtime import configure_threads
 
     use_plain_warnings()

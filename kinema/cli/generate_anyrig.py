@@ -3,8 +3,8 @@
 Used by `kinema generate` when ``--model`` names an any-rig model. ``--rig`` is a GLB/glTF or BVH file
 (a GLB output keeps that rig's skinned mesh) or the id of a training rig; without ``--rig`` the known
 rigs are listed. ``--timeline`` is a JSON list of ``{prompt, seconds}`` segments, as for the
-human model. ``--constraints`` is the any-rig JSON list (kinema.generate.anyrig_constraints.read_constraints)
-or a docs/constraints.md file (world frame; kinema.generate.anyrig_world), checked against the rig.
+human model. ``--constraints`` is the any-rig JSON list (kinema.anyrig.constraints.read_constraints)
+or a docs/constraints.md file (world frame; kinema.anyrig.world), checked against the rig.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def list_rigs(model) -> str:
 
 def run_anyrig(args: argparse.Namespace, path: Path) -> int:
     from kinema.errors import KinemaError
-    from kinema.generate.api import load_model
+    from kinema.generate import load_model
     from kinema.io.atomic import check_output_path
 
     what = _prompt(args)
@@ -72,7 +72,7 @@ def run_anyrig(args: argparse.Namespace, path: Path) -> int:
 def _prompt(args: argparse.Namespace):
     """PROMPT, or the ``--timeline`` file (checked before the model loads; it overrides PROMPT and --seconds)."""
     from kinema.errors import KinemaError
-    from kinema.generate.timeline import parse_timeline
+    from kinema.pipeline.timeline import parse_timeline
 
     if args.timeline is None:
         return args.prompt or ""
@@ -84,9 +84,9 @@ def _prompt(args: argparse.Namespace):
 
 def _generate(model, args: argparse.Namespace, what, samples: int):
     """The motions for ``what`` on ``--rig`` with ``--constraints`` (an any-rig list, or a
-    docs/constraints.md file in the world frame: kinema.generate.anyrig_world), and notes of what the
+    docs/constraints.md file in the world frame: kinema.anyrig.world), and notes of what the
     model left out. The constraints are checked against the rig before anything is generated."""
-    from kinema.generate.anyrig_world import generate_world, load_constraints_file
+    from kinema.anyrig.world import generate_world, load_constraints_file
 
     rig = model.resolve_rig(args.rig)
     seconds = args.seconds or 4.0

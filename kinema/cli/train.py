@@ -68,7 +68,7 @@ def _init_path(name: str | None) -> str | None:
     """``--init-from`` as a path string ('default' names the shipped model); missing folders fail here."""
     if name is None:
         return None
-    from kinema.generate.api import resolve_model_path
+    from kinema.generate import resolve_model_path
 
     return str(resolve_model_path(name))
 

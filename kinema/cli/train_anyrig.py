@@ -49,9 +49,9 @@ def _settings(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from kinema.errors import KinemaError
-    from kinema.model.anyrig_config import get_anyrig_config
+    from kinema.model.anyrig.config import get_anyrig_config
     from kinema.runtime import configure_threads
-    from kinema.train.anyrig_trainer import AnyRigTrainConfig, AnyRigTrainer
+    from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
 
     configure_threads(args.threads, cap=None)
     if args.variants is not None and args.variants < 0:

@@ -146,7 +146,7 @@ def text_metrics(
 # ----------------------------------------------------------------------------- the run
 def _post(model, motion: Motion, case: dict) -> Motion:
     from kinema.constraints import load_constraints
-    from kinema.generate.targets import run_postprocess
+    from kinema.human.targets import run_postprocess
 
     cons = (
         load_constraints(case["constraints"], model.skeleton, model.fps, motion.num_frames)

@@ -8,7 +8,7 @@ positions. Rows (all *raw*, no post-processing):
 - ``single-stage``: today's sampler, each target an ``end-effector`` constraint (imputation plus the
   sampler's root/joint corrections);
 - ``two-stage``: the same constraints with ``keyjoint_model``: the keyjoint model plans the six
-  keyjoints, the body model follows them (kinema.generate.twostage);
+  keyjoints, the body model follows them (kinema.human.keyjoint_planning);
 - ``single-stage + noise opt``: single-stage with each target also a ``reach`` objective on its frame
   (noise optimisation, then snapping: kinema.objectives).
 

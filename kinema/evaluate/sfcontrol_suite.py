@@ -5,7 +5,7 @@ same file), restricted to those with end-effector *position* targets (the ``end_
 ``mixed`` cases holding one). Each is generated exactly as the suite runner does (same prompt, length,
 constraints, heading and seed ``seed * 100003 + i`` with ``i`` the case's index in the whole suite,
 raw), once as today (single-stage) and once with the keyjoint model planning first
-(``keyjoint_model``, kinema.generate.twostage), and scored with the runner's own metrics.
+(``keyjoint_model``, kinema.human.keyjoint_planning), and scored with the runner's own metrics.
 """
 
 from __future__ import annotations

@@ -220,7 +220,7 @@ class Denoiser(nn.Module):
 
         ``context_mask (B, T, D)``: entries of ``mask`` that *every* branch sees (their targets in
         ``x_tgt``), i.e. context the guidance does not extrapolate: a timeline's join frames
-        (kinema.generate.segments). Given to the constraint branch only, as constraints, they are pushed
+        (kinema.human.segments). Given to the constraint branch only, as constraints, they are pushed
         ``w_constr`` times and the previous segment's motion outweighs the new prompt (issue 18). When
         the mask holds nothing but context, the constraint branch equals the unconditional one and the
         separated mode is reduced to regular CFG, as without a mask.

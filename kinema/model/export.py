@@ -19,7 +19,7 @@ from safetensors.torch import save_file
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
-from kinema.model.anyrig_loading import load_anyrig
+from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.grounding import Grounding
 from kinema.model.loading import (
     find_checkpoint,

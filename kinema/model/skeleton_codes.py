@@ -24,7 +24,7 @@ import torch
 
 from kinema.geometry.rotations import quat_to_sixd
 from kinema.kinematics import forward_kinematics
-from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.anyrig.config import AnyRigConfig
 from kinema.rig import Rig
 
 

@@ -3,7 +3,7 @@
 The initial noise ``z (B, T, D)`` of a short deterministic DDIM chain (``ddim_steps``, default 5) is
 optimised with Adam so that the generated motion minimises the sum of the bound objectives' losses
 (kinema.objectives.terms) evaluated on its world joint positions. The chain is the sampler's own
-(guided denoiser, root corrections and constraint imputation: kinema.generate.sampling.clean_estimate_fn),
+(guided denoiser, root corrections and constraint imputation: kinema.human.sampling.clean_estimate_fn),
 run with autograd, so explicit constraints keep working next to objectives. After every Adam step the
 noise is projected back onto the sphere of radius ``sqrt(T D)`` where N(0, I) samples concentrate (the
 DNO prior that keeps the chain's input typical); a ``realism`` objective adds a prior on the output.
@@ -21,7 +21,7 @@ import torch
 
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.errors import KinemaError
-from kinema.generate.sampling import SampleSettings, SampleTargets, clean_estimate_fn
+from kinema.human.sampling import SampleSettings, SampleTargets, clean_estimate_fn
 from kinema.model.denoiser import Denoiser
 from kinema.objectives.terms import Bound
 from kinema.representation.flat import FlatRepresentation

@@ -16,9 +16,9 @@ from dataclasses import replace
 import torch
 
 from kinema.errors import KinemaError
-from kinema.generate.sampling import SampleSettings, sample_features
-from kinema.generate.segments import SegmentPlan, stack_targets
-from kinema.generate.targets import UserTargets
+from kinema.human.sampling import SampleSettings, sample_features
+from kinema.human.segments import SegmentPlan, stack_targets
+from kinema.human.targets import UserTargets
 from kinema.motion.core import Motion
 from kinema.objectives.io import ObjectiveError, bind_objectives, load_objectives
 from kinema.objectives.optimize import NoiseOptSettings, errors, optimise_noise

@@ -3,7 +3,7 @@
 A keyjoint frame is ``(20,)``: world positions (metres, Y up) of the pelvis, head, left hand, right
 hand, left ankle and right ankle (6 x 3, in that order), then the root heading ``(cos, sin)`` (0 faces
 +Z). It is read straight from the flat features (``joint_pos`` holds positions with x/z relative to the
-smoothed root, so the world position is ``joint_pos + root_xz``); kinema.generate.twostage turns a
+smoothed root, so the world position is ``joint_pos + root_xz``); kinema.human.keyjoint_planning turns a
 planned trajectory back into body-model targets. Shapes: keyjoints ``(..., T, 20)``,
 features ``(..., T, D)``.
 

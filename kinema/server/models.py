@@ -47,7 +47,7 @@ class ServedModel:
     """A loaded model under the name clients use for it."""
 
     name: str
-    model: object  # kinema.generate.api.KinemaModel (imported lazily: torch)
+    model: object  # kinema.human.pipeline.KinemaModel (imported lazily: torch)
     sha256: str
 
     @property
@@ -85,7 +85,7 @@ class ModelRegistry:
     @classmethod
     def load(cls, specs: list[str]) -> ModelRegistry:
         """Load every ``--model`` spec (see `parse_model_spec`)."""
-        from kinema.generate.api import load_model
+        from kinema.generate import load_model
 
         served = []
         for spec in specs or ["default"]:

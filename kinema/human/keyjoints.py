@@ -6,7 +6,7 @@ follows a single keyframed joint only loosely (measured on the shipped model, 38
 of the test suite: the FK joint misses by 13.9 cm on average, and the model's own joint-position
 channel by as much, 14.4 cm, while the two agree with each other to 3.4 cm: the body is consistent
 but short of the target). ``displace_joints`` nudges the clean estimate after every denoising step,
-like :func:`kinema.generate.sampling.displace_root` does for the root: the residual between each
+like :func:`kinema.human.sampling.displace_root` does for the root: the residual between each
 keyjoint target and the FK joint is spread over neighbouring frames with a Gaussian and added to
 that joint's position channels, so the next step sees (and the network poses a body around) a
 trajectory that bends smoothly towards the target. Frames that pin every joint (full-body

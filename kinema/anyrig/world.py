@@ -1,8 +1,8 @@
 """World-frame constraints (docs/constraints.md, the human model's file format) for any-rig models.
 
 The human model's constraints are in the world frame; the any-rig model's joint targets are in the
-*character frame* (kinema.generate.anyrig_constraints). This module bridges them, for ``kinema generate
---model creatures --constraints FILE`` and the app (kinema.app.anyrig_bridge re-exports it):
+*character frame* (kinema.anyrig.constraints). This module bridges them, for ``kinema generate
+--model creatures --constraints FILE`` and the app (kinema.app.rig_constraints re-exports it):
 
 - `json_form`: constraints read and checked by kinema.constraints.load_constraints against the rig's
   skeleton (joint names or roles, frames, shapes) -> the JSON form the app also uses: one dict per
@@ -14,7 +14,7 @@ The human model's constraints are in the world frame; the any-rig model's joint 
   of the *planned* root (on the root path, else at the origin facing +Z) at the height of the rest
   pose's root above its lowest joint; full-body poses -> `Keyframe`; rotation targets, foot contacts,
   targets on the root joint or on the bones of a floor-level armature that the model moves by
-  translation (kinema.generate.anyrig_api.floor_root_children) are left out;
+  translation (kinema.anyrig.pipeline.floor_root_children) are left out;
 - `generate_world`: when there are end-effector targets, a first raw pass without them gives the
   body's placement; the targets are read in its character frame and the second pass keeps its root
   (`RootMotion`: path, height, rotation, heading) up to the last target, so the world targets are
@@ -31,12 +31,7 @@ from pathlib import Path
 
 import torch
 
-from kinema.constraints import Constraint as FileConstraint
-from kinema.constraints import EndEffectorConstraint, constraint_to_json, load_constraints
-from kinema.constraints.types import resolve_joint
-from kinema.errors import KinemaError
-from kinema.generate.anyrig_api import AnyRigModel, AnyRigResult, floor_root_children
-from kinema.generate.anyrig_constraints import (
+from kinema.anyrig.constraints import (
     ANYRIG_TYPES,
     Constraint,
     JointTarget,
@@ -44,8 +39,13 @@ from kinema.generate.anyrig_constraints import (
     RootMotion,
     RootPath,
     check_constraints,
-    read_constraints,
+    parse_constraints,
 )
+from kinema.anyrig.feet import floor_root_children
+from kinema.constraints import Constraint as FileConstraint
+from kinema.constraints import EndEffectorConstraint, constraint_to_json, load_constraints
+from kinema.constraints.types import resolve_joint
+from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, quat_rotate
 from kinema.motion.core import Motion
 from kinema.representation.joint import JointRepresentation, yaw_quat
@@ -172,49 +172,56 @@ def to_anyrig(
     return out, notes
 
 
-def generate_world(
-    model: AnyRigModel, prompt, *, rig: Skeleton | Rig, constraints: list[dict], samples: int = 1, progress=None, **kw
-) -> tuple[AnyRigResult, list[str], float]:
-    """``model.generate(prompt, rig=rig, ...)`` for JSON-form world ``constraints`` (see the module
-    docstring): the result, the notes of what was left out, and the wall time of both passes (s).
-    ``progress(done, total)`` runs over both passes as one bar; ``kw`` goes to ``generate``."""
+def generate_world(model, prompt, *, rig: Skeleton | Rig, constraints: list[dict], samples: int = 1, progress=None,
+                   **kw):
+    """``model.sample_on_rig(prompt, rig=rig, ...)`` (kinema.anyrig.pipeline) for JSON-form world
+    ``constraints`` (see the module docstring): the result, the notes of what was left out, and the wall
+    time of both passes (s). ``progress(done, total)`` runs over both passes as one bar; ``kw`` goes to
+    ``sample_on_rig``."""
     skeleton = rig.skeleton if isinstance(rig, Rig) else rig
     cons, notes = to_anyrig(constraints, skeleton, model.fps)
     targets = [c for c in cons if isinstance(c, JointTarget)]
     if not targets:
-        res = model.generate(prompt, rig=rig, constraints=cons, samples=samples, progress=progress, **kw)
+        res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=progress, **kw)
         return res, notes, res.report.seconds
     first_kw = kw | {"postprocess": False}
-    first = model.generate(prompt, rig=rig, constraints=cons, samples=1, progress=_pass(progress, 0), **first_kw)
+    first = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=1, progress=_pass(progress, 0),
+                                **first_kw)
     reference = first.motions[0]
     cons, _ = to_anyrig(constraints, skeleton, model.fps, reference=reference)
     cons.append(RootMotion(motion=reference, until=max(t.frame for t in targets) + 1))
-    res = model.generate(prompt, rig=rig, constraints=cons, samples=samples, progress=_pass(progress, 1), **kw)
+    res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=_pass(progress, 1),
+                              **kw)
     return res, notes, first.report.seconds + res.report.seconds
 
 
 def load_constraints_file(
-    path: Path, skeleton: Skeleton, fps: float, frames: int, source_fps: float | None = None
+    source, skeleton: Skeleton, fps: float, frames: int, source_fps: float | None = None
 ) -> tuple[list[Constraint], list[dict]]:
-    """A constraints file for an any-rig model on ``skeleton`` and a motion of ``frames`` frames: either
-    the any-rig list (``type`` ``joint`` / ``root_path``: kinema.generate.anyrig_constraints.read_constraints),
-    returned first, or a docs/constraints.md file (world frame), checked against the rig by
-    kinema.constraints.load_constraints and returned second in `json_form`. Errors name the file."""
-    path = Path(path)
-    if not path.is_file():
-        raise KinemaError(f"{path}: no such constraints file")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
-        raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+    """Constraints (a file path, or parsed JSON) for an any-rig model on ``skeleton`` and a motion of
+    ``frames`` frames: either the any-rig list (``type`` ``joint`` / ``root_path`` / ``keyframe``:
+    kinema.anyrig.constraints.read_constraints), returned first, or a docs/constraints.md file or list
+    (world frame), checked against the rig by kinema.constraints.load_constraints and returned second in
+    `json_form`. Errors name the file."""
+    if isinstance(source, str | Path):
+        path = Path(source)
+        if not path.is_file():
+            raise KinemaError(f"{path}: no such constraints file")
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
+            raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+        where, base = str(path), path.parent
+    else:
+        data, where, base, path = source, "constraints", Path("."), source
     if isinstance(data, list) and any(isinstance(o, dict) and o.get("type") in ANYRIG_TYPES for o in data):
         if source_fps is not None:
             raise KinemaError(
-                f"{path}: the any-rig list's frames are at the model's fps; a constraints fps "
+                f"{where}: the any-rig list's frames are at the model's fps; a constraints fps "
                 "applies to docs/constraints.md files"
             )
-        cons = read_constraints(path, fps)
-        check_constraints(cons, skeleton, frames, str(path))
+        cons = parse_constraints(data, where, base, fps)
+        check_constraints(cons, skeleton, frames, where)
         return cons, []
     checked = load_constraints(path, skeleton, fps, frames, source_fps=source_fps)
     return [], json_form(checked, skeleton, fps, frames)

@@ -12,7 +12,7 @@ Three kinds (frames at the model's fps; lengths in metres; Y up, +Z forward):
 - `RootPath(frames=, xz=)`: world ground waypoints of the root, starting from the origin at frame 0;
   between waypoints the root moves straight at constant speed, facing where it goes;
 - `RootMotion(motion=, until=)`: the root's path, height, rotation and heading copied from a motion on
-  the same rig for frames ``[0, until)`` (kinema.generate.anyrig_world uses it to meet world-frame targets).
+  the same rig for frames ``[0, until)`` (kinema.anyrig.world uses it to meet world-frame targets).
 
 `encode_constraints` turns them into `FeatureTargets` on a rig in its normalised units (``scale`` =
 units per metre). `post_targets` turns them into world-frame `PostTargets` for the exact pass, once
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import torch
 
+from kinema.anyrig.sampling import FeatureTargets
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_sampling import FeatureTargets
 from kinema.geometry.rotations import quat_mul, quat_rotate, quat_to_sixd
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
@@ -357,6 +357,11 @@ def read_constraints(path: str | Path, fps: float | None = None) -> list[Constra
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
         raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+    return parse_constraints(data, str(path), path.parent, fps)
+
+
+def parse_constraints(data, where: str, base: Path = Path("."), fps: float | None = None) -> list[Constraint]:
+    """Constraints from parsed JSON (see `read_constraints`); clip files are looked up in ``base``."""
     if not isinstance(data, list):
-        raise KinemaError(f"{path}: any-rig constraints are a JSON list of objects")
-    return [_from_json(i, obj, str(path), path.parent, fps) for i, obj in enumerate(data)]
+        raise KinemaError(f"{where}: any-rig constraints are a JSON list of objects")
+    return [_from_json(i, obj, where, base, fps) for i, obj in enumerate(data)]

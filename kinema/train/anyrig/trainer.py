@@ -1,8 +1,8 @@
 """Training loop of the any-rig model: DDPM x0 prediction on per-joint features of many rigs.
 
-Each step draws one joint-count bucket (kinema.train.anyrig_data), random windows, a random caption
+Each step draws one joint-count bucket (kinema.train.anyrig.data), random windows, a random caption
 per clip (dropped to the empty condition with probability ``text_drop``), random constraint masks
-(kinema.train.anyrig_masks) and a diffusion step; the loss is the masked MSE between the predicted and
+(kinema.train.anyrig.masks) and a diffusion step; the loss is the masked MSE between the predicted and
 the clean normalised features over real frames, joints and channels. AdamW with warm-up and cosine
 decay, gradient clipping, an EMA copy. Checkpoints (kinema.train.checkpoint: safetensors, atomic,
 ``latest`` pointer) hold weights, EMA, optimiser and step; ``resume`` continues the newest, and batches
@@ -23,12 +23,12 @@ from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
-from kinema.model.anyrig import AnyRigDenoiser
-from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.anyrig.config import AnyRigConfig
+from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.config import reject_unknown_keys
 from kinema.text import get_text_encoder
-from kinema.train.anyrig_data import AnyRigClips, Batch
-from kinema.train.anyrig_masks import random_masks
+from kinema.train.anyrig.data import AnyRigClips, Batch
+from kinema.train.anyrig.masks import random_masks
 from kinema.train.checkpoint import load_checkpoint, load_optimizer_tensors, save_checkpoint
 from kinema.train.optim import lr_at, make_ema, update_ema
 

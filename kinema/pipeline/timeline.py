@@ -1,7 +1,7 @@
 """Multi-prompt timelines: parsing, and the blending that joins their pieces.
 
 Each segment is sampled on its own prompt, then every join is regenerated as a transition window
-(kinema.generate.segments says how and why); :func:`splice` puts a window into the motion, cross-fading
+(kinema.human.segments says how and why); :func:`splice` puts a window into the motion, cross-fading
 (root lerp, rotation slerp with raised-cosine weights, :func:`crossfade`) over its first and last
 frames so the join has no seam.
 """

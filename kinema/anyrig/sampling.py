@@ -2,7 +2,7 @@
 
 Long motions by overlapping windows ("How to Move Your Dragon" Sec. 3.4, in the MultiDiffusion form):
 the whole sequence ``x_t (S, T, J, C)`` is noised once; at every DDIM step it is cut into the windows
-of a `WindowPlan` (kinema.generate.anyrig_windows: the model's ``window`` frames overlapping by at least
+of a `WindowPlan` (kinema.anyrig.windows: the model's ``window`` frames overlapping by at least
 a quarter window, or a timeline's windows, each with its segment's prompt), all windows and all
 guidance branches are denoised in ONE batched forward pass, and the windows' x0 predictions are
 blended back with weights that ramp down towards each window's inner edges, so neighbouring windows
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import torch
 
+from kinema.anyrig.windows import WindowPlan, single_plan, window_starts, window_weights
 from kinema.diffusion.guidance import Guidance, combine, split_branches
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
-from kinema.generate.anyrig_windows import WindowPlan, single_plan, window_starts, window_weights
-from kinema.model.anyrig import AnyRigDenoiser
+from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.skeleton_codes import CodeBatch
 
 
@@ -43,7 +43,7 @@ class WindowDenoiser:
     """``__call__(x_t (S, T, J, C), t) -> guided x0``: windows x branches as one batched pass.
 
     ``text_emb (P, D)`` holds one embedding per prompt (None: no text at all; a zero row: that prompt
-    is empty) and ``plan`` says which prompt each window gets (kinema.generate.anyrig_windows)."""
+    is empty) and ``plan`` says which prompt each window gets (kinema.anyrig.windows)."""
 
     def __init__(
         self,

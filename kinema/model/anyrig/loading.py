@@ -14,8 +14,8 @@ from pathlib import Path
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
-from kinema.model.anyrig import AnyRigDenoiser
-from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.anyrig.config import AnyRigConfig
+from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.loading import find_checkpoint, read_checkpoint_info, read_weights, weights_file
 
 

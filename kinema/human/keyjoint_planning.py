@@ -31,8 +31,8 @@ import torch
 
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.errors import KinemaError
-from kinema.generate.keyjoints import KeyjointTargets, gaussian_spread
-from kinema.generate.sampling import SampleSettings, SampleTargets, sample_features
+from kinema.human.keyjoints import KeyjointTargets, gaussian_spread
+from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 from kinema.model.denoiser import Denoiser
 from kinema.model.keyjoint import KeyjointDenoiser, load_keyjoint_model
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
@@ -287,7 +287,7 @@ def sample_two_stage(
     **kwargs,
 ) -> torch.Tensor:
     """Unnormalised body features ``(B, T, D)``: stage 1 plans the keyjoints from ``targets``, stage 2
-    is :func:`kinema.generate.sampling.sample_features` on the targets with the plan filled in
+    is :func:`kinema.human.sampling.sample_features` on the targets with the plan filled in
     (``kwargs`` go there: progress, on_step...), then ``planner.refine`` passes re-sample the body from
     the same noise with the planned keyjoints moved on by the (smoothed) miss the previous pass left;
     ``on_step`` counts the steps of all passes."""

@@ -9,7 +9,7 @@ as *context* every guidance branch sees, ``join`` mask; kinema.model.denoiser.De
 with the later segment's prompt, over the last ``JOIN_STRENGTH`` of the DDIM steps starting from the
 first take's hard cut (Gaussian-smoothed over ``JOIN_START_SMOOTHING`` frames, then noised: SDEdit);
 the window is cross-faded into the motion over ``JOIN_FADE_SECONDS`` at each edge
-(kinema.generate.timeline.splice).
+(kinema.pipeline.timeline.splice).
 
 Why (issue 18): the former joins re-played 0.5 s of the previous motion at the start of each segment
 with its first 0.15 s as context, and that context outweighed the new text: after a walk the bow
@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import torch
 
 from kinema.errors import KinemaError
-from kinema.generate.sampling import SampleTargets
-from kinema.generate.targets import UserTargets, encode_user_constraints, run_postprocess
+from kinema.human.sampling import SampleTargets
+from kinema.human.targets import UserTargets, encode_user_constraints, run_postprocess
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.representation.flat import FlatRepresentation

@@ -1,5 +1,5 @@
 """The app's constraints (JSON-form dicts, world frame, docs/constraints.md) as the any-rig model's:
-the translation lives in kinema.generate.anyrig_world (shared with ``kinema generate --constraints``)
+the translation lives in kinema.anyrig.world (shared with ``kinema generate --constraints``)
 and is re-exported here; `waypoint_residual` says how far the root is from a waypoint.
 Units: metres, Y up; frames at the model's fps.
 """
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.generate.anyrig_world import planned_root, to_anyrig
+from kinema.anyrig.world import planned_root, to_anyrig
 from kinema.motion.core import Motion
 from kinema.rig import Rig
 

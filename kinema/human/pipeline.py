@@ -1,6 +1,6 @@
-"""The public generation API: ``kinema.load_model(...)`` and ``KinemaModel.generate(...)``.
+"""The human pipeline: ``kinema.load_model("default").generate(request)`` for the flat root/body model.
 
-``generate`` turns a prompt (or a multi-prompt timeline) plus optional kinematic constraints into
+``run`` turns a prompt (or a multi-prompt timeline) plus optional kinematic constraints into
 ``Motion`` objects on the model's skeleton: text -> embedding, constraints -> imputed feature targets,
 DDIM with separated guidance, features -> rotations -> FK, then optional post-processing (foot locking,
 IK, exact constraint hitting). Times are seconds, positions metres, Y up, first frame facing ``heading``
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -21,74 +21,42 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
-from kinema.generate.anyrig_api import AnyRigModel
-from kinema.generate.progress import ProgressFn, StepProgress, split_progress
-from kinema.generate.results import MotionResults
-from kinema.generate.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
-from kinema.generate.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, stack_targets
-from kinema.generate.timeline import Segment, parse_timeline, splice, split_long
-from kinema.generate.twostage import KeyjointPlanner, sample_two_stage
-from kinema.model.anyrig_loading import is_anyrig_checkpoint, load_anyrig
+from kinema.human.keyjoint_planning import KeyjointPlanner, sample_two_stage
+from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
+from kinema.human.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, stack_targets
 from kinema.model.grounding import Grounded, Grounding, as_grounding, ground
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
 from kinema.objectives.optimize import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
 from kinema.objectives.sample import add_final, collect_objectives, objective_settings, sample_with_objectives
+from kinema.pipeline.base import MotionPipeline, RigInfo
+from kinema.pipeline.progress import ProgressFn, StepProgress, split_progress
+from kinema.pipeline.request import GenerationRequest
+from kinema.pipeline.result import GenerationReport, GenerationResult
+from kinema.pipeline.timeline import Segment, parse_timeline, splice, split_long
 from kinema.representation.flat import FlatRepresentation
-from kinema.text import MemoryCachedEncoder, TextEncoder, get_text_encoder
-
-#: prompt embeddings kept in memory by a loaded model (thread-safe LRU, kinema.text.MemoryCachedEncoder)
-TEXT_MEMORY_ENTRIES = 1024
+from kinema.rig import Rig
+from kinema.text import TextEncoder
 
 
-@dataclass
-class GenerationReport:
-    """What one ``generate`` call did: its settings, timing, constraint residuals and warnings.
-
-    ``residuals`` holds one post-processing report per sample (empty dicts without post-processing):
-    ``{"smooth", "foot_lock", "exact": {"before", "after", ...}, "plausibility", "warnings"}``.
-    ``warnings`` are the things a user must hear about (a stage undone by the guard, an unreachable
-    target, a prompt far from every training caption); the CLI prints them on stderr.
-    ``prompts`` holds, per distinct prompt, its nearest training captions and their cosine similarity
-    (kinema.model.vocabulary; empty when the model folder has no ``known_prompts.safetensors``) and
-    ``grounding``: what prompt grounding did with it (kinema.model.grounding: ``status``, the captions
-    blended in with their ``weight`` and the prompt's own ``prompt_weight``).
-    """
-
-    seconds: float = 0.0
-    segments: int = 1
-    frames: int = 0
-    steps: int = 0
-    guidance: tuple[float, float] = (0.0, 0.0)
-    seed: int = 0
-    residuals: list[dict] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    prompts: list[dict] = field(default_factory=list)
-    objectives: dict = field(default_factory=dict)
-
-
-class GenerationResult(MotionResults):
-    """The motions of one ``generate`` call (indexable like a list) and that call's own report."""
-
-    report: GenerationReport
-
-
-class KinemaModel:
-    """A trained model ready to generate; build it with :func:`load_model`.
+class HumanPipeline(MotionPipeline):
+    """The human model ready to generate; build it with ``kinema.load_model``.
 
     One instance may be shared by several threads: ``generate`` keeps everything it computes in the
     call (its result carries its own report) and never changes the model or its sampler.
 
-    Sampling-time root corrections (kinema.generate.sampling; not in the paper): ``root_displacement``
+    Sampling-time root corrections (kinema.human.sampling; not in the paper): ``root_displacement``
     (default True) moves the predicted root trajectory onto root constraints and pins a free first frame
     to the origin (or, with root constraints, shifts it with the first one) after every denoising step;
     ``root_smoothing`` (seconds, default 0.25) filters the predicted root x/z; ``joint_sigma`` (seconds,
     default 0.6) spreads each keyjoint's miss into its position channels
-    (kinema.generate.keyjoints). Set them to False / 0 / 0 for the paper's imputation alone.
-    ``grounding`` (kinema.model.grounding) is what ``generate(grounding=None)`` uses: the model's saved
-    setting (``checkpoint.json`` "grounding", else ``DEFAULT_GROUNDING``).
+    (kinema.human.keyjoints). Set them to False / 0 / 0 for the paper's imputation alone.
+    ``grounding`` (kinema.model.grounding) is what a request without grounding fields uses: the model's
+    saved setting (``checkpoint.json`` "grounding", else ``DEFAULT_GROUNDING``).
     """
+
+    pipeline_name = "human"
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder, known_prompts: KnownPrompts | None = None):
         self.loaded = loaded
@@ -99,6 +67,19 @@ class KinemaModel:
         self.joint_sigma = JOINT_SIGMA_SECONDS
         self.grounding: Grounding = loaded.grounding
 
+    @classmethod
+    def load(cls, ckpt: Path, text_encoder) -> HumanPipeline:
+        loaded = load_denoiser(ckpt)
+        known = KnownPrompts.load(loaded.path)
+        if known is not None and known.encoder_id != loaded.text_encoder_id:
+            raise KinemaError(f"{ckpt}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
+                              f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)")
+        return cls(loaded, text_encoder, known)
+
+    @property
+    def path(self) -> Path:
+        return self.loaded.path
+
     @property
     def skeleton(self):
         return self.loaded.skeleton
@@ -106,6 +87,10 @@ class KinemaModel:
     @property
     def fps(self) -> float:
         return self.loaded.fps
+
+    @property
+    def text_encoder_id(self) -> str:
+        return self.loaded.text_encoder_id
 
     @property
     def representation(self) -> FlatRepresentation:
@@ -118,107 +103,89 @@ class KinemaModel:
         return self.loaded.denoiser.config.max_frames / self.fps
 
     @property
+    def window_seconds(self) -> float:
+        return self.max_seconds
+
+    @property
     def max_steps(self) -> int:
         """The largest number of DDIM steps: the length T of the training noise schedule."""
         return self.loaded.sampler.num_train_steps
 
+    @property
+    def default_steps(self) -> int:
+        return self.loaded.sampler.num_inference_steps
+
+    def rigs(self) -> list[RigInfo]:
+        skel = self.skeleton
+        return [RigInfo(skel.name or "unnamed", list(skel.names), [int(p) for p in skel.parents], [])]
+
+    def resolve_rig(self, rig) -> Rig:
+        """The model's own rig; a request naming another is refused (retargeting is kinema.retarget's)."""
+        own = self.rigs()[0].name
+        if rig is None or rig == own or rig is self.skeleton:
+            return self.representation.rig
+        raise KinemaError(f"rig: the model {self.path.name!r} drives its own skeleton {own!r}; use a model "
+                          "for any rig (--model creatures) for this rig")
+
     def __repr__(self) -> str:
-        return f"KinemaModel({self.loaded.path}, {self.skeleton.num_joints} joints @ {self.fps:g} fps)"
+        return f"HumanPipeline({self.loaded.path}, {self.skeleton.num_joints} joints @ {self.fps:g} fps)"
 
     # ------------------------------------------------------------------ public
-    def generate(
-        self,
-        prompt_or_timeline,
-        *,
-        seconds: float | None = None,
-        constraints=None,
-        constraints_fps: float | None = None,
-        samples: int = 1,
-        steps: int | None = None,
-        guidance: tuple[float, float] | Guidance | None = None,
-        seed: int = 0,
-        postprocess: bool = True,
-        heading: float = 0.0,
-        progress: bool | ProgressFn = False,
-        objectives=None,
-        objective_steps: int | None = None,
-        keyjoint_model=None,
-        grounding: float | Grounding | dict | bool | None = None,
-    ) -> GenerationResult:
-        """Generate ``samples`` motions; returns them with this call's report (``result.report``).
+    def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:
+        """Generate ``request.samples`` motions; returns them with this call's report (``result.report``).
 
-        Args:
-            prompt_or_timeline: a prompt ("A person walks forward.", "" for no text), a list of
-                ``(prompt, seconds)`` / ``{"prompt", "seconds"}`` segments, or a timeline .json path.
-            seconds: duration for a single prompt (default 5 s); ignored for timelines. The motion has
-                exactly ``round(seconds * fps)`` frames.
-            constraints: a constraints .json path, a JSON-style list, or constraint objects (see
-                docs/constraints.md); frames refer to the whole output at the model's fps unless the
-                file states its own ``fps`` or ``constraints_fps`` is given.
-            constraints_fps: the frame rate the constraint file's ``frame_indices`` were written at.
-            samples: how many different motions (same constraints, different noise), sampled as one
-                batch (faster per motion) and post-processed one by one.
-            steps: DDIM steps for this call (default: the model's saved setting), 1..``max_steps``.
-            guidance: ``(w_text, w_constr)`` >= 0 or a Guidance (default: the model's saved setting).
-            seed: fixes the result (0 <= seed < 2**64) for a given ``samples``: all samples draw their
-                noise from one generator stream, so sample i also depends on ``samples``.
-            postprocess: foot locking + IK + exact constraint hitting, guarded (kinema.postprocess.guard).
-            heading: first-frame facing in radians about +Y (0 faces +Z).
-            objectives: implicit controls met by optimising the diffusion noise (kinema.objectives,
-                docs/objectives.md): JSON-style dicts or Objective objects, added to a constraints file's
-                ``"objectives"``; the chain then runs ``steps`` (default 5) DDIM steps.
-            objective_steps: Adam iterations on the noise (default 12 when there are objectives).
-            keyjoint_model: two-stage control (kinema.generate.twostage, docs/constraints.md): ``"default"``
-                (the shipped keyjoint model), a keyjoint model folder or a loaded ``KeyjointPlanner``;
-                the keyjoints (pelvis, head, hands, ankles) are planned first from the constraints,
-                then the body follows them. One segment (up to ``max_seconds``), no objectives.
-            grounding: condition on a blend of each prompt's embedding and its nearest training captions'
-                (kinema.model.grounding, docs/evaluation.md): a weight in [0, 1], a ``Grounding``, its dict,
-                False (off) or None (:attr:`grounding`, the model's saved default); a weight alone keeps
-                the default's temperature and top k. Training captions, unknown prompts (see the
-                warnings) and prompts without a near caption naming the same sides are never grounded;
-                timeline segments are grounded one by one. ``report.prompts`` says on which captions, with what weights.
-            progress: True shows a tqdm bar; a callable ``fn(done, total)`` is called with the denoiser
-                steps done so far out of ``steps x segments`` (kinema.generate.progress); it never
-                changes the result.
+        Frames of constraints refer to the whole output at the model's fps unless the file states its own
+        ``fps`` or ``request.constraints_fps`` is given. Samples share one batch (faster per motion) and
+        are post-processed one by one; all draw their noise from one generator stream, so sample i also
+        depends on ``samples``. Objectives (docs/objectives.md) are optimised through the noise; a keyjoint
+        model (kinema.human.keyjoint_planning) plans pelvis, head, hands and ankles first (one segment, no
+        objectives); grounding blends each prompt's embedding with its nearest training captions'
+        (kinema.model.grounding); training captions, unknown prompts and prompts without a near caption
+        naming the same sides are never grounded.
         """
         t0 = time.perf_counter()
-        steps_given = steps
-        samples, steps, seed = self._check_counts(samples, steps, seed)
-        segments = self._segments(prompt_or_timeline, seconds)
+        r = request
+        self.resolve_rig(r.rig)
+        samples, steps, seed = self._check_counts(r.samples, r.steps, r.seed)
+        steps_given = r.steps
+        segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
-        texts = self.ground_prompts([s.prompt for s in segments], grounding)
-        guide = self._guidance(guidance)
-        plan = plan_segments(self.representation, segments, constraints, constraints_fps)
+        texts = self.ground_prompts([s.prompt for s in segments], r.grounding_settings())
+        guide = self._guidance(r.guidance)
+        heading, constraints = r.heading, r.constraints
+        plan = plan_segments(self.representation, segments, constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
-        bound = collect_objectives(constraints, objectives, self.skeleton, self.fps, plan.total_frames)
-        planner = self._planner(keyjoint_model, plan, bound)
+        bound = collect_objectives(constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
+        planner = self._planner(r.keyjoint_model, plan, bound)
         obj_report: dict = {}
         if bound:
             settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
                                           DEFAULT_DDIM_STEPS)
             steps = settings.steps
-            opt = NoiseOptSettings(DEFAULT_ITERATIONS if objective_steps is None else objective_steps)
+            opt = NoiseOptSettings(DEFAULT_ITERATIONS if r.objective_steps is None else r.objective_steps)
             text = self._text(plan.segments[0].prompt, texts)
             raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
                                                             opt, split_progress(progress)[0])
         else:
             raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner, texts)
             plans = [plan] * samples
+        t_sampled = time.perf_counter()
         motions, residuals = [], []
         for motion, sample_plan in zip(raw, plans, strict=True):
-            motion, report = sample_plan.postprocess(motion) if postprocess else (motion, {})
+            motion, report = sample_plan.postprocess(motion) if r.postprocess else (motion, {})
             motions.append(motion)
             residuals.append(report)
         obj_warnings: list[str] = []
         if bound:
             motions, obj_report, obj_warnings = add_final(obj_report, bound, motions, raw)
         warnings = [m.warning() for m in matches if not m.known] + obj_warnings
-        warnings += [w for r in residuals for w in r.get("warnings", [])]
+        warnings += [w for r_ in residuals for w in r_.get("warnings", [])]
+        t1 = time.perf_counter()
         report = GenerationReport(
-            seconds=time.perf_counter() - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
+            seconds=t1 - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
             prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} for m in matches], objectives=obj_report,
+            timings={"sampling": t_sampled - t0, "postprocess": t1 - t_sampled}, joints=self.skeleton.num_joints,
         )
         return GenerationResult(motions, report)
 
@@ -247,15 +214,12 @@ class KinemaModel:
             raise KinemaError(f"seed must be an integer in [0, 2**64), got {seed!r}")
         return samples, steps, seed
 
-    def _segments(self, prompt_or_timeline, seconds) -> list[Segment]:
-        if isinstance(prompt_or_timeline, str) and not prompt_or_timeline.lower().endswith(".json"):
-            seconds = 5.0 if seconds is None else float(seconds)
-            if not (math.isfinite(seconds) and seconds > 0):
-                raise KinemaError(f"seconds must be positive, got {seconds}")
-            return split_long(prompt_or_timeline, seconds, self.max_seconds)
-        segs = parse_timeline(prompt_or_timeline)
+    def _segments(self, request: GenerationRequest) -> list[Segment]:
+        if request.timeline is None:
+            seconds = self.default_seconds if request.seconds is None else float(request.seconds)
+            return split_long(request.prompt, seconds, self.max_seconds)
         out = []
-        for s in segs:
+        for s in parse_timeline(request.timeline):
             out += split_long(s.prompt, s.seconds, self.max_seconds)
         return out
 
@@ -317,7 +281,7 @@ class KinemaModel:
                       planner: KeyjointPlanner | None = None,
                       texts: dict[str, Grounded] | None = None) -> list[Motion]:
         """``samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every
-        join's window regenerated between the two (kinema.generate.segments), one batch of all samples per pass.
+        join's window regenerated between the two (kinema.human.segments), one batch of all samples per pass.
 
         Sampling all motions in one denoiser batch is faster per motion than one after another (the
         network runs on larger matrices). Segment k of every sample starts where that sample's motion
@@ -356,43 +320,5 @@ class KinemaModel:
         return [rep.to_motion(f) for f in feats]
 
 
-def resolve_model_path(name_or_path: str | Path) -> Path:
-    """``"default"`` (the model shipped inside the package) or a run / checkpoint folder."""
-    if str(name_or_path) in ("default", ""):
-        from importlib.resources import files
-
-        shipped = Path(str(files("kinema") / "assets" / "models" / "default"))
-        if not (shipped / "checkpoint.json").exists():
-            raise KinemaError("this kinema install ships no default model yet; pass a checkpoint with --model PATH")
-        return shipped
-    path = Path(name_or_path)
-    if not path.exists():
-        from importlib.resources import files
-
-        shipped = Path(str(files("kinema") / "assets" / "models")) / str(name_or_path)
-        if path.name == str(name_or_path) and (shipped / "checkpoint.json").exists():
-            return shipped  # another model shipped inside the package, e.g. "creatures"
-        raise KinemaError(f"{path}: no such model folder")
-    return path
-
-
-def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES) -> KinemaModel | AnyRigModel:
-    """Load a model for generation: ``"default"`` or a path to a run/checkpoint folder.
-
-    Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
-    so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
-    behind it that persists between processes (the CLI passes ``cache/text``).
-    """
-    path = resolve_model_path(name_or_path)
-    loaded = load_anyrig(path) if is_anyrig_checkpoint(path) else load_denoiser(path)
-    encoder = get_text_encoder(loaded.text_encoder_id, cache_dir=text_cache)
-    if text_memory:
-        encoder = MemoryCachedEncoder(encoder, text_memory)
-    if not isinstance(loaded, LoadedModel):
-        return AnyRigModel(loaded, encoder)  # a model for any rig (kinema.generate.anyrig_api)
-    known = KnownPrompts.load(loaded.path)
-    if known is not None and known.encoder_id != loaded.text_encoder_id:
-        raise KinemaError(f"{path}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
-                          f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)")
-    return KinemaModel(loaded, encoder, known)
+#: the name this class had before the one-pipeline interface (kept for scripts that import it)
+KinemaModel = HumanPipeline

@@ -51,7 +51,7 @@ import torch
 
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
-from kinema.generate.keyjoints import KeyjointTargets, joint_displacement
+from kinema.human.keyjoints import KeyjointTargets, joint_displacement
 from kinema.model.denoiser import Denoiser
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
@@ -62,7 +62,7 @@ from kinema.representation.flat import FlatRepresentation
 ROOT_SMOOTHING_SECONDS = 0.25
 
 #: Gaussian (seconds) over which a keyjoint's miss is spread into its position channels after every
-#: step (kinema.generate.keyjoints): wide enough that the joint bends towards the target over a few
+#: step (kinema.human.keyjoints): wide enough that the joint bends towards the target over a few
 #: frames instead of snapping at the keyframe.
 JOINT_SIGMA_SECONDS = 0.6
 

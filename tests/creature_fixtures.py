@@ -1,6 +1,6 @@
 """Shared fixtures of the any-rig tests: a synthetic multi-rig motion cache (three shapes under three
 names each) and a tiny any-rig model trained on it for a few steps (``anyrig-tiny``, hash text encoder).
-Import them into a test module: ``from anyrig_fixtures import creature_cache, trained``."""
+Import them into a test module: ``from creature_fixtures import creature_cache, trained``."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ from pathlib import Path
 import pytest
 from rig_fixtures import fish, hexapod, quadruped, walking
 
+from kinema.anyrig.pipeline import AnyRigModel
 from kinema.data.multirig_build import Description, assemble, write_build
 from kinema.data.sources import SourceFile
-from kinema.generate.anyrig_api import AnyRigModel
-from kinema.model.anyrig_config import get_anyrig_config
-from kinema.model.anyrig_loading import load_anyrig
+from kinema.model.anyrig.config import get_anyrig_config
+from kinema.model.anyrig.loading import load_anyrig
 from kinema.skeleton import Skeleton
 from kinema.text import get_text_encoder
-from kinema.train.anyrig_trainer import AnyRigTrainConfig, AnyRigTrainer
+from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
 
 
 def _variant(skel: Skeleton, k: int) -> Skeleton:

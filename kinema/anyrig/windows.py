@@ -2,14 +2,14 @@
 
 The any-rig denoiser sees ``window`` frames at a time. A motion longer than that, or a timeline of
 several prompts, is covered by overlapping windows that are all denoised together at every DDIM step
-and blended (kinema.generate.anyrig_sampling). A `WindowPlan` lists them:
+and blended (kinema.anyrig.sampling). A `WindowPlan` lists them:
 
 - one prompt (`single_plan`): windows of the model's length over the whole motion, overlapping by at
   least a quarter window (Dragon Sec. 3.4, MultiDiffusion form);
-- a timeline (`segment_plan`): segment k owns output frames ``[b_k, b_k+1)`` (kinema.generate.segments.
+- a timeline (`segment_plan`): segment k owns output frames ``[b_k, b_k+1)`` (kinema.human.segments.
   segment_bounds, the human model's rule) and its windows, all with segment k's prompt, start
   ``overlap`` frames early, re-playing the end of segment k-1 as the human model's timeline does
-  (kinema.generate.timeline). Those shared frames are cross-faded by the blending weights, which ramp
+  (kinema.pipeline.timeline). Those shared frames are cross-faded by the blending weights, which ramp
   over exactly the shared frames -- at every denoising step instead of once at the end, so both sides
   of a join are denoised to agree and no frame needs imposing as context.
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import torch
 
 #: seconds of the previous segment a segment's windows re-play (as the human model's segments did before
-#: its joins became regenerated windows, kinema.generate.segments), at most a quarter window
+#: its joins became regenerated windows, kinema.human.segments), at most a quarter window
 OVERLAP_SECONDS = 0.5
 
 

@@ -7,7 +7,7 @@ mesh), a `Skeleton`, a `Rig` (its contact joints and limbs are used), or the id 
 (``model.known_rigs()``).
 
 The rig is scaled to the model's units (rest pose 1 across, as in training), sampled with DDIM in
-overlapping windows (kinema.generate.anyrig_sampling), turned to face ``heading``, converted to a
+overlapping windows (kinema.anyrig.sampling), turned to face ``heading``, converted to a
 motion (kinema.representation.joint), scaled back to metres and post-processed: de-jittering, foot
 locking on the rig's contact joints (any number of legs) and the exact pass on joint targets.
 """
@@ -17,14 +17,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
 
-from kinema.diffusion.guidance import Guidance
-from kinema.errors import KinemaError
-from kinema.generate.anyrig_constraints import (
+from kinema.anyrig.constraints import (
     Constraint,
     JointTarget,
     Keyframe,
@@ -32,8 +29,8 @@ from kinema.generate.anyrig_constraints import (
     RootPath,
     encode_constraints,
 )
-from kinema.generate.anyrig_constraints import post_targets as make_post_targets
-from kinema.generate.anyrig_feet import (
+from kinema.anyrig.constraints import post_targets as make_post_targets
+from kinema.anyrig.feet import (
     descendants,
     floor_height,
     floor_root_children,
@@ -42,8 +39,8 @@ from kinema.generate.anyrig_feet import (
     translated_feet,
     with_floor_translations,
 )
-from kinema.generate.anyrig_ground import ground_motion, leg_ends, settle_offsets, steady_height
-from kinema.generate.anyrig_post import (
+from kinema.anyrig.ground import ground_motion, leg_ends, settle_offsets, steady_height
+from kinema.anyrig.post import (
     dejitter,
     pin_root,
     reach_by_translation,
@@ -52,17 +49,22 @@ from kinema.generate.anyrig_post import (
     translatable_bones,
     unmet_warnings,
 )
-from kinema.generate.anyrig_sampling import sample_features
-from kinema.generate.anyrig_windows import WindowPlan, segment_overlap, segment_plan, single_plan
-from kinema.generate.progress import ProgressFn
-from kinema.generate.results import MotionResults
-from kinema.generate.segments import segment_bounds
-from kinema.generate.timeline import parse_timeline
+from kinema.anyrig.sampling import sample_features
+from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, single_plan
+from kinema.anyrig.world import generate_world, load_constraints_file
+from kinema.diffusion.guidance import Guidance
+from kinema.errors import KinemaError
+from kinema.human.segments import segment_bounds
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
-from kinema.model.anyrig_loading import LoadedAnyRig
+from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
+from kinema.pipeline.base import MotionPipeline, RigInfo
+from kinema.pipeline.progress import ProgressFn
+from kinema.pipeline.request import GenerationRequest
+from kinema.pipeline.result import GenerationReport, GenerationResult
+from kinema.pipeline.timeline import parse_timeline
 from kinema.postprocess import postprocess as run_postprocess
 from kinema.postprocess.guard import plausibility, violations
 from kinema.representation.joint import JointRepresentation
@@ -70,55 +72,57 @@ from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
 
-@dataclass
-class AnyRigReport:
-    """What one ``generate`` call did: wall time, steps, windows, timeline segments, constraint errors (cm;
-    degrees for rotation targets),
-    foot locking, the largest vertical change of de-jittering the root height, of putting the motion on
-    the floor and of settling the body onto its legs (rig sizes: ``height_smoothed``, ``grounded``,
-    ``settled``), joint targets met by translating a bone (name -> largest shift, rig sizes), warnings."""
-
-    seconds: float = 0.0
-    steps: int = 0
-    windows: int = 1
-    joints: int = 0
-    segments: int = 1
-    residuals_cm: list[float] = field(default_factory=list)
-    residuals_deg: list[float] = field(default_factory=list)
-    foot_lock: list[dict] = field(default_factory=list)
-    grounded: float = 0.0
-    height_smoothed: float = 0.0
-    settled: float = 0.0
-    reached_by_translation: dict[str, float] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
-
-
-class AnyRigResult(MotionResults):
-    """The motions of one call (indexable like a list) and its report."""
-
-    report: AnyRigReport
-
-
-class AnyRigModel:
+class AnyRigPipeline(MotionPipeline):
     """A trained any-rig model ready to generate; build it with ``kinema.load_model``."""
+
+    pipeline_name = "anyrig"
+    default_seconds = 4.0
 
     def __init__(self, loaded: LoadedAnyRig, text_encoder) -> None:
         self.loaded = loaded
         self.text_encoder = text_encoder
 
+    @classmethod
+    def load(cls, ckpt: Path, text_encoder) -> AnyRigPipeline:
+        return cls(load_anyrig(ckpt), text_encoder)
+
+    @property
+    def path(self) -> Path:
+        return self.loaded.path
+
     @property
     def fps(self) -> float:
         return self.loaded.fps
 
+    @property
+    def text_encoder_id(self) -> str:
+        return self.loaded.text_encoder_id
+
+    @property
+    def max_steps(self) -> int:
+        return self.loaded.sampler.num_train_steps
+
+    @property
+    def default_steps(self) -> int:
+        return self.loaded.sampler.num_inference_steps
+
+    @property
+    def window_seconds(self) -> float:
+        return self.loaded.config.window / self.fps
+
     def __repr__(self) -> str:
-        return f"AnyRigModel({self.loaded.path}, {len(self.loaded.train_rigs)} training rigs)"
+        return f"AnyRigPipeline({self.loaded.path}, {len(self.loaded.train_rigs)} training rigs)"
 
     def known_rigs(self) -> list[tuple[str, int, list[str]]]:
         """(rig id, joints, source files) of every training rig."""
+        return [(r.name, len(r.joints), r.files) for r in self.rigs()]
+
+    def rigs(self) -> list[RigInfo]:
         files = self.loaded.rig_files
         out = []
         for rid, d in sorted(self.loaded.train_rigs.items()):
-            out.append((rid, len(d["skeleton"]["names"]), list(files.get(rid, []))))
+            skel = d["skeleton"]
+            out.append(RigInfo(rid, list(skel["names"]), [int(p) for p in skel["parents"]], list(files.get(rid, []))))
         return out
 
     # ------------------------------------------------------------------ rigs
@@ -128,6 +132,10 @@ class AnyRigModel:
             return rig
         if isinstance(rig, Skeleton):
             return Rig.from_skeleton(rig)
+        if rig is None or not isinstance(rig, str | Path):
+            ids = ", ".join(r.name for r in self.rigs()) or "none"
+            raise KinemaError(f"rig: the any-rig model {self.path.name!r} needs a rig: a GLB/glTF or BVH file or a "
+                              f"training rig id ({ids})")
         path = Path(rig)
         if path.is_file():
             if path.suffix.lower() in (".glb", ".gltf"):
@@ -140,7 +148,35 @@ class AnyRigModel:
         raise KinemaError(f"rig {str(rig)!r}: no such file and not a training rig id (known: {ids})")
 
     # ------------------------------------------------------------------ generation
-    def generate(
+    def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:
+        """The request on its rig: any-rig constraint objects or lists (kinema.anyrig.constraints,
+        character frame) are sampled directly; docs/constraints.md constraints (world frame) go through
+        kinema.anyrig.world, whose notes of what the model cannot take open the warnings."""
+        r = request
+        _refuse_unsupported(r, self.path.name)
+        rig = self.resolve_rig(r.rig)
+        what = r.prompt if r.timeline is None else r.timeline
+        kw = dict(seconds=self.default_seconds if r.seconds is None else r.seconds, steps=r.steps, seed=r.seed,
+                  guidance=r.guidance, heading=r.heading, postprocess=r.postprocess,
+                  progress=progress if callable(progress) else None)
+        own, world = self._constraints(r, rig, what, kw["seconds"])
+        if not world:
+            return self.sample_on_rig(what, rig=rig, constraints=own, samples=r.samples, **kw)
+        res, notes, _ = generate_world(self, what, rig=rig, constraints=world, samples=r.samples, **kw)
+        res.report.warnings[:0] = notes
+        return res
+
+    def _constraints(self, r: GenerationRequest, rig: Rig, what, seconds: float) -> tuple[list, list[dict]]:
+        """(any-rig constraint objects, world-frame JSON constraints) of a request."""
+        c = r.constraints
+        if c is None:
+            return [], []
+        if isinstance(c, list | tuple) and all(isinstance(o, Constraint) for o in c):
+            return list(c), []
+        return load_constraints_file(c, rig.skeleton, self.fps, self.frames(what, seconds),
+                                     source_fps=r.constraints_fps)
+
+    def sample_on_rig(
         self,
         prompt: str | Sequence | Path,
         *,
@@ -154,15 +190,15 @@ class AnyRigModel:
         heading: float = 0.0,
         postprocess: bool = True,
         progress: ProgressFn | None = None,
-    ) -> AnyRigResult:
-        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.generate.anyrig_constraints;
+    ) -> GenerationResult:
+        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.anyrig.constraints;
         frames at the model's fps, counted over the whole motion).
 
         ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline: a list of ``{"prompt",
-        "seconds"}`` / ``(prompt, seconds)`` segments or a timeline .json path (kinema.generate.timeline;
+        "seconds"}`` / ``(prompt, seconds)`` segments or a timeline .json path (kinema.pipeline.timeline;
         ``seconds`` is then ignored). A timeline's segments are denoised together, each by windows with its
         own prompt that re-play the end of the previous segment and are cross-faded with it
-        (kinema.generate.anyrig_windows). ``heading`` (radians, from +Z towards +X) is the facing at frame 0
+        (kinema.anyrig.windows). ``heading`` (radians, from +Z towards +X) is the facing at frame 0
         when no root path or keyframe fixes it. ``progress(done, total)`` is called after every denoiser step."""
         t0 = time.perf_counter()
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
@@ -194,10 +230,15 @@ class AnyRigModel:
         )
         if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
             feats = _face(feats, rig_n.root, heading)
-        report = AnyRigReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints, segments=len(prompts))
+        report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
+                                  segments=len(prompts), frames=T, seed=seed)
+        t_sampled = time.perf_counter()
         motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
         report.seconds = time.perf_counter() - t0
-        return AnyRigResult(motions, report)
+        report.timings = {"sampling": t_sampled - t0, "postprocess": report.seconds - (t_sampled - t0)}
+        g = self._guidance(guidance)
+        report.guidance = (g.w_text, g.w_constr)
+        return GenerationResult(motions, report)
 
     def frames(self, prompt: str | Sequence | Path, seconds: float = 4.0) -> int:
         """Frames (at ``fps``) that ``generate`` makes for ``prompt`` (a text or a timeline) and ``seconds``."""
@@ -246,10 +287,10 @@ class AnyRigModel:
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
         """Features -> motion, post-processed in rig units (rest pose 1 across, so the human-tuned
         thresholds of kinema.postprocess mean the same on a fish and a T-rex), then scaled to metres.
-        The motion is first put on the floor (kinema.generate.anyrig_ground; not when a keyframe or a
+        The motion is first put on the floor (kinema.anyrig.ground; not when a keyframe or a
         copied root motion fixes the root). Bones under a floor-level armature get their translations after
         post-processing (which works on rotations) and their feet are cleaned up and locked directly
-        (kinema.generate.anyrig_feet)."""
+        (kinema.anyrig.feet)."""
         m = rep_n.to_motion(f)
         targets = None
         if postprocess:
@@ -290,7 +331,7 @@ class AnyRigModel:
     @staticmethod
     def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:
         """``m`` with a steadied root height, put on the floor by its contact joints and settled onto its
-        legs (kinema.generate.anyrig_ground), unless a keyframe or a copied root motion decides where the
+        legs (kinema.anyrig.ground), unless a keyframe or a copied root motion decides where the
         root is; and the features ``f`` (the translated feet's moved to keep their world heights)."""
         rig = rep_n.rig
         if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
@@ -305,12 +346,12 @@ class AnyRigModel:
         rest = [stands.get(j, floor_height(skel, j)) for j in rig.contacts]
         m, off = ground_motion(m, probe, list(rig.contacts), rest, rest_extent(skel))
         report.grounded = max(report.grounded, off)
-        return AnyRigModel._settle(m, f, rep_n, report)
+        return AnyRigPipeline._settle(m, f, rep_n, report)
 
     @staticmethod
     def _settle(m: Motion, f, rep_n, report) -> tuple[Motion, torch.Tensor]:
         """The body lowered (or raised) onto its legs where the model put its translated feet too far from
-        them (kinema.generate.anyrig_ground.settle_offsets); the feet keep their world heights (their
+        them (kinema.anyrig.ground.settle_offsets); the feet keep their world heights (their
         root-relative features are moved the other way). Returns the motion and the features."""
         skel = rep_n.rig.skeleton
         kids = [j for j in floor_root_children(skel) if j not in skel.path_from_root(rep_n.rig.root)]
@@ -329,7 +370,7 @@ class AnyRigModel:
 
     @staticmethod
     def _lock_feet(m: Motion, rep_n, targets, report) -> tuple[Motion, dict]:
-        """Translated feet locked (kinema.generate.anyrig_feet), undone with a warning when that makes
+        """Translated feet locked (kinema.anyrig.feet), undone with a warning when that makes
         the motion less plausible than before by the post-processing guard's bounds."""
         skel = rep_n.rig.skeleton
         feet = translated_feet(rep_n.rig, rep_n.rig.root)
@@ -363,8 +404,25 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     return out
 
 
+def _refuse_unsupported(r: GenerationRequest, name: str) -> None:
+    """One-line errors for the request fields the any-rig model cannot honour."""
+    if r.grounding_settings() is not None:
+        raise KinemaError(f"grounding: the any-rig model {name!r} keeps no training captions to ground prompts on")
+    if r.keyjoint_model is not None:
+        raise KinemaError(f"keyjoint_model: keyjoint planning is for the human model; {name!r} is an any-rig model")
+    if r.objectives is not None or r.objective_steps is not None:
+        raise KinemaError(f"objectives: noise-optimised objectives are for the human model; {name!r} is an any-rig "
+                          "model")
+
+
+#: the names these had before the one-pipeline interface (kept for scripts that import them)
+AnyRigModel = AnyRigPipeline
+AnyRigResult = GenerationResult
+AnyRigReport = GenerationReport
+
 __all__ = [
     "AnyRigModel",
+    "AnyRigPipeline",
     "AnyRigReport",
     "AnyRigResult",
     "JointTarget",

@@ -2,7 +2,7 @@
 
 `AnyRigClips` reads a multi-rig build or manifest (kinema.data.multirig), computes each clip's
 per-joint features ``(T, J, 13)`` on its rig (and on ``variants`` rig-augmented copies,
-kinema.train.anyrig_augment), the rig's skeleton codes, and its captions. `sample_batch` draws a
+kinema.train.anyrig.augment), the rig's skeleton codes, and its captions. `sample_batch` draws a
 batch from one joint-count bucket (so a 6-joint fish does not pay for a 48-joint fox): batch size
 ``token_budget // J_max`` of the bucket, windows of ``window`` frames -- a random crop of a longer
 clip, a looping clip tiled, any other shorter clip padded with a frame mask -- and a random heading.
@@ -19,11 +19,11 @@ import torch
 
 from kinema.data.multirig import MultiRigData
 from kinema.errors import DataError
-from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.skeleton_codes import CodeBatch, SkeletonCodes, batch_codes, skeleton_codes
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
-from kinema.train.anyrig_augment import augment
+from kinema.train.anyrig.augment import augment
 
 #: joint-count buckets (upper bounds, inclusive)
 BUCKETS = (8, 16, 32, 64)

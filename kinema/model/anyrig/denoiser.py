@@ -25,7 +25,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from kinema.model.anyrig_config import AnyRigConfig
+from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.layers import sinusoidal_embedding
 from kinema.model.skeleton_codes import CodeBatch, rest_dim, tree_dim
 

@@ -25,7 +25,7 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
   when the clip nearest to it by `motion_descriptor` has that caption; chance = the share of clips
   with it (1 / clips when the captions differ). Only for rigs with two or more distinct captions;
 - ``similarity`` / ``nearest`` (held-out splits, with ``train_shapes``): the rig's class against the
-  training rigs (kinema.evaluate.anyrig_groups).
+  training rigs (kinema.evaluate.anyrig.groups).
 """
 
 from __future__ import annotations
@@ -35,12 +35,12 @@ from pathlib import Path
 
 import torch
 
+from kinema.anyrig.constraints import post_targets
+from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_root_children
 from kinema.data.multirig import MultiRigData
-from kinema.evaluate.anyrig_groups import RigShape, classify, rig_shape
+from kinema.evaluate.anyrig.groups import RigShape, classify, rig_shape
 from kinema.evaluate.distribution import coverage_novelty_auc
 from kinema.evaluate.metrics import position_jerk
-from kinema.generate.anyrig_api import AnyRigModel, JointTarget, Keyframe, floor_root_children
-from kinema.generate.anyrig_constraints import post_targets
 from kinema.geometry.rotations import sixd_to_quat
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
@@ -113,7 +113,7 @@ def keyframe_error(model: AnyRigModel, rig: Rig, ref: Motion, caption: str, *, s
     """Largest joint error (x 100: cm at 1-m scale) at a full-body keyframe after post-processing: the
     pose of ``ref``'s frame at a third of its length, asked for at that frame of a motion as long as
     ``ref`` (at least two windows). Compared with the pose as the rig can take it, placed at the motion's
-    root and heading there (kinema.generate.anyrig_constraints.post_targets: bones at their rest lengths
+    root and heading there (kinema.anyrig.constraints.post_targets: bones at their rest lengths
     except those moved by translation, a floor-level armature left on the floor) -- the clips stretch
     bones by translation, which a rotation can never match (the platformer character's armature: 72 cm)."""
     seconds = max(ref.duration, 2 * WINDOW / model.fps)
@@ -214,7 +214,7 @@ def evaluate_split(
 ) -> list[dict]:
     """`evaluate_rig` for every rig of ``split`` (or the named ``rigs``), up to ``clips`` clips each,
     with different captions where the rig has them; rigs of a held-out split are classified against
-    ``train_shapes`` (kinema.evaluate.anyrig_groups.training_shapes of the model) when given."""
+    ``train_shapes`` (kinema.evaluate.anyrig.groups.training_shapes of the model) when given."""
     d = MultiRigData(data, split=split)
     by_rig: dict[str, list[int]] = {}
     for i, rec in enumerate(d.clips):

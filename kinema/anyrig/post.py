@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import torch
 
-from kinema.generate.anyrig_feet import floor_root_children
+from kinema.anyrig.feet import floor_root_children
 from kinema.geometry.rotations import quat_angle_deg, quat_inverse, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.guard import DEFAULT_BOUNDS, plausibility, violations
@@ -102,7 +102,7 @@ def pin_root(m: Motion, pins: dict[int, torch.Tensor], root: int, reach_s: float
 
 def translatable_bones(skeleton, root: int, root_fixed: bool) -> set[int]:
     """Joints whose translation `reach_by_translation` may change: joint 0 and the bones under a
-    floor-level armature (kinema.generate.anyrig_feet.floor_root_children), but not the rig root or its
+    floor-level armature (kinema.anyrig.feet.floor_root_children), but not the rig root or its
     path when keyframes, root paths or a copied root motion (``root_fixed``) decide where the root is."""
     movable = {0, *floor_root_children(skeleton)}
     return movable - set(skeleton.path_from_root(root)) if root_fixed else movable

@@ -1,0 +1,1 @@
+"""The per-joint any-rig denoiser (denoiser), its config (config) and its checkpoint loader (loading)."""

@@ -1,0 +1,136 @@
+"""`MotionPipeline`: the one interface every generation model implements.
+
+``load_model`` (kinema.generate) returns one; faces (CLI, server, batch, app, streaming) call
+``generate(request)`` and read the few properties below, and never ask which model it is. A request
+field a pipeline cannot honour is a one-line `KinemaError` from that pipeline ("the any-rig model keeps
+no training captions to ground prompts on"), never silently ignored.
+
+``generate`` also takes the request's fields as keywords (``model.generate("A person walks.",
+seconds=4)``), the short form for Python callers; both forms build the same `GenerationRequest`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+from kinema.errors import KinemaError
+from kinema.pipeline.progress import ProgressFn
+from kinema.pipeline.request import GenerationRequest
+from kinema.pipeline.result import GenerationResult
+
+
+@dataclass(frozen=True)
+class RigInfo:
+    """A rig a model drives without a file: its id, joint names and parents (for ``GET /v1/models``)."""
+
+    name: str
+    joints: list[str]
+    parents: list[int]
+    files: list[str]
+
+
+def request_from_keywords(what: Any = None, **keywords) -> GenerationRequest:
+    """The request of ``generate(what, **keywords)``: ``what`` is a prompt, a timeline (a list of
+    ``{"prompt", "seconds"}`` / ``(prompt, seconds)`` segments, or a .json file path) or None."""
+    if isinstance(what, str) and not what.lower().endswith(".json"):
+        keywords["prompt"] = what
+    elif what is not None:
+        if keywords.get("seconds") is not None and isinstance(what, str | Path):
+            keywords.pop("seconds")  # a timeline file carries its own durations (as before the request)
+        keywords["timeline"] = what
+    grounding = keywords.get("grounding")
+    if grounding is not None and not isinstance(grounding, int | float) or isinstance(grounding, bool):
+        keywords.update(_grounding_fields(keywords.pop("grounding")))
+    if isinstance(keywords.get("guidance"), list):
+        keywords["guidance"] = tuple(keywords["guidance"])
+    try:
+        return GenerationRequest(**keywords)
+    except TypeError as err:  # an unknown keyword
+        raise KinemaError(f"generate: {err}") from None
+
+
+def _grounding_fields(value: Any) -> dict:
+    """A ``Grounding``, its dict, or a bool as the request's grounding fields."""
+    if isinstance(value, bool):
+        return {} if value else {"grounding": 0.0}
+    data = value.to_dict() if hasattr(value, "to_dict") else value
+    if not isinstance(data, Mapping):
+        raise KinemaError(f"grounding: expected a weight in [0, 1], a Grounding or its dict, got {value!r}")
+    names = {"weight": "grounding", "top_k": "grounding_top_k", "temperature": "grounding_temperature"}
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        raise KinemaError(f"grounding: unknown key {unknown[0]!r} (expected weight, top_k, temperature)")
+    return {names[k]: v for k, v in data.items()}
+
+
+class MotionPipeline(ABC):
+    """A loaded model that turns a `GenerationRequest` into a `GenerationResult`."""
+
+    #: the value of ``checkpoint.json``'s "pipeline" key that names this class
+    pipeline_name: ClassVar[str]
+    #: seconds of a single prompt when the request gives none
+    default_seconds: ClassVar[float] = 5.0
+
+    @classmethod
+    @abstractmethod
+    def load(cls, ckpt: Path, text_encoder) -> MotionPipeline:
+        """The pipeline of a checkpoint folder, with its text encoder."""
+
+    # ------------------------------------------------------------------ what faces read
+    @property
+    @abstractmethod
+    def path(self) -> Path:
+        """The checkpoint folder."""
+
+    @property
+    @abstractmethod
+    def fps(self) -> float: ...
+
+    @property
+    @abstractmethod
+    def text_encoder_id(self) -> str: ...
+
+    @property
+    @abstractmethod
+    def max_steps(self) -> int:
+        """The largest number of DDIM steps (the training noise schedule's length)."""
+
+    @property
+    @abstractmethod
+    def default_steps(self) -> int: ...
+
+    @property
+    @abstractmethod
+    def window_seconds(self) -> float:
+        """The longest stretch the denoiser sees at once (longer motions are made of several)."""
+
+    @abstractmethod
+    def rigs(self) -> list[RigInfo]:
+        """The rigs this model drives without a rig file (the human model: its own skeleton)."""
+
+    @abstractmethod
+    def resolve_rig(self, rig):
+        """The `Rig` a request's ``rig`` names (a file path, a rig id, a `Skeleton` or `Rig`), in metres."""
+
+    # ------------------------------------------------------------------ generation
+    def generate(self, request: GenerationRequest | Any = None, /, *, progress: bool | ProgressFn = False,
+                 **keywords) -> GenerationResult:
+        """Generate what ``request`` asks (or a request built from a prompt/timeline and keywords).
+
+        ``progress``: True shows a bar; a callable ``fn(done, total)`` is called with the denoiser steps
+        done so far; it never changes the result.
+        """
+        if isinstance(request, GenerationRequest):
+            if keywords:
+                request = request.replace(**keywords)
+        else:
+            request = request_from_keywords(request, **keywords)
+        return self.run(request, progress=progress)
+
+    @abstractmethod
+    def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:
+        """Generate what ``request`` asks; see `generate`."""

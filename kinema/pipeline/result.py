@@ -1,0 +1,77 @@
+"""What a generation call returns: `GenerationResult` (the motions, indexable like a list) and its
+`GenerationReport`, one report type for every pipeline.
+
+Fields a pipeline has nothing to say about keep their defaults: the human model runs no windows and
+translates no bones; the any-rig model grounds no prompts. Lengths are metres, residuals centimetres
+(``residuals_cm``) and degrees (``residuals_deg``) measured on the final output.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+from kinema.motion.core import Motion
+
+
+@dataclass
+class GenerationReport:
+    """What one ``generate`` call did.
+
+    Common to every pipeline: ``seconds`` (wall time), ``steps``, ``seed``, ``guidance``, ``segments``,
+    ``frames``, ``warnings`` (what a user must hear: unmet targets, unknown prompts, stages undone by the
+    guard), ``timings`` (wall seconds per stage).
+
+    The human pipeline (kinema.human): ``residuals`` holds one post-processing report per sample (empty
+    dicts without post-processing: ``{"smooth", "foot_lock", "exact": {"before", "after", ...},
+    "plausibility", "warnings"}``), ``prompts`` per distinct prompt its nearest training captions and what
+    grounding did (kinema.model.vocabulary, kinema.model.grounding), ``objectives`` the noise-optimised
+    objectives' values.
+
+    The any-rig pipeline (kinema.anyrig): ``windows``, ``joints``, ``residuals_cm`` / ``residuals_deg``
+    (constraint errors after post-processing), ``foot_lock``, the largest vertical change of de-jittering
+    the root height, of putting the motion on the floor and of settling the body onto its legs (rig sizes:
+    ``height_smoothed``, ``grounded``, ``settled``) and ``reached_by_translation`` (joint targets met by
+    translating a bone: name -> largest shift, rig sizes).
+    """
+
+    seconds: float = 0.0
+    segments: int = 1
+    frames: int = 0
+    steps: int = 0
+    guidance: tuple[float, float] = (0.0, 0.0)
+    seed: int = 0
+    warnings: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    residuals: list[dict] = field(default_factory=list)
+    prompts: list[dict] = field(default_factory=list)
+    objectives: dict = field(default_factory=dict)
+    windows: int = 1
+    joints: int = 0
+    residuals_cm: list[float] = field(default_factory=list)
+    residuals_deg: list[float] = field(default_factory=list)
+    foot_lock: list[dict] = field(default_factory=list)
+    grounded: float = 0.0
+    height_smoothed: float = 0.0
+    settled: float = 0.0
+    reached_by_translation: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """The report as JSON values (what the server answers and batch manifests record)."""
+        return asdict(self)
+
+
+class GenerationResult(Sequence):
+    """The motions of one call (indexable like a list) and that call's own report."""
+
+    def __init__(self, motions: list[Motion], report: GenerationReport) -> None:
+        self.motions, self.report = list(motions), report
+
+    def __getitem__(self, index):
+        return self.motions[index]
+
+    def __len__(self) -> int:
+        return len(self.motions)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"

@@ -1,0 +1,2 @@
+"""Training the per-joint any-rig denoiser: multi-rig data (data), rig augmentation (augment),
+constraint masks (masks) and the trainer (trainer)."""
