@@ -23,6 +23,8 @@ from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
 REQUIRED_KEYS = ("joint_names", "parents", "fps", "local_quats", "root_translation", "offsets")
+#: shortest ``local_quats`` entry accepted as a rotation (it is normalised on reading)
+MIN_QUAT_NORM = 1e-6
 
 
 def _float32(t: torch.Tensor) -> np.ndarray:
@@ -58,11 +60,23 @@ def save_npz(motion: Motion, path: str | Path) -> Path:
     return Path(path)
 
 
-def _check_finite(path: Path, data) -> None:
+def _arrays(path: Path, data) -> dict[str, np.ndarray]:
+    """Every array of an opened npz; an object (pickled) array is a one-line error naming its key."""
+    out = {}
+    for key in data.files:
+        try:
+            out[key] = data[key]
+        except ValueError:
+            raise KinemaError(f"{path}: '{key}' is an object array (pickled Python objects); kinema motions hold "
+                              "plain number and string arrays only (see docs/formats.md)") from None
+    return out
+
+
+def _check_finite(path: Path, data: dict[str, np.ndarray]) -> None:
     """Numeric arrays must be finite and fps positive: a one-line error naming the key and where."""
     for key in ("fps", "offsets", "root_translation", "local_quats", "positions", "foot_contacts",
                 "local_translations"):
-        if key not in data.files:
+        if key not in data:
             continue
         arr = data[key]
         if arr.dtype.kind not in "biuf":
@@ -74,6 +88,19 @@ def _check_finite(path: Path, data) -> None:
     fps = data["fps"]
     if fps.size != 1 or not float(fps.reshape(-1)[0]) > 0:
         raise KinemaError(f"{path}: 'fps' must be one positive number, got {fps.tolist()}")
+
+
+def _check_quats(path: Path, quats: np.ndarray) -> None:
+    """A quaternion of (near) zero length is no rotation at all: refused, naming the frame and joint
+    (normalising it would silently turn it into an arbitrary pose)."""
+    if quats.ndim != 3 or quats.shape[-1] != 4:
+        return  # Motion names the expected shape
+    norms = np.linalg.norm(quats.astype(np.float64), axis=-1)
+    bad = norms < MIN_QUAT_NORM
+    if bad.any():
+        frame, joint = np.argwhere(bad)[0].tolist()
+        raise KinemaError(f"{path}: 'local_quats' holds {int(bad.sum())} quaternion(s) of zero length (first at "
+                          f"frame {frame}, joint {joint}); each must be a rotation (w, x, y, z) of length 1")
 
 
 def load_npz(path: str | Path, *, scale: float = 1.0) -> Motion:
@@ -90,18 +117,20 @@ def load_npz(path: str | Path, *, scale: float = 1.0) -> Motion:
         missing = [k for k in REQUIRED_KEYS if k not in data.files]
         if missing:
             raise KinemaError(f"{path}: missing keys {missing} (see docs/formats.md)")
-        _check_finite(path, data)
-        names = [str(n) for n in data["joint_names"]]
-        skel = Skeleton(names, data["parents"].tolist(), data["offsets"] * scale)
-        contacts = torch.from_numpy(data["foot_contacts"]) if "foot_contacts" in data.files else None
-        trans = None
-        if "local_translations" in data.files:
-            trans = torch.from_numpy(data["local_translations"].astype(np.float32))
-        return Motion(
-            skel,
-            float(data["fps"]),
-            torch.from_numpy(data["root_translation"].astype(np.float32) * np.float32(scale)),
-            torch.from_numpy(data["local_quats"].astype(np.float32)),
-            contacts,
-            trans,
-        )
+        arrays = _arrays(path, data)
+    _check_finite(path, arrays)
+    _check_quats(path, arrays["local_quats"])
+    names = [str(n) for n in arrays["joint_names"]]
+    skel = Skeleton(names, arrays["parents"].tolist(), arrays["offsets"] * scale)
+    contacts = torch.from_numpy(arrays["foot_contacts"]) if "foot_contacts" in arrays else None
+    trans = None
+    if "local_translations" in arrays:
+        trans = torch.from_numpy(arrays["local_translations"].astype(np.float32))
+    return Motion(
+        skel,
+        float(arrays["fps"]),
+        torch.from_numpy(arrays["root_translation"].astype(np.float32) * np.float32(scale)),
+        torch.from_numpy(arrays["local_quats"].astype(np.float32)),
+        contacts,
+        trans,
+    )
