@@ -136,7 +136,7 @@ def test_health_models_and_api_key(server):
     (m,) = models["models"]
     assert m["rig"]["name"] == "bandai-namco" and len(m["rig"]["joints"]) == 21 and m["rig"]["fps"] == 20
     assert m["limits"]["max_steps"] == 5 and models["limits"]["max_seconds"] == 2 and len(m["sha256"]) == 64
-    assert set(models["formats"]) == {"bvh", "npz", "json"}
+    assert set(models["formats"]) == {"bvh", "npz", "glb", "json"}
     spec = httpx.get(f"{url}/openapi.json").json()
     assert {"/v1/generate", "/v1/jobs", "/v1/jobs/{job_id}", "/v1/models", "/healthz"} <= set(spec["paths"])
     assert httpx.get(f"{url}/docs").status_code == 200
@@ -220,7 +220,7 @@ def test_jobs_lifecycle_and_downloads(server):
         ({"typo": 1}, "$.typo", "Extra inputs"),
         ({"seconds": 3}, "$.seconds", "less than or equal to 2"),
         ({"steps": 6}, "$.steps", "less than or equal to 5"),
-        ({"format": "glb"}, "$.format", "not implemented"),
+        ({"format": "gltf"}, "$.format", "not implemented"),
         ({"objectives": [{"type": "reach"}]}, "$.objectives", "not supported"),
         ({"model": "../../etc"}, "$.model", "unknown model"),
         ({"rig": "smpl"}, "$.rig", "no model here drives this rig"),

@@ -97,7 +97,7 @@ def test_model_specs_and_lookup_by_name_and_rig(registry):
     base = registry.models["default"]
     two = ModelRegistry([base, ServedModel("second", base.model, base.sha256)])
     assert two.resolve(None, None) is base and two.resolve("second", "bandai-namco").name == "second"
-    with pytest.raises(RequestError, match="drives rig"):
+    with pytest.raises(RequestError, match="does not drive rig"):
         two.resolve("second", "smpl")
     with pytest.raises(KinemaError, match="same name"):
         ModelRegistry([base, base])

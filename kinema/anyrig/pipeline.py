@@ -77,6 +77,7 @@ class AnyRigPipeline(MotionPipeline):
 
     pipeline_name = "anyrig"
     default_seconds = 4.0
+    needs_rig = True
 
     def __init__(self, loaded: LoadedAnyRig, text_encoder) -> None:
         self.loaded = loaded

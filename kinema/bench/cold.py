@@ -58,12 +58,9 @@ def cli_times(model: str, seconds: float = 5.0, threads: int | None = None, step
 def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_path: str) -> dict:
     """In-process part of :func:`phase_breakdown` (kinema already imported); returns seconds per phase.
 
-    Uses the same pieces, in the same order, as ``KinemaModel.generate`` for one sample of one prompt.
+    One ``generate`` call of one sample of one prompt; its report's timings split sampling from post-processing.
     """
-    import torch
-
-    from kinema.generate import load_model
-    from kinema.human.segments import plan_segments
+    from kinema.generate import GenerationRequest, load_model
 
     times: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -72,15 +69,10 @@ def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_p
     t0 = time.perf_counter()
     m.encode_text(prompt)  # first prompt: loads the encoder weights, encodes, fills the cache
     times["text_encoding"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    samples, steps, seed = m._check_counts(1, steps, 0)
-    plan = plan_segments(m.representation, m._segments(prompt, seconds), None, None)
-    motion, _ = m._generate_one(plan, m._guidance(None), steps, torch.Generator().manual_seed(seed), 0.0,
-                                False, False)
-    times["sampling"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    motion, _ = plan.postprocess(motion)
-    times["postprocess"] = time.perf_counter() - t0
+    result = m.generate(GenerationRequest(prompt=prompt, seconds=seconds, steps=steps))
+    times["sampling"] = result.report.timings["sampling"]
+    times["postprocess"] = result.report.timings["postprocess"]
+    motion = result[0]
     t0 = time.perf_counter()
     motion.save(out_path)
     times["writing"] = time.perf_counter() - t0

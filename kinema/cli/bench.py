@@ -329,12 +329,12 @@ def _run_generate(args: argparse.Namespace) -> int:
 
 
 def _is_anyrig(model: str | None) -> bool:
+    """True when ``model`` loads as a pipeline that needs a rig per request (its bench times rigs)."""
     from kinema.errors import KinemaError
-    from kinema.generate import resolve_model_path
-    from kinema.model.anyrig.loading import is_anyrig_checkpoint
+    from kinema.generate import load_model
 
     try:
-        return model is not None and is_anyrig_checkpoint(resolve_model_path(model))
+        return model is not None and load_model(model).needs_rig
     except KinemaError:
         return False
 

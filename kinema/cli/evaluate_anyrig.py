@@ -28,7 +28,6 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from kinema.anyrig.pipeline import AnyRigModel
     from kinema.errors import KinemaError
     from kinema.evaluate.anyrig.groups import similarity_table, split_summary, training_shapes
     from kinema.evaluate.anyrig.suite import TABLE_HEADER, evaluate_split
@@ -40,8 +39,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_output_path(args.out)
     model = load_model(args.model, text_cache=Path("cache/text"))
-    if not isinstance(model, AnyRigModel):
-        raise KinemaError(f"--model {args.model}: not an any-rig model")
+    if not model.needs_rig:
+        raise KinemaError(f"--model {args.model}: not an any-rig model (it drives its own skeleton)")
     shapes = training_shapes(model.loaded.train_rigs)
     print(TABLE_HEADER)
     rows = []

@@ -35,16 +35,14 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
-    from kinema.model.anyrig.loading import is_anyrig_checkpoint, load_anyrig
-    from kinema.model.export import export_model
-    from kinema.model.loading import load_denoiser
+    from kinema.model.export import export_model, load_weights
 
     if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
         raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
                       ema=args.weights == "ema", grounding=grounding_overrides(args))
-    loaded = (load_anyrig if is_anyrig_checkpoint(out) else load_denoiser)(out)  # prove the folder loads
+    loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())

@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 import warnings
 
+from kinema.cli.objective_table import objective_table
+
 #: residual key -> (what it measures, unit)
 KINDS = {
     "full_body_position_cm": ("keyframe joint positions", "cm"),
@@ -71,3 +73,23 @@ def use_plain_warnings() -> None:
     """Python warnings raised while a command runs (e.g. a constraint file read at another fps) print as
     one ``kinema: warning:`` line instead of Python's file:line format."""
     warnings.showwarning = _show_warning
+
+
+def print_report(result) -> None:
+    """What `kinema generate` prints after writing the files, for any pipeline: the summary line, the
+    grounding lines, the residual and objective tables, the constraint errors and the warnings (stderr)."""
+    rep = result.report
+    where = f" on {rep.joints} joints" if rep.joints else ""
+    windows = f", {rep.windows} window(s)" if rep.windows > 1 else ""
+    print(f"generated {len(result)} motion(s){where}, {rep.segments} segment(s){windows}, {rep.steps} DDIM steps "
+          f"in {rep.seconds:.2f} s")
+    for line in grounding_lines(rep.prompts):
+        print(line)
+    for table in (residual_table(rep.residuals), objective_table(rep.objectives)):
+        if table:
+            print(table)
+    if rep.residuals_cm:
+        print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
+    if rep.residuals_deg:
+        print(f"rotation target error after post-processing: max {max(rep.residuals_deg):.2f} deg")
+    print_warnings(rep.warnings)

@@ -19,9 +19,10 @@ from safetensors.torch import save_file
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.atomic import atomic_folder
-from kinema.model.anyrig.loading import load_anyrig
+from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.grounding import Grounding
 from kinema.model.loading import (
+    LoadedModel,
     find_checkpoint,
     load_denoiser,
     read_checkpoint_info,
@@ -92,9 +93,15 @@ def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor]) -> Path
         (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
         for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
             (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)
-        (load_anyrig if info.get("kind") == "anyrig" else load_denoiser)(tmp)  # a folder that would not load
-        # never replaces ``out``
+        load_weights(tmp)  # a folder that would not load never replaces ``out``
     return out
+
+
+def load_weights(folder: Path) -> LoadedModel | LoadedAnyRig:
+    """The denoiser of a checkpoint folder with its settings, whichever network it holds (for tools that
+    work on weights: export, inspection; generation goes through kinema.generate.load_model)."""
+    info = read_checkpoint_info(find_checkpoint(folder))
+    return (load_anyrig if info.get("kind") == "anyrig" else load_denoiser)(folder)
 
 
 def rig_files(info: dict) -> dict[str, list[str]]:

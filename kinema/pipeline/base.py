@@ -74,6 +74,8 @@ class MotionPipeline(ABC):
     pipeline_name: ClassVar[str]
     #: seconds of a single prompt when the request gives none
     default_seconds: ClassVar[float] = 5.0
+    #: True when a request must name a rig (the model drives no skeleton of its own)
+    needs_rig: ClassVar[bool] = False
 
     @classmethod
     @abstractmethod

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -134,7 +135,7 @@ class GenerationRequest:
 
     def segments_json(self) -> list[dict]:
         """The request as a timeline list: the segments, or the prompt with its seconds (default 5 s)."""
-        if isinstance(self.timeline, str):
+        if isinstance(self.timeline, str | os.PathLike):
             raise KinemaError(f"timeline {self.timeline}: read the file first (kinema.pipeline.timeline)")
         if self.timeline is not None:
             return [dict(s) if isinstance(s, Mapping) else {"prompt": s[0], "seconds": s[1]} for s in self.timeline]

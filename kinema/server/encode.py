@@ -19,7 +19,7 @@ import numpy as np
 from kinema.motion.core import Motion
 
 #: File suffix per output format.
-SUFFIX = {"bvh": ".bvh", "npz": ".npz", "json": ".json"}
+SUFFIX = {"bvh": ".bvh", "npz": ".npz", "glb": ".glb", "json": ".json"}
 #: Decimals kept in the JSON format (0.001 mm and 1e-6 of a quaternion: far below what matters).
 JSON_DECIMALS = 6
 

@@ -8,6 +8,7 @@ three must reach the client the same way, a 422 naming the field, and a failed j
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 from kinema.constraints.types import ConstraintError
 from kinema.errors import KinemaError
@@ -49,17 +50,22 @@ def from_pydantic(errors: Sequence[dict]) -> list[dict]:
     return items
 
 
-def from_kinema(err: KinemaError) -> RequestError:
+def from_kinema(err: KinemaError, hide: str | None = None) -> RequestError:
     """A KinemaError raised while generating -> a RequestError located in the request where possible.
 
     ConstraintErrors carry the constraint's index and field; other errors (e.g. a timeline segment
-    shorter than one frame) are the body's.
+    shorter than one frame) are the body's. ``hide``: a private folder (the request's scratch files)
+    whose path never reaches the client; it reads ``<inline>`` instead.
     """
+    loc: list[str | int] = ["body"]
+    msg = str(err)
     if isinstance(err, ConstraintError):
-        loc: list[str | int] = ["body", "constraints"]
+        loc, msg = ["body", "constraints"], err.reason
         if err.index is not None:
             loc.append(err.index)
             if err.field:
                 loc.append(err.field)
-        return RequestError.at(loc, err.reason)
-    return RequestError.at(["body"], str(err))
+    if hide:
+        for path in (str(Path(hide).resolve()), str(hide)):
+            msg = msg.replace(path, "<inline>")
+    return RequestError.at(loc, msg)

@@ -44,32 +44,48 @@ def parse_model_spec(spec: str) -> tuple[str, str]:
 
 @dataclass
 class ServedModel:
-    """A loaded model under the name clients use for it."""
+    """A loaded model (a kinema `MotionPipeline`) under the name clients use for it."""
 
     name: str
-    model: object  # kinema.human.pipeline.KinemaModel (imported lazily: torch)
+    model: object  # kinema.pipeline.base.MotionPipeline (imported lazily: torch)
     sha256: str
 
     @property
+    def rig_names(self) -> list[str]:
+        return [r.name for r in self.model.rigs()]
+
+    @property
     def rig(self) -> str:
-        return self.model.skeleton.name or "unnamed"
+        """The rig a request gets without naming one: the model's own skeleton, or "inline" for a model
+        for any rig (its requests name a rig)."""
+        return "inline" if self.model.needs_rig else self.rig_names[0]
 
     def max_steps(self, server_max: int) -> int:
         return min(server_max, self.model.max_steps)
 
     def info(self, limits: dict) -> dict:
-        """``ModelOut`` for ``GET /v1/models``: the rig, the window and the limits that apply here."""
-        skel = self.model.skeleton
+        """``ModelOut`` for ``GET /v1/models``: the rigs, the window and the limits that apply here."""
+        fps = float(self.model.fps)
+        rigs = [{"name": r.name, "joints": r.joints, "parents": r.parents, "fps": fps} for r in self.model.rigs()]
         return {
             "name": self.name,
-            "rig": {"name": self.rig, "joints": list(skel.names), "parents": [int(p) for p in skel.parents],
-                    "fps": float(self.model.fps)},
-            "text_encoder": str(self.model.loaded.text_encoder_id),
+            "rig": None if self.model.needs_rig else rigs[0],
+            "rigs": rigs,
+            "needs_rig": bool(self.model.needs_rig),
+            "text_encoder": str(self.model.text_encoder_id),
             "sha256": self.sha256,
-            "window_seconds": float(self.model.max_seconds),
-            "default_steps": int(self.model.loaded.sampler.num_inference_steps),
+            "window_seconds": float(self.model.window_seconds),
+            "default_steps": int(self.model.default_steps),
             "limits": limits | {"max_steps": self.max_steps(limits["max_steps"])},
         }
+
+    def drives(self, rig) -> bool:
+        """Whether a request's ``rig`` (None, a rig id, or an inline character) can go to this model."""
+        if rig is None:
+            return not self.model.needs_rig
+        if isinstance(rig, str):
+            return rig in self.rig_names
+        return bool(self.model.needs_rig)
 
 
 class ModelRegistry:
@@ -91,24 +107,28 @@ class ModelRegistry:
         for spec in specs or ["default"]:
             name, path = parse_model_spec(spec)
             model = load_model(path)
-            served.append(ServedModel(name, model, model_sha256(model.loaded.path)))
+            served.append(ServedModel(name, model, model_sha256(model.path)))
         return cls(served)
 
     @property
     def names(self) -> list[str]:
         return list(self.models)
 
-    def resolve(self, name: str | None, rig: str | None) -> ServedModel:
-        """The model a request asks for: by name, else the first with that rig, else the first."""
+    def resolve(self, name: str | None, rig) -> ServedModel:
+        """The model a request asks for: by name, else the first that drives its rig (a rig id, an inline
+        character: a model for any rig; none: a model with its own skeleton)."""
         if name is not None:
             served = self.models.get(name)
             if served is None:
                 raise RequestError.at(["body", "model"], f"unknown model; this server has {self.names}")
-            if rig is not None and rig != served.rig:
-                raise RequestError.at(["body", "rig"], f"model {name!r} drives rig {served.rig!r}, not this one")
+            if not served.drives(rig):
+                what = "needs a rig: name one from GET /v1/models or send one inline" if rig is None else (
+                    f"does not drive rig {rig!r}; its rigs: {served.rig_names}" if isinstance(rig, str)
+                    else f"drives its own skeleton {served.rig!r}, not an inline character")
+                raise RequestError.at(["body", "rig"], f"model {name!r} {what}")
             return served
         for served in self.models.values():
-            if rig is None or served.rig == rig:
+            if served.drives(rig):
                 return served
-        rigs = sorted({s.rig for s in self.models.values()})
+        rigs = sorted({r for s in self.models.values() for r in s.rig_names})
         raise RequestError.at(["body", "rig"], f"no model here drives this rig; rigs: {rigs}")

@@ -9,15 +9,19 @@ BVH text is written to a private temporary folder whose paths alone reach kinema
 
 from __future__ import annotations
 
+import base64
+import binascii
 import copy
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from kinema.errors import KinemaError
+from kinema.pipeline.request import GenerationRequest
 from kinema.server.encode import encode_motion, json_safe
 from kinema.server.errors import RequestError, from_kinema
 from kinema.server.models import ModelRegistry, ServedModel
+from kinema.server.schemas import InlineRig
 
 
 @dataclass
@@ -25,10 +29,8 @@ class Prepared:
     """A request checked against the server's models, ready for a worker."""
 
     served: ServedModel
-    timeline: list[dict]
-    constraints: list[dict] | None
-    settings: dict
-    fmt: str
+    request: GenerationRequest
+    rig: InlineRig | str | None
 
 
 def prepare(req, registry: ModelRegistry, max_steps: int) -> Prepared:
@@ -37,11 +39,11 @@ def prepare(req, registry: ModelRegistry, max_steps: int) -> Prepared:
     limit = served.max_steps(max_steps)
     if req.steps is not None and req.steps > limit:
         raise RequestError.at(["body", "steps"], f"at most {limit} for model {served.name!r}")
-    constraints = [c.to_kinema() for c in req.constraints] if req.constraints else None
-    settings = {"constraints_fps": req.constraints_fps, "samples": req.samples, "steps": req.steps, "seed": req.seed,
-                "guidance": None if req.guidance is None else tuple(req.guidance), "heading": req.heading,
-                "postprocess": req.postprocess}
-    return Prepared(served, req.timeline_json(), constraints, settings, req.format)
+    try:
+        request = req.to_request()
+    except KinemaError as err:
+        raise from_kinema(err) from None
+    return Prepared(served, request, req.rig)
 
 
 def _inline_bvh(constraints, folder: Path):
@@ -57,20 +59,34 @@ def _inline_bvh(constraints, folder: Path):
     return out
 
 
+def _inline_rig(rig, folder: Path):
+    """The request's rig for kinema: a rig id as it is, an inline character as a file in ``folder``."""
+    if not isinstance(rig, InlineRig):
+        return rig
+    path = folder / f"character.{rig.format}"
+    if rig.format == "bvh":
+        path.write_text(rig.data, encoding="utf-8")
+        return str(path)
+    try:
+        path.write_bytes(base64.b64decode(rig.data, validate=True))
+    except (binascii.Error, ValueError):
+        raise RequestError.at(["body", "rig", "data"], "not valid base64 (a .glb file, base64-encoded)") from None
+    return str(path)
+
+
 def execute(prep: Prepared) -> dict:
     """Generate and encode; returns a ``GenerateResponse`` dict. KinemaErrors become `RequestError`."""
-    model = prep.served.model
+    model, fmt = prep.served.model, prep.request.format or "bvh"
     with tempfile.TemporaryDirectory(prefix="kinema-serve-") as tmp:
         folder = Path(tmp)
         try:
-            result = model.generate(prep.timeline, constraints=_inline_bvh(prep.constraints, folder),
-                                    progress=False, **prep.settings)
-            motions = [encode_motion(m, prep.fmt, i, folder) for i, m in enumerate(result)]
+            request = prep.request.replace(constraints=_inline_bvh(prep.request.constraints, folder),
+                                           rig=_inline_rig(prep.rig, folder))
+            result = model.generate(request)
+            motions = [encode_motion(m, fmt, i, folder) for i, m in enumerate(result)]
         except KinemaError as err:
-            raise from_kinema(err) from None
-    rep = result.report
-    report = {"seconds": rep.seconds, "segments": rep.segments, "frames": rep.frames, "steps": rep.steps,
-              "guidance": list(rep.guidance), "seed": rep.seed, "residuals": json_safe(rep.residuals),
-              "warnings": [str(w) for w in rep.warnings], "prompts": json_safe(rep.prompts)}
-    return {"model": prep.served.name, "rig": prep.served.rig, "format": prep.fmt, "motions": motions,
-            "report": report}
+            raise from_kinema(err, hide=tmp) from None
+    report = json_safe(result.report.to_dict())
+    report["warnings"] = [str(w) for w in report["warnings"]]
+    rig = prep.rig if isinstance(prep.rig, str) else prep.served.rig
+    return {"model": prep.served.name, "rig": rig, "format": fmt, "motions": motions, "report": report}

@@ -15,9 +15,11 @@ from __future__ import annotations
 
 from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, field_validator, model_validator
+from pydantic import BaseModel, Field, StrictBool, StrictInt, field_validator, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
+from kinema.pipeline.request import GenerationRequest, RequestBounds
+from kinema.pipeline.request_json import Strict, request_model, to_request
 from kinema.server.config import ServerLimits
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -27,17 +29,9 @@ Mat = list[list[Finite]]
 Cube = list[list[list[Finite]]]
 ConstraintType = Literal["fullbody", "end-effector", "left-hand", "right-hand", "left-foot", "right-foot", "root2d",
                          "foot-contact"]
-Format = Literal["bvh", "npz", "json"]
+Format = Literal["bvh", "npz", "glb", "json"]
 #: Output formats named in requests that kinema cannot write yet (a clear 422 instead of a bare enum error).
-NOT_YET_FORMATS = {"glb": "glb export is not implemented in kinema yet; choose bvh, npz or json",
-                   "gltf": "glTF export is not implemented in kinema yet; choose bvh, npz or json"}
-MAX_SEED = 2**64 - 1
-
-
-class Strict(BaseModel):
-    """Base of every request model: unknown keys are errors (typos must not be silently ignored)."""
-
-    model_config = ConfigDict(extra="forbid")
+NOT_YET_FORMATS = {"gltf": "glTF (text) export is not implemented in kinema; choose glb, bvh, npz or json"}
 
 
 class ConstraintSpec(Strict):
@@ -88,35 +82,27 @@ class Segment(Strict):
     seconds: PositiveFinite
 
 
-class GenerateRequestBase(Strict):
-    """The limit-free part of a generate request: settings, and the checks across fields.
+class InlineRig(Strict):
+    """A character sent with the request: a GLB (base64) or a BVH (its text)."""
 
-    `build_request_model` adds the fields whose bounds are server limits (``limits``)."""
+    format: Literal["glb", "bvh"]
+    data: Annotated[str, Field(min_length=1, description="base64 of the .glb file, or the BVH text itself")]
+
+
+class GenerateRequestBase(Strict):
+    """The checks across fields of a generate request; `build_request_model` adds the fields, derived from
+    kinema's `GenerationRequest` with the bounds of ``limits``."""
 
     limits: ClassVar[ServerLimits] = ServerLimits()
 
-    model: str | None = Field(None, max_length=200, description="a name from GET /v1/models (default: the first)")
-    rig: str | None = Field(None, max_length=200, description="the rig (skeleton) name; must be the model's")
-    constraints_fps: PositiveFinite | None = Field(
-        None, description="the frame rate the constraints' frame_indices are written at (default: the model's)")
-    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = 0
-    guidance: tuple[Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)],
-                    Annotated[float, Field(ge=0, le=100, allow_inf_nan=False)]] | None = Field(
-        None, description="(w_text, w_constr); default: the model's setting")
-    heading: Annotated[float, Field(ge=-1000, le=1000, allow_inf_nan=False)] = Field(
-        0.0, description="first-frame facing, radians about +Y (0 faces +Z)")
-    postprocess: StrictBool = True
-    objectives: SkipJsonSchema[Any] = Field(None, exclude=True)
-    format: Format = Field("bvh", description="bvh (text), npz (base64) or json (arrays); glb is not implemented yet")
-
-    @field_validator("format", mode="before")
+    @field_validator("format", mode="before", check_fields=False)
     @classmethod
     def _known_format(cls, value: Any) -> Any:
         if isinstance(value, str) and value.lower() in NOT_YET_FORMATS:
             raise ValueError(NOT_YET_FORMATS[value.lower()])
         return value
 
-    @field_validator("objectives", mode="before")
+    @field_validator("objectives", mode="before", check_fields=False)
     @classmethod
     def _no_objectives(cls, value: Any) -> Any:
         raise ValueError("'objectives' are not supported by this server yet; use 'constraints'")
@@ -138,15 +124,21 @@ class GenerateRequestBase(Strict):
             return float(sum(s.seconds for s in self.timeline))
         return float(self.seconds if self.seconds is not None else min(5.0, self.limits.max_seconds))
 
-    def timeline_json(self) -> list[dict]:
-        """Always a timeline list: kinema would read a prompt ending in ``.json`` as a file name."""
-        if self.timeline is not None:
-            return [{"prompt": s.prompt, "seconds": s.seconds} for s in self.timeline]
-        return [{"prompt": self.prompt, "seconds": self.total_seconds()}]
+    def to_request(self) -> GenerationRequest:
+        """kinema's request for this body: the prompt always as a timeline list (kinema would read a prompt
+        ending in ``.json`` as a file name), constraints as parsed JSON, an inline rig left to `run`."""
+        timeline = ([{"prompt": s.prompt, "seconds": s.seconds} for s in self.timeline] if self.timeline is not None
+                    else [{"prompt": self.prompt, "seconds": self.total_seconds()}])
+        constraints = [c.to_kinema() for c in self.constraints] if self.constraints else None
+        return to_request(self, skip=("prompt", "seconds", "timeline", "constraints", "rig", "format")).replace(
+            timeline=timeline, constraints=constraints, format=self.format)
 
 
-def build_request_model(limits: ServerLimits) -> type[GenerateRequestBase]:
-    """The ``POST /v1/generate`` (and ``/v1/jobs``) body for these limits; see the field descriptions."""
+def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> type[GenerateRequestBase]:
+    """The ``POST /v1/generate`` (and ``/v1/jobs``) body for these limits: every field of ``cls``
+    (kinema.pipeline.request_json), with the server's own shapes for the fields below."""
+    bounds = RequestBounds(max_seconds=limits.max_seconds, max_samples=limits.max_samples,
+                           max_steps=limits.max_steps, max_prompt_chars=limits.max_prompt_chars)
     prompt_t = Annotated[str, Field(max_length=limits.max_prompt_chars)]
     seconds_t = Annotated[float, Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
     these_limits = limits  # a class body cannot read an enclosing name it also assigns
@@ -155,22 +147,26 @@ def build_request_model(limits: ServerLimits) -> type[GenerateRequestBase]:
         prompt: prompt_t
         seconds: seconds_t
 
-    class GenerateRequest(GenerateRequestBase):
-        """What to generate. Give ``prompt`` (+ ``seconds``) or ``timeline``; everything else is optional."""
-
+    class Limited(GenerateRequestBase):
         limits: ClassVar[ServerLimits] = these_limits
 
-        prompt: prompt_t | None = Field(None, description='what the character does ("" = no text)')
-        seconds: seconds_t | None = Field(
-            None, description=f"duration for a prompt (default {min(5.0, limits.max_seconds):g})")
-        timeline: Annotated[list[LimitedSegment], Field(min_length=1, max_length=limits.max_segments)] | None = None
-        constraints: Annotated[list[ConstraintSpec], Field(max_length=limits.max_constraints)] | None = Field(
-            None, description="kinema constraint objects, inline (docs/constraints.md)")
-        samples: Annotated[int, Field(ge=1, le=limits.max_samples)] = 1
-        steps: Annotated[int, Field(ge=1, le=limits.max_steps)] | None = Field(
-            None, description="DDIM steps (default: the model's setting)")
-
-    return GenerateRequest
+    overrides = {
+        "prompt": (prompt_t | None, Field(None, description='what the character does ("" = no text)')),
+        "seconds": (seconds_t | None, Field(None, description=f"duration for a prompt (default "
+                                                             f"{min(5.0, limits.max_seconds):g})")),
+        "timeline": Annotated[list[LimitedSegment], Field(min_length=1, max_length=limits.max_segments)],
+        "constraints": (Annotated[list[ConstraintSpec], Field(max_length=limits.max_constraints)] | None,
+                        Field(None, description="kinema constraint objects, inline (docs/constraints.md)")),
+        "objectives": (SkipJsonSchema[Any], Field(None, exclude=True)),
+        "keyjoint_model": (Literal["default"] | None, Field(None, description="'default': plan pelvis, head, "
+                                                                              "hands and feet first")),
+        "rig": (Annotated[str, Field(max_length=200)] | InlineRig | None,
+                Field(None, description="a rig id from GET /v1/models, or a character inline {format, data}")),
+        "format": (Format, Field("bvh", description="bvh (text), npz or glb (base64) or json (arrays)")),
+    }
+    extra = {"model": (str | None, Field(None, max_length=200, description="a name from GET /v1/models "
+                                                                          "(default: the first)"))}
+    return request_model("GenerateRequest", cls=cls, bounds=bounds, overrides=overrides, extra=extra, base=Limited)
 
 
 # ----------------------------------------------------------------------------- responses
@@ -208,7 +204,8 @@ class MotionOut(BaseModel):
 
 
 class ReportOut(BaseModel):
-    """kinema's GenerationReport: settings, timing, per-sample constraint residuals and warnings."""
+    """kinema's GenerationReport (kinema.pipeline.result): settings, timing, per-sample constraint residuals
+    and warnings; the any-rig fields (windows, joints, residuals in cm/deg) are those of any pipeline."""
 
     seconds: float
     segments: int
@@ -220,6 +217,11 @@ class ReportOut(BaseModel):
     warnings: list[str]
     #: per distinct prompt: its nearest training captions and whether it counts as known (issue 18)
     prompts: list[dict[str, Any]] = []
+    timings: dict[str, float] = {}
+    windows: int = 1
+    joints: int = 0
+    residuals_cm: list[float] = []
+    residuals_deg: list[float] = []
 
 
 class GenerateResponse(BaseModel):
@@ -254,10 +256,13 @@ class RigOut(BaseModel):
 
 
 class ModelOut(BaseModel):
-    """A served model, its rig and the limits that apply to it."""
+    """A served model, its rigs and the limits that apply to it. ``rig`` is the skeleton a model drives of
+    its own (None for a model for any rig: ``needs_rig``, name one of ``rigs`` or send one inline)."""
 
     name: str
-    rig: RigOut
+    rig: RigOut | None
+    rigs: list[RigOut]
+    needs_rig: bool
     text_encoder: str
     sha256: str
     window_seconds: float

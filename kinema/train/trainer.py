@@ -179,6 +179,7 @@ class Trainer:
             "skeleton": self.skeleton.to_dict(),
             "stats": self.stats.to_dict(),
             "text_encoder": self.text_encoder_id,
+            "pipeline": "human",  # the MotionPipeline that loads it (kinema.generate.loading)
             "sampler": sampler.to_dict(),
             "guidance": Guidance().to_dict(),
             "train_config": asdict(self.cfg),

@@ -99,6 +99,7 @@ class AnyRigTrainer:
         rigs = {rid: rig.to_dict() for rid, rig in self.clips.rigs.items()}
         return {
             "kind": "anyrig",
+            "pipeline": "anyrig",  # the MotionPipeline that loads it (kinema.generate.loading)
             "model_config": self.model_config.to_dict(),
             "train_config": asdict(self.cfg),
             "fps": self.model_config.fps,

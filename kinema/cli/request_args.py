@@ -1,0 +1,100 @@
+"""The command line's generation flags, derived from `GenerationRequest` (kinema.pipeline.request).
+
+Every request field becomes a flag (``--name-with-dashes``) typed and bounded by its `Option`, unless
+its Option says ``cli=False`` (``format`` comes from ``--out``'s suffix, ``objectives`` from the
+constraints file). Special spellings: ``prompt`` is the positional argument, a field whose default is
+True is turned off by ``--no-NAME``, a pair takes two numbers, ``file`` fields take a path, and
+``--heading`` takes degrees (the request holds radians). Every flag defaults to None ("not given"), so
+a command can fill what the user left out (a Kimodo meta.json) and the request keeps its own defaults.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from pathlib import Path
+
+from kinema.pipeline.request import REQUEST_BOUNDS, GenerationRequest, Option, RequestBounds, options
+
+#: fields the CLI spells in a unit other than the request's: name -> (CLI unit, to request unit)
+CLI_UNITS = {"heading": ("degrees", math.radians)}
+
+
+def _bounded(name: str, opt: Option, bounds: RequestBounds):
+    """argparse type of a numeric field: parses and checks the field's bounds with a one-line message."""
+    integer = opt.kind == "int"
+
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, "
+                                             f"got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        low, high = opt.low, opt.high_value(bounds)
+        if name in CLI_UNITS:
+            low = high = None  # checked in the request's unit
+        if low is not None and (value <= low if opt.open_low else value < low):
+            raise argparse.ArgumentTypeError(f"expected a number {'>' if opt.open_low else '>='} {low:g}, "
+                                             f"got {text!r}")
+        if high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"at most {high:g}, got {text!r}")
+        return value
+
+    return parse
+
+
+def flag(name: str, opt: Option) -> str:
+    """The command-line spelling of a request field."""
+    if isinstance(opt.cli, str):
+        return opt.cli
+    return "--" + name.replace("_", "-")
+
+
+def add_request_arguments(p: argparse.ArgumentParser, cls: type = GenerationRequest,
+                          bounds: RequestBounds = REQUEST_BOUNDS) -> None:
+    """One argument per request field of ``cls`` (see the module docstring)."""
+    for f, opt in options(cls):
+        if opt.cli is False:
+            continue
+        help_text = opt.help + (f" [{CLI_UNITS[f.name][0]}]" if f.name in CLI_UNITS else "")
+        if opt.cli == "PROMPT":
+            p.add_argument("prompt", nargs="?", default=None, help=help_text)
+        elif opt.kind == "bool" and f.default is True:
+            p.add_argument(f"--no-{f.name.replace('_', '-')}", dest=f.name, action="store_const", const=False,
+                           default=None, help=f"turn off: {help_text}")
+        elif opt.kind == "bool":
+            p.add_argument(flag(f.name, opt), dest=f.name, action="store_const", const=True, default=None,
+                           help=help_text)
+        elif opt.kind == "pair":
+            p.add_argument(flag(f.name, opt), dest=f.name, nargs=2, type=_bounded(f.name, opt, bounds),
+                           metavar=opt.metavar, default=None, help=help_text)
+        elif opt.kind in ("int", "float"):
+            p.add_argument(flag(f.name, opt), dest=f.name, type=_bounded(f.name, opt, bounds),
+                           metavar=opt.metavar, default=None, help=help_text)
+        else:
+            p.add_argument(flag(f.name, opt), dest=f.name, type=Path if opt.file else str, metavar=opt.metavar,
+                           choices=opt.choices, default=None, help=help_text)
+
+
+def request_from_args(args: argparse.Namespace, cls: type = GenerationRequest, **extra) -> GenerationRequest:
+    """The request the parsed flags ask for (flags not given keep the request's defaults); ``extra``
+    fields (those the CLI spells otherwise, like ``format``) are added as they are."""
+    values = {}
+    for f, opt in options(cls):
+        value = getattr(args, f.name, None)
+        if opt.cli is False or value is None:
+            continue
+        if f.name in CLI_UNITS:
+            value = CLI_UNITS[f.name][1](value)
+        if opt.kind == "pair":
+            value = tuple(value)
+        values[f.name] = value
+    return cls(**(values | extra))
+
+
+def request_fields(cls: type = GenerationRequest) -> list[str]:
+    """The names of ``cls``'s fields (the tests compare every face's list with this one)."""
+    return [f.name for f in dataclasses.fields(cls)]
