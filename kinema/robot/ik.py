@@ -1,0 +1,145 @@
+"""Damped least-squares inverse kinematics over a robot's floating base and hinge joints, with MuJoCo's
+forward kinematics and Jacobians (``mj_kinematics``, ``mj_comPos``, ``mj_jac``, ``mj_jacBody``).
+
+Each frame is solved from the previous frame's solution (warm start), so the solver never jumps to
+another IK branch; a small pull towards that previous pose and towards the zero pose keeps redundant
+joints (wrists, waist) still. Sole points below the floor are pushed up by one-sided rows. Joint limits are enforced inside the iterations: a joint at a bound whose
+step points outwards is frozen for that step and the step is solved again without it, and every step
+is clamped into the ranges, so later iterations work with the clamped pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from kinema.robot.description import Robot
+from kinema.robot.targets import SIDES, FrameTargets, RobotSizes
+
+_MAX_STEP = 0.4  # radians (and metres) per iteration
+
+
+@dataclass(frozen=True)
+class IKWeights:
+    """Task weights (squared-error weights) and regularisation of the per-frame solve."""
+
+    sole: float = 20.0
+    sole_height: float = 60.0
+    foot_rotation: float = 4.0
+    pelvis: float = 6.0
+    pelvis_height: float = 1.0
+    pelvis_rotation: float = 1.0
+    torso_rotation: float = 2.0
+    hand: float = 4.0
+    elbow: float = 1.0
+    knee: float = 1.0
+    floor: float = 200.0
+    to_previous: float = 0.1
+    to_zero: float = 0.02
+    damping: float = 1e-2
+
+
+def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """World-frame rotation vector (3,) taking ``current`` to ``target`` (both 3x3)."""
+    R = target @ current.T
+    angle = np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = np.sin(angle)
+    return axis * (0.5 if s < 1e-6 else angle / (2.0 * s))
+
+
+class HingeIK:
+    """Per-frame IK for one robot (see the module docstring)."""
+
+    def __init__(self, robot: Robot, sizes: RobotSizes, weights: IKWeights = IKWeights()):
+        self.robot, self.sizes, self.w = robot, sizes, weights
+        self.model, self.data = robot.model, mujoco.MjData(robot.model)
+        nv = robot.model.nv
+        self.hinge = np.zeros(nv, dtype=bool)
+        self.hinge[robot.dof_adr] = True
+        self._jacp, self._jacr = np.zeros((3, nv)), np.zeros((3, nv))
+        self.pelvis_weights = np.array([weights.pelvis, weights.pelvis, weights.pelvis_height])
+        self.sole_weights = np.array([weights.sole, weights.sole, weights.sole_height])
+        mujoco.mj_kinematics(self.model, self.data)
+        self.rest = {k: self.data.xmat[robot.body_ids[k]].reshape(3, 3).copy() for k in ("pelvis", "torso")}
+        self.rest.update({s: self.data.xmat[robot.soles[s].body].reshape(3, 3).copy() for s in SIDES})
+
+    def _point_rows(self, body: int, point: np.ndarray, target: np.ndarray, weight: float):
+        mujoco.mj_jac(self.model, self.data, self._jacp, None, point, body)
+        return self._jacp.copy(), target - point, weight
+
+    def _rotation_rows(self, body: int, target: np.ndarray, weight: float):
+        mujoco.mj_jacBody(self.model, self.data, None, self._jacr, body)
+        return self._jacr.copy(), rotation_error(target, self.data.xmat[body].reshape(3, 3)), weight
+
+    def _floor_rows(self, side: str) -> list:
+        """Rows pushing up every sole point that is below the floor (z = 0): an inequality, active only
+        where it is violated."""
+        foot = self.robot.soles[side].body
+        rows = []
+        for p in self.robot.sole_points(self.data, side):
+            if p[2] < 0.0:
+                mujoco.mj_jac(self.model, self.data, self._jacp, None, p, foot)
+                rows.append((self._jacp[2:3].copy(), np.array([-p[2]]), self.w.floor))
+        return rows
+
+    def _tasks(self, tg: FrameTargets, t: int) -> list:
+        r, w, d = self.robot, self.w, self.data
+        ids = r.body_ids
+        rows = [
+            self._point_rows(ids["pelvis"], r.point(d, "pelvis"), tg.pelvis[t], self.pelvis_weights),
+            self._rotation_rows(ids["pelvis"], tg.pelvis_frame[t] @ self.rest["pelvis"], w.pelvis_rotation),
+            self._rotation_rows(ids["torso"], tg.torso_frame[t] @ self.rest["torso"], w.torso_rotation),
+        ]
+        for s in SIDES:
+            foot = r.soles[s].body
+            rows.append(self._point_rows(foot, r.sole_centre(d, s), tg.sole[s][t], self.sole_weights))
+            rows += self._floor_rows(s)
+            rows.append(self._rotation_rows(foot, tg.foot_frame[s][t] @ self.rest[s], w.foot_rotation))
+            knee = r.point(d, f"{s}_hip") + self.sizes.thigh * tg.knee_dir[s][t]
+            rows.append(self._point_rows(ids[f"{s}_knee"], r.point(d, f"{s}_knee"), knee, w.knee))
+            shoulder = r.point(d, f"{s}_shoulder")
+            elbow = shoulder + self.sizes.upper_arm * tg.elbow_dir[s][t]
+            rows.append(self._point_rows(ids[f"{s}_elbow"], r.point(d, f"{s}_elbow"), elbow, w.elbow))
+            hand = shoulder + tg.hand_reach[s][t]
+            rows.append(self._point_rows(ids[f"{s}_hand"], r.point(d, f"{s}_hand"), hand, w.hand))
+        return rows
+
+    def _step(self, q: np.ndarray, q_prev: np.ndarray, tg: FrameTargets, t: int) -> np.ndarray:
+        """One limited DLS step (nv,) from pose ``q``."""
+        rows = self._tasks(tg, t)
+        A = np.concatenate([np.reshape(np.sqrt(wt), (-1, 1)) * J for J, _, wt in rows])
+        b = np.concatenate([np.sqrt(wt) * e for _, e, wt in rows])
+        r, w = self.robot, self.w
+        reg = np.where(self.hinge, w.to_previous + w.to_zero, 0.0)
+        H = A.T @ A + np.diag(reg + w.damping)
+        g = A.T @ b
+        angles, prev = q[r.qpos_adr], q_prev[r.qpos_adr]
+        g[r.dof_adr] += w.to_previous * (prev - angles) - w.to_zero * angles
+        dq = np.linalg.solve(H, g)
+        lo, hi = r.ranges[:, 0], r.ranges[:, 1]
+        step = dq[r.dof_adr]
+        frozen = ((angles <= lo + 1e-9) & (step < 0)) | ((angles >= hi - 1e-9) & (step > 0))
+        if frozen.any():
+            idx = r.dof_adr[frozen]
+            H[idx, :], H[:, idx], g[idx] = 0.0, 0.0, 0.0
+            H[idx, idx] = 1.0
+            dq = np.linalg.solve(H, g)
+        return dq * min(1.0, _MAX_STEP / max(np.abs(dq).max(), 1e-12))
+
+    def solve(self, q: np.ndarray, tg: FrameTargets, t: int, iterations: int) -> np.ndarray:
+        """The pose (nq,) for frame ``t`` starting from ``q`` (the previous frame's pose)."""
+        r, m, d = self.robot, self.model, self.data
+        q_prev, q = q.copy(), q.copy()
+        for _ in range(iterations):
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            dq = self._step(q, q_prev, tg, t)
+            mujoco.mj_integratePos(m, q, dq, 1.0)
+            q[r.qpos_adr] = np.clip(q[r.qpos_adr], r.ranges[:, 0], r.ranges[:, 1])
+            if np.abs(dq).max() < 1e-4:
+                break
+        return q

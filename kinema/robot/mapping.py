@@ -1,0 +1,163 @@
+"""Which robot body stands for which human joint: the G1's names, a name guess for other MJCF humanoids,
+and a small JSON mapping file for robots whose names are not recognised.
+
+Keys are robot-side landmarks (``ROBOT_POINTS``); each maps to a body of the MJCF and an optional point in
+that body's frame (metres), e.g. the G1's head is a point 0.43 m above its torso frame. A JSON mapping is
+an object of such keys, each a body name or ``{"body": NAME, "offset": [x, y, z]}``; keys it leaves out
+are guessed from the body names, and a landmark that can be neither read nor guessed is an error that
+names it. The feet's soles are not mapped: they are found from the foot bodies' geoms (kinema.robot.description).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from kinema.errors import KinemaError
+
+#: Robot landmarks, in the order the retargeting uses them. ``*_hip`` is the hip joint centre, ``*_foot``
+#: the body that carries the sole (the last ankle link), ``*_hand`` the wrist.
+ROBOT_POINTS = (
+    "pelvis",
+    "torso",
+    "head",
+    "left_hip",
+    "left_knee",
+    "left_foot",
+    "right_hip",
+    "right_knee",
+    "right_foot",
+    "left_shoulder",
+    "left_elbow",
+    "left_hand",
+    "right_shoulder",
+    "right_elbow",
+    "right_hand",
+)
+
+#: The Unitree G1 (Menagerie's unitree_g1, 23- and 29-DoF variants): body names, and points in them.
+G1_MAPPING: dict[str, tuple[str, tuple[float, float, float]]] = {
+    "pelvis": ("pelvis", (0.0, 0.0, 0.0)),
+    "torso": ("torso_link", (0.0, 0.0, 0.0)),
+    "head": ("torso_link", (0.0, 0.0, 0.43)),
+    "left_hip": ("left_hip_roll_link", (0.0, 0.0, 0.0)),
+    "left_knee": ("left_knee_link", (0.0, 0.0, 0.0)),
+    "left_foot": ("left_ankle_roll_link", (0.0, 0.0, 0.0)),
+    "right_hip": ("right_hip_roll_link", (0.0, 0.0, 0.0)),
+    "right_knee": ("right_knee_link", (0.0, 0.0, 0.0)),
+    "right_foot": ("right_ankle_roll_link", (0.0, 0.0, 0.0)),
+    "left_shoulder": ("left_shoulder_roll_link", (0.0, 0.0, 0.0)),
+    "left_elbow": ("left_elbow_link", (0.0, 0.0, 0.0)),
+    "left_hand": ("left_wrist_yaw_link", (0.0, 0.0, 0.0)),
+    "right_shoulder": ("right_shoulder_roll_link", (0.0, 0.0, 0.0)),
+    "right_elbow": ("right_elbow_link", (0.0, 0.0, 0.0)),
+    "right_hand": ("right_wrist_yaw_link", (0.0, 0.0, 0.0)),
+}
+
+#: Words that identify a landmark in a body name (the last body of the chain that matches wins for limbs'
+#: ends, the first for the rest; see _guess).
+_WORDS = {
+    "pelvis": ("pelvis", "base", "hips", "waist"),
+    "torso": ("torso", "chest", "trunk", "upper_body", "body"),
+    "head": ("head", "neck"),
+    "hip": ("hip", "thigh", "upper_leg"),
+    "knee": ("knee", "shin", "calf", "lower_leg"),
+    "foot": ("ankle", "foot", "sole"),
+    "shoulder": ("shoulder", "upper_arm"),
+    "elbow": ("elbow", "forearm", "lower_arm"),
+    "hand": ("wrist", "hand", "palm"),
+}
+_LAST_WINS = ("foot", "hand", "hip", "shoulder")  # e.g. the ankle-roll link below the ankle-pitch link
+_FALLBACK = {"torso": "pelvis", "head": "torso"}  # a robot without a torso or head body uses the one below
+_SIDE = {"left": re.compile(r"(^|[_\-. ])(left|l)([_\-. ]|$)|^left", re.I),
+         "right": re.compile(r"(^|[_\-. ])(right|r)([_\-. ]|$)|^right", re.I)}
+
+
+@dataclass(frozen=True)
+class BodyPoint:
+    """A landmark: a body of the MJCF and a point in its frame (metres)."""
+
+    body: str
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def _guess(key: str, body_names: list[str]) -> str | None:
+    """The body whose name names ``key`` (``left_knee`` -> a body with 'left' and 'knee'), or None."""
+    side, _, part = key.partition("_") if key.startswith(("left_", "right_")) else (None, "", key)
+    matches = []
+    for name in body_names:
+        low = name.lower()
+        if side is not None and not _SIDE[side].search(low):
+            continue
+        if side is None and (_SIDE["left"].search(low) or _SIDE["right"].search(low)):
+            continue
+        if any(word in low for word in _WORDS[part]):
+            matches.append(name)
+    if not matches:
+        return None
+    return matches[-1] if part in _LAST_WINS else matches[0]
+
+
+def _read_entry(key: str, value, where: str) -> BodyPoint:
+    """One JSON entry: a body name or {"body": NAME, "offset": [x, y, z]}."""
+    if isinstance(value, str):
+        return BodyPoint(value)
+    if not isinstance(value, dict) or not isinstance(value.get("body"), str):
+        raise KinemaError(f"{where}: {key!r} must be a body name or {{\"body\": NAME, \"offset\": [x, y, z]}}")
+    offset = value.get("offset", [0.0, 0.0, 0.0])
+    arr = np.asarray(offset, dtype=object)
+    if arr.shape != (3,) or not all(isinstance(x, int | float) and np.isfinite(x) for x in offset):
+        raise KinemaError(f"{where}: {key!r} offset must be three finite numbers (metres), got {offset!r}")
+    return BodyPoint(value["body"], tuple(float(x) for x in offset))
+
+
+def read_mapping_file(path: Path) -> dict[str, BodyPoint]:
+    """A JSON mapping file (see the module docstring), validated for its keys and shapes."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise KinemaError(f"{path}: no such mapping file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise KinemaError(f"{path}: not a JSON mapping ({err})") from None
+    if not isinstance(data, dict):
+        raise KinemaError(f"{path}: a mapping must be a JSON object of landmark -> body")
+    unknown = sorted(set(data) - set(ROBOT_POINTS))
+    if unknown:
+        raise KinemaError(f"{path}: unknown landmark(s) {unknown}; expected some of {list(ROBOT_POINTS)}")
+    return {key: _read_entry(key, value, str(path)) for key, value in data.items()}
+
+
+def resolve_mapping(
+    body_names: list[str], given: dict[str, BodyPoint] | None, is_g1: bool, where: str
+) -> dict[str, BodyPoint]:
+    """Every landmark of ROBOT_POINTS as a BodyPoint: given entries first, then the G1's table for the G1,
+    then a guess from the body names; an unknown body or an unguessable landmark is a KinemaError."""
+    out: dict[str, BodyPoint] = {}
+    missing = []
+    for key in ROBOT_POINTS:
+        if given and key in given:
+            out[key] = given[key]
+        elif is_g1:
+            body, offset = G1_MAPPING[key]
+            out[key] = BodyPoint(body, offset)
+        else:
+            guess = _guess(key, body_names)
+            if guess is not None:
+                out[key] = BodyPoint(guess)
+            elif key in _FALLBACK and _FALLBACK[key] in out:
+                out[key] = out[_FALLBACK[key]]
+            else:
+                missing.append(key)
+    if missing:
+        raise KinemaError(
+            f"{where}: cannot tell which body is {missing}; give them in a --mapping JSON file "
+            f"(landmark -> body name; bodies: {body_names})"
+        )
+    for key, point in out.items():
+        if point.body not in body_names:
+            raise KinemaError(f"{where}: mapping {key!r} names body {point.body!r}, which the MJCF does not have")
+    return out

@@ -1,0 +1,169 @@
+"""What the robot should do on each frame, read off a human motion: targets in MuJoCo's world (Z up, +X
+forward, +Y left), scaled to the robot.
+
+The human world (Y up, +Z forward, +X left; docs/conventions.md) turns into the robot's by the cyclic axis
+permutation ``AXES`` (a rotation, so left stays left). Lengths are scaled by the ratio of leg lengths
+(hip to knee to ankle) for the root and the feet, and of arm lengths for the hands' reach from the
+shoulders; knees and elbows keep the human limb *directions* at the robot's own segment lengths. Soles:
+kinema.robot.feet.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from kinema.motion.contacts import contact_joints, foot_contacts
+from kinema.robot.feet import clean_flags, hold_planted
+from kinema.skeleton import Skeleton
+
+#: robot = AXES @ human: human +Z (forward) -> robot +X, human +X (left) -> +Y, human +Y (up) -> +Z.
+AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+SIDES = ("left", "right")
+MAX_FOOT_TURN = 0.6  # radians a foot may point away from the root's heading
+HUMAN_ROLES = ("pelvis", "spine", "neck") + tuple(
+    f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", "toe", "upper_arm", "elbow", "hand")
+)
+
+
+@dataclass(frozen=True)
+class RobotSizes:
+    """Robot measurements at rest (metres): segment lengths and the root's height above the soles."""
+
+    thigh: float
+    shin: float
+    upper_arm: float
+    forearm: float
+    stand_height: float
+    hips: dict[str, np.ndarray]  # (3,) each hip in the root's frame at rest
+    ankle_height: float  # foot body origin above the sole at rest
+
+
+@dataclass
+class FrameTargets:
+    """Per-frame targets (T, ...) in the robot's world; ``planted[side]`` (T,) bool."""
+
+    pelvis: np.ndarray  # (T, 3) root position
+    pelvis_frame: np.ndarray  # (T, 3, 3) columns: forward, left, up
+    torso_frame: np.ndarray  # (T, 3, 3)
+    knee_dir: dict[str, np.ndarray]  # (T, 3) unit hip -> knee
+    elbow_dir: dict[str, np.ndarray]  # (T, 3) unit shoulder -> elbow
+    hand_reach: dict[str, np.ndarray]  # (T, 3) shoulder -> wrist at robot scale
+    sole: dict[str, np.ndarray]  # (T, 3) sole centre
+    foot_frame: dict[str, np.ndarray]  # (T, 3, 3)
+    planted: dict[str, np.ndarray]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+
+def frames_from(left: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotations with columns forward, left, up from left and (roughly) up vectors (T, 3)."""
+    left = _unit(left)
+    forward = _unit(np.cross(left, up))
+    return np.stack([forward, left, np.cross(forward, left)], axis=-1)
+
+
+def yaw_pitch_frames(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) ``Rz(yaw) @ Ry(pitch)``: heading about Z, then toe-down pitch about the foot's left axis."""
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    zero = np.zeros_like(yaw)
+    return np.stack(
+        [np.stack([cy * cp, -sy, cy * sp], -1), np.stack([sy * cp, cy, sy * sp], -1), np.stack([-sp, zero, cp], -1)],
+        axis=-2,
+    )
+
+
+def _planted_height(height: np.ndarray, planted: np.ndarray) -> float:
+    """A contact joint's height when planted: the median over planted frames (else its 5th percentile)."""
+    return float(np.median(height[planted])) if planted.any() else float(np.percentile(height, 5))
+
+
+def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: float, heading: np.ndarray):
+    """(sole centre (T, 3), foot frame (T, 3, 3)) targets of one side; ``heading`` (T, 3) is the root's
+    forward direction, which steadies the foot's heading when the foot points steeply up or down."""
+    ankle, toe = P[:, roles[f"{side}_ankle"]], P[:, roles[f"{side}_toe"]]
+    a0, t0 = _planted_height(ankle[:, 2], planted), _planted_height(toe[:, 2], planted)
+    lift = np.maximum(np.minimum(ankle[:, 2] - a0, toe[:, 2] - t0), 0.0)
+    ground = hold_planted(scale * (ankle[:, :2] + toe[:, :2]) / 2, planted)
+    up = np.maximum(hold_planted(scale * lift[:, None], planted, held=np.zeros(1)), 0.0)
+    d = toe - ankle
+    drop = (ankle[:, 2] - toe[:, 2]) - (a0 - t0)
+    pitch = np.arcsin(np.clip(drop / np.maximum(np.linalg.norm(d, axis=1), 1e-6), -1.0, 1.0))
+    flat = d[:, :2] / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-6) + 0.5 * heading[:, :2]
+    root_yaw = np.unwrap(np.arctan2(heading[:, 1], heading[:, 0]))
+    turn = np.angle(np.exp(1j * (np.arctan2(flat[:, 1], flat[:, 0]) - root_yaw)))
+    yaw = root_yaw + np.clip(turn, -MAX_FOOT_TURN, MAX_FOOT_TURN)
+    angles = hold_planted(np.stack([yaw, pitch], 1), planted)
+    angles[:, 1] = hold_planted(pitch[:, None], planted, held=np.zeros(1))[:, 0]
+    return np.concatenate([ground, up], axis=1), yaw_pitch_frames(angles[:, 0], angles[:, 1])
+
+
+def _human_stand_height(P: np.ndarray, roles: dict, sk: Skeleton, planted_ankle: float) -> float:
+    """The human root's height when standing straight: hip drop + thigh + shin + planted ankle height."""
+    hips = (P[:, roles["left_hip"], 2] + P[:, roles["right_hip"], 2]) / 2
+    drop = float(np.median(P[:, roles["pelvis"], 2] - hips))
+    thigh = float(sk.offsets[roles["left_knee"]].norm())
+    shin = float(sk.offsets[roles["left_ankle"]].norm())
+    return drop + thigh + shin + planted_ankle
+
+
+def _limb_scales(sk: Skeleton, roles: dict, sizes: RobotSizes) -> tuple[float, float]:
+    """(leg scale, arm scale): robot over human lengths of hip-knee-ankle and shoulder-elbow-wrist."""
+    leg = float(sk.offsets[roles["left_knee"]].norm() + sk.offsets[roles["left_ankle"]].norm())
+    arm = float(sk.offsets[roles["left_elbow"]].norm() + sk.offsets[roles["left_hand"]].norm())
+    return (sizes.thigh + sizes.shin) / leg, (sizes.upper_arm + sizes.forearm) / arm
+
+
+def _reachable_height(pelvis: np.ndarray, frame: np.ndarray, soles: dict, sizes: RobotSizes) -> np.ndarray:
+    """(T,) root heights lowered where a straight-enough leg could not reach its sole target (97 % of the
+    leg's length), smoothed over three frames so that lowering does not jerk."""
+    reach = 0.97 * (sizes.thigh + sizes.shin)
+    z = pelvis[:, 2].copy()
+    for s in SIDES:
+        hip = pelvis + frame @ sizes.hips[s]
+        ankle = soles[s] + np.array([0.0, 0.0, sizes.ankle_height])
+        across = np.linalg.norm(hip[:, :2] - ankle[:, :2], axis=1)
+        rise = np.sqrt(np.maximum(reach**2 - across**2, 0.0))
+        z = np.minimum(z, ankle[:, 2] + rise + (pelvis[:, 2] - hip[:, 2]))
+    if len(z) >= 3:
+        z[1:-1] = np.minimum(z[1:-1], (z[:-2] + z[1:-1] + z[2:]) / 3)
+    return z
+
+
+def frame_targets(motion, sizes: RobotSizes) -> FrameTargets:
+    """Targets for every frame of a kinema ``Motion`` (any human rig with the roles of HUMAN_ROLES)."""
+    sk = motion.skeleton
+    sk.require_roles(list(HUMAN_ROLES))
+    roles = sk.roles
+    world = motion.positions.detach().double().numpy()
+    contacts = foot_contacts(motion.positions.detach().double(), motion.fps, sk).numpy() > 0.5
+    P = world @ AXES.T  # robot axes, human metres
+    leg_scale, arm_scale = _limb_scales(sk, roles, sizes)
+    planted = {s: clean_flags(contacts[:, 2 * i] & contacts[:, 2 * i + 1]) for i, s in enumerate(SIDES)}
+    ankle0 = _planted_height(P[:, contact_joints(sk)[0], 2], planted["left"])
+    root = P[:, roles["pelvis"]]
+    height = sizes.stand_height + leg_scale * (root[:, 2] - _human_stand_height(P, roles, sk, ankle0))
+    pelvis = np.concatenate([leg_scale * root[:, :2], height[:, None]], axis=1)
+    hip_line = P[:, roles["left_hip"]] - P[:, roles["right_hip"]]
+    shoulder_line = P[:, roles["left_upper_arm"]] - P[:, roles["right_upper_arm"]]
+    pelvis_frame = frames_from(hip_line, P[:, roles["spine"]] - root)
+    feet = {s: _foot(P, roles, s, planted[s], leg_scale, pelvis_frame[:, :, 0]) for s in SIDES}
+    pelvis[:, 2] = _reachable_height(pelvis, pelvis_frame, {s: feet[s][0] for s in SIDES}, sizes)
+
+    def limb(a: str, b: str, s: str) -> np.ndarray:
+        return P[:, roles[f"{s}_{b}"]] - P[:, roles[f"{s}_{a}"]]
+
+    return FrameTargets(
+        pelvis=pelvis,
+        pelvis_frame=pelvis_frame,
+        torso_frame=frames_from(shoulder_line, P[:, roles["neck"]] - P[:, roles["spine"]]),
+        knee_dir={s: _unit(limb("hip", "knee", s)) for s in SIDES},
+        elbow_dir={s: _unit(limb("upper_arm", "elbow", s)) for s in SIDES},
+        hand_reach={s: arm_scale * limb("upper_arm", "hand", s) for s in SIDES},
+        sole={s: feet[s][0] for s in SIDES},
+        foot_frame={s: feet[s][1] for s in SIDES},
+        planted=planted,
+    )
