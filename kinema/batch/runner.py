@@ -39,8 +39,8 @@ class BatchSummary:
 def driver_model_sha(model_spec: str) -> str:
     """The fingerprint of the model the driver sees (workers report theirs; a mismatch fails the job)."""
     from kinema.generate import resolve_model_path
+    from kinema.model.fingerprint import model_sha256
     from kinema.model.loading import find_checkpoint
-    from kinema.server.models import model_sha256
 
     return model_sha256(find_checkpoint(resolve_model_path(model_spec)))
 
@@ -58,8 +58,18 @@ def _raw_id(text: str) -> str | None:
     return raw.get("id") if isinstance(raw, dict) and isinstance(raw.get("id"), str) else None
 
 
-def _plan(jobs_path: Path, manifest: Manifest, out: Path, model_sha: str, summary: BatchSummary) -> list[Task]:
-    """The tasks still to run; lines that cannot be parsed are recorded as failed right away."""
+class ModelShas(dict):
+    """Model spec -> the fingerprint the driver sees, computed once per spec (a bad spec: a KinemaError)."""
+
+    def __missing__(self, spec: str) -> str:
+        self[spec] = driver_model_sha(spec)
+        return self[spec]
+
+
+def _plan(jobs_path: Path, manifest: Manifest, out: Path, shas: ModelShas, default: str,
+          summary: BatchSummary) -> list[Task]:
+    """The tasks still to run; lines that cannot be parsed (or name a model that does not load) are
+    recorded as failed right away."""
     finished = manifest.finished(out)
     todo = []
     for line, text, task in read_jobs(jobs_path):
@@ -70,6 +80,14 @@ def _plan(jobs_path: Path, manifest: Manifest, out: Path, model_sha: str, summar
             summary.failed += 1
             summary.errors.append(f"line {line}: {task}")
             continue
+        try:
+            model_sha = shas[task.model or default]
+        except KinemaError as err:
+            manifest.append({"id": task.id, "line": line, "status": "failed", "input": text,
+                             "error": f"model: {err}", "finished_at": _now()})
+            summary.failed += 1
+            summary.errors.append(f"line {line}: model: {err}")
+            continue
         rec = finished.get(task.id)
         if rec and rec.get("input_sha256") == task.input_sha256 and rec.get("model_sha256") == model_sha:
             summary.skipped += 1
@@ -79,7 +97,8 @@ def _plan(jobs_path: Path, manifest: Manifest, out: Path, model_sha: str, summar
 
 
 def _record(task: Task, result: dict, out: Path, model_spec: str, model_sha: str) -> dict:
-    """Write a finished job's files (atomically) and return its manifest record."""
+    """Write a finished job's files (atomically) and return its manifest record (``model_spec``: the
+    task's model, ``model_sha``: its fingerprint as the driver sees it)."""
     rec = {"id": task.id, "line": task.line, "input": task.raw, "input_sha256": task.input_sha256,
            "model": model_spec, "model_sha256": result.get("model_sha256"), "worker": result.get("worker")}
     if "error" not in result and result.get("model_sha256") != model_sha:
@@ -110,8 +129,9 @@ def run_batch(jobs_path: str | Path, out: str | Path, *, model: str = "default",
     executor = None
     try:
         remove_stale_temps(out)
-        model_sha = driver_model_sha(model)
-        todo = _plan(jobs_path, manifest, out, model_sha, summary)
+        shas = ModelShas()
+        shas[model]  # the run's model must load before anything runs
+        todo = _plan(jobs_path, manifest, out, shas, model, summary)
         if not todo:
             return summary
         t0 = time.perf_counter()
@@ -122,7 +142,8 @@ def run_batch(jobs_path: str | Path, out: str | Path, *, model: str = "default",
         summary.startup_s = t1 - t0
         with tqdm(total=len(todo), unit="motion", desc="batch", disable=not progress, dynamic_ncols=True) as bar:
             for task, result in executor.run(todo):
-                rec = _record(task, result, out, model, model_sha)
+                spec = task.model or model
+                rec = _record(task, result, out, spec, shas[spec])
                 manifest.append(rec)
                 if rec["status"] == "ok":
                     summary.done += 1

@@ -16,32 +16,31 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, StrictBool, ValidationError
+from pydantic import Field, ValidationError
 
 from kinema.errors import KinemaError
-from kinema.server.schemas import MAX_SEED, Finite, PositiveFinite, Segment, Strict
+from kinema.pipeline.request_json import Segment, request_model, to_request
 
-Format = Literal["bvh", "bvh.gz", "npz"]
+Format = Literal["bvh", "bvh.gz", "npz", "glb"]
 DEFAULT_SECONDS = 5.0
 
-
-class BatchJob(Strict):
-    """One line of a jobs file (unknown keys are errors)."""
-
-    id: Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")] | None = None
-    prompt: str | None = None
-    seconds: PositiveFinite | None = None
-    timeline: list[Segment] | str | None = None
-    constraints: list[dict[str, Any]] | dict[str, Any] | str | None = None
-    constraints_fps: PositiveFinite | None = None
-    samples: Annotated[int, Field(ge=1, le=64)] = 1
-    steps: Annotated[int, Field(ge=1)] | None = None
-    seed: Annotated[int, Field(ge=0, le=MAX_SEED)] = 0
-    guidance: tuple[Annotated[float, Field(ge=0, allow_inf_nan=False)],
-                    Annotated[float, Field(ge=0, allow_inf_nan=False)]] | None = None
-    heading: Finite = 0.0
-    postprocess: StrictBool = True
-    format: Format = "bvh"
+#: One line of a jobs file (unknown keys are errors): every `GenerationRequest` field
+#: (kinema.pipeline.request_json), with files named relative to the jobs file where a request takes a file
+#: (timeline, constraints, rig), plus the line's ``id`` and ``model`` (default: the run's ``--model``).
+BatchJob = request_model(
+    "BatchJob",
+    overrides={
+        "prompt": (str | None, Field(None, description='what the character does ("" = no text)')),
+        "timeline": list[Segment] | str,
+        "constraints": list[dict[str, Any]] | dict[str, Any] | str,
+        "objectives": list[dict[str, Any]],
+        "rig": Annotated[str, Field(max_length=1000, description="a GLB/BVH file (relative to the jobs file) or a "
+                                                                 "training rig id")],
+        "format": (Format, Field("bvh", description="output format: bvh, bvh.gz, npz or glb")),
+    },
+    extra={"id": (Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")] | None, None),
+           "model": (Annotated[str, Field(max_length=1000)] | None, None)},
+)
 
 
 @dataclass
@@ -51,8 +50,9 @@ class Task:
     id: str
     line: int
     raw: dict
-    payload: dict  # JSON for the worker: timeline, constraints, settings, format, outputs
+    payload: dict  # JSON for the worker: the request (files read), the model, the outputs
     input_sha256: str
+    model: str | None = None  # the line's model spec (None: the run's --model)
 
     @property
     def outputs(self) -> list[str]:
@@ -88,7 +88,19 @@ def _absolute_bvh(constraints, folder: Path):
     return constraints
 
 
-def _resolve(job: BatchJob, base: Path) -> dict:
+def _rig_file(rig: str | None, base: Path) -> tuple[str | None, str | None]:
+    """A rig that names a file (relative to the jobs file, then the current directory) as an absolute
+    path and the file's sha256 (so editing the character runs its jobs again); a rig id as it is."""
+    if rig is None:
+        return None, None
+    for folder in (base, Path.cwd()):
+        path = folder / rig
+        if path.is_file():
+            return str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest()
+    return rig, None
+
+
+def _resolve(job, base: Path) -> dict:
     """The worker payload of ``job`` (files read, prompt as a timeline); raises KinemaError."""
     if (job.prompt is None) == (job.timeline is None):
         raise KinemaError("give exactly one of 'prompt' and 'timeline'")
@@ -106,9 +118,10 @@ def _resolve(job: BatchJob, base: Path) -> dict:
         constraints = _absolute_bvh(_read_json(path, "constraints"), path.parent)
     elif constraints is not None:
         constraints = _absolute_bvh(constraints, base)
-    settings = {"constraints_fps": job.constraints_fps, "samples": job.samples, "steps": job.steps,
-                "seed": job.seed, "guidance": job.guidance, "heading": job.heading, "postprocess": job.postprocess}
-    return {"timeline": timeline, "constraints": constraints, "settings": settings, "format": job.format}
+    rig, rig_sha = _rig_file(job.rig, base)
+    request = to_request(job, skip=("prompt", "seconds", "timeline", "constraints", "rig")).replace(
+        timeline=timeline, constraints=constraints, rig=rig)
+    return {"request": request.to_json(), "model": job.model, "rig_sha256": rig_sha}
 
 
 def parse_line(text: str, line: int, base: Path) -> Task:
@@ -129,7 +142,7 @@ def parse_line(text: str, line: int, base: Path) -> Task:
     job_id = job.id or f"{line:06d}"
     payload["outputs"] = output_names(job_id, job.format, job.samples)
     digest = hashlib.sha256(json.dumps(payload, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
-    return Task(job_id, line, raw, payload, digest)
+    return Task(job_id, line, raw, payload, digest, job.model)
 
 
 def read_jobs(path: str | Path) -> list[tuple[int, str, Task | KinemaError]]:

@@ -16,20 +16,34 @@ import traceback
 from pathlib import Path
 
 from kinema.errors import KinemaError
+from kinema.generate import load_model
+from kinema.model.fingerprint import model_sha256
+from kinema.pipeline.request import GenerationRequest
+from kinema.pipeline.result import json_safe
+from kinema.runtime import configure_threads
 
 
 class Worker:
-    """A loaded model plus its fingerprint; `run` does one job. Used in-process, per pool process, per Ray actor."""
+    """Loaded models (the run's, and any a job names) with their fingerprints; `run` does one job. Used
+    in-process, per pool process, per Ray actor."""
 
     def __init__(self, model_spec: str, threads: int = 1):
-        from kinema.generate import load_model
-        from kinema.runtime import configure_threads
-        from kinema.server.models import model_sha256
-
         configure_threads(threads)
-        self.model = load_model(model_spec)
-        self.sha256 = model_sha256(self.model.loaded.path)
+        self.default = model_spec
+        self.models: dict[str, tuple[object, str]] = {}
+        self._model(model_spec)
         self.name = f"{socket.gethostname()}:{os.getpid()}"
+
+    def _model(self, spec: str):
+        """(pipeline, sha256) of a model spec, loaded once per process."""
+        if spec not in self.models:
+            model = load_model(spec)
+            self.models[spec] = (model, model_sha256(model.path))
+        return self.models[spec]
+
+    @property
+    def sha256(self) -> str:
+        return self.models[self.default][1]
 
     def ping(self) -> str:
         """This worker's name (host:pid), once its model is loaded (warm-up and start-up timing)."""
@@ -38,18 +52,17 @@ class Worker:
     def run(self, payload: dict) -> dict:
         """Generate one job: ``{"files": [bytes, ...], "report": {...}, ...}`` or ``{"error": ...}``."""
         t0 = time.perf_counter()
-        base = {"worker": self.name, "model_sha256": self.sha256}
+        base = {"worker": self.name}
         try:
-            result = self.model.generate(payload["timeline"], constraints=payload["constraints"], progress=False,
-                                         **payload["settings"])
+            model, sha = self._model(payload.get("model") or self.default)
+            base["model_sha256"] = sha
+            result = model.generate(GenerationRequest.from_json(payload["request"]))
             files = _encode(result, payload["outputs"])
         except KinemaError as err:
             return base | {"error": str(err), "error_type": type(err).__name__}
         except Exception as err:  # a bug, reported per job (with its traceback) instead of killing the worker
             return base | {"error": f"{type(err).__name__}: {err}", "error_type": "internal",
                            "traceback": traceback.format_exc(limit=8)}
-        from kinema.server.encode import json_safe
-
         rep = result.report
         report = {"seconds": result[0].duration, "frames": rep.frames, "steps": rep.steps,
                   "guidance": list(rep.guidance), "seed": rep.seed, "residuals": json_safe(rep.residuals),

@@ -28,19 +28,24 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: deeper joints are listed with their depth instead of one more level of indentation
+MAX_DRAWN_DEPTH = 40
+
+
 def joint_tree(skeleton) -> list[str]:
-    """One line per joint, drawn as a tree (depth-first, children in skeleton order)."""
+    """One line per joint, drawn as a tree (depth-first, children in skeleton order). Walked with an
+    explicit stack (a 5000-joint chain is fine); below `MAX_DRAWN_DEPTH` levels a line shows its depth
+    instead of growing its indentation."""
     lines: list[str] = []
-
-    def visit(j: int, prefix: str, last: bool, top: bool) -> None:
+    stack = [(0, "  ", True, True, 0)]
+    while stack:
+        j, prefix, last, top, depth = stack.pop()
         branch = "" if top else ("└─ " if last else "├─ ")
-        lines.append(f"{prefix}{branch}{skeleton.names[j]}")
+        shown = f"[depth {depth}] " if depth > MAX_DRAWN_DEPTH else ""
+        lines.append(f"{prefix}{branch}{shown}{skeleton.names[j]}")
         kids = skeleton.children[j]
-        below = prefix if top else prefix + ("   " if last else "│  ")
-        for k, c in enumerate(kids):
-            visit(c, below, k == len(kids) - 1, False)
-
-    visit(0, "  ", True, True)
+        below = prefix if top or depth >= MAX_DRAWN_DEPTH else prefix + ("   " if last else "│  ")
+        stack += [(c, below, k == len(kids) - 1, False, depth + 1) for k, c in reversed(list(enumerate(kids)))]
     return lines
 
 

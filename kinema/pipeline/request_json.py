@@ -23,6 +23,13 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+class Segment(Strict):
+    """One timeline segment: a prompt held for ``seconds``."""
+
+    prompt: str
+    seconds: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
 def _no_bool(value: Any) -> Any:
     """Numbers only: JSON ``true`` is not 1 (pydantic would take it)."""
     if isinstance(value, bool):

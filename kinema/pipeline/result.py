@@ -8,8 +8,12 @@ translates no bones; the any-rig model grounds no prompts. Lengths are metres, r
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
+
+import numpy as np
 
 from kinema.motion.core import Motion
 
@@ -57,8 +61,8 @@ class GenerationReport:
     reached_by_translation: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """The report as JSON values (what the server answers and batch manifests record)."""
-        return asdict(self)
+        """The report as strict JSON values (what the server answers and batch manifests record)."""
+        return json_safe(asdict(self))
 
 
 class GenerationResult(Sequence):
@@ -75,3 +79,23 @@ class GenerationResult(Sequence):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
+
+
+def json_safe(value):
+    """``value`` with tensors/arrays as lists, numpy scalars as Python numbers and non-finite floats as None."""
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    if isinstance(value, bool | str) or value is None:
+        return value
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        return value if math.isfinite(value) else None
+    return str(value)

@@ -147,8 +147,8 @@ def geometric_feet(skeleton: Skeleton, root: int) -> list[int]:
 
 def geometric_contacts(skeleton: Skeleton, feet: list[int], root: int) -> tuple[int, ...]:
     """Each foot preceded by its parent when that parent also lies in the foot band (ankle, toe)."""
-    P = rest_positions(skeleton)
-    body = [j for j in range(skeleton.num_joints) if j not in helpers(skeleton)]
+    P, skip = rest_positions(skeleton), helpers(skeleton)
+    body = [j for j in range(skeleton.num_joints) if j not in skip]
     floor, top = float(P[body, 1].min()), float(P[body, 1].max())
     band = floor + FOOT_BAND * (top - floor)
     out: list[int] = []

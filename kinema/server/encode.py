@@ -10,38 +10,17 @@ from __future__ import annotations
 
 import base64
 import json
-import math
-import numbers
 from pathlib import Path
 
 import numpy as np
 
 from kinema.motion.core import Motion
+from kinema.pipeline.result import json_safe
 
 #: File suffix per output format.
 SUFFIX = {"bvh": ".bvh", "npz": ".npz", "glb": ".glb", "json": ".json"}
 #: Decimals kept in the JSON format (0.001 mm and 1e-6 of a quaternion: far below what matters).
 JSON_DECIMALS = 6
-
-
-def json_safe(value):
-    """``value`` with tensors/arrays as lists, numpy scalars as Python numbers and non-finite floats as None."""
-    if hasattr(value, "detach"):
-        value = value.detach().cpu().numpy()
-    if isinstance(value, np.ndarray):
-        return json_safe(value.tolist())
-    if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v) for v in value]
-    if isinstance(value, bool | str) or value is None:
-        return value
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    return str(value)
 
 
 def motion_arrays(motion: Motion) -> dict:

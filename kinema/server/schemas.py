@@ -19,7 +19,7 @@ from pydantic import BaseModel, Field, StrictBool, StrictInt, field_validator, m
 from pydantic.json_schema import SkipJsonSchema
 
 from kinema.pipeline.request import GenerationRequest, RequestBounds
-from kinema.pipeline.request_json import Strict, request_model, to_request
+from kinema.pipeline.request_json import Segment, Strict, request_model, to_request
 from kinema.server.config import ServerLimits
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -73,13 +73,6 @@ class ConstraintSpec(Strict):
     def to_kinema(self) -> dict:
         """The object as kinema's constraint loader reads it (keys that were not given left out)."""
         return self.model_dump(exclude_unset=True, exclude_none=True)
-
-
-class Segment(Strict):
-    """One timeline segment: a prompt held for ``seconds``."""
-
-    prompt: str
-    seconds: PositiveFinite
 
 
 class InlineRig(Strict):
