@@ -26,6 +26,9 @@ def register(sub) -> None:
     p.add_argument("--constraints", type=Path, help="constraints JSON whose targets are marked")
     p.add_argument("--fps", type=float, help="GIF frame rate (default: the motion's, at most 20; GIF only)")
     p.add_argument("--title", help="title drawn at the top (default: the input file name)")
+    p.add_argument("--robot", help="robot motion input (.csv, or .npz from `kinema robot`): 'g1' or its MJCF "
+                   "(default: the robot the npz names, else g1); --mapping as for `kinema robot`")
+    p.add_argument("--mapping", type=Path, help="robot input: JSON landmark -> body mapping of the MJCF")
     p.set_defaults(func=run)
 
 
@@ -36,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from kinema.io import load_motion
     from kinema.io.atomic import check_output_path
     from kinema.render import render_filmstrip, render_gif
+    from kinema.robot.files import is_robot_npz
 
     src: Path = args.motion
     if not src.is_file():
@@ -43,7 +47,10 @@ def run(args: argparse.Namespace) -> int:
     name = src.name.lower()
     is_bvh = name.endswith(".bvh") or name.endswith(".bvh.gz")
     is_gltf = name.endswith(".glb") or name.endswith(".gltf")
-    if not (is_bvh or is_gltf or name.endswith(".npz")):
+    is_robot = name.endswith(".csv") or (name.endswith(".npz") and is_robot_npz(src))
+    if (args.robot is not None or args.mapping is not None) and not is_robot:
+        raise KinemaError("--robot and --mapping apply to robot motions only (.csv, or .npz from `kinema robot`)")
+    if not (is_bvh or is_gltf or is_robot or name.endswith(".npz")):
         raise KinemaError(f"{src}: unknown motion format (use .bvh, .bvh.gz, .npz, .glb or .gltf)")
     if args.animation is not None and not is_gltf:
         raise KinemaError("--animation applies to glTF input only (.glb, .gltf)")
@@ -63,7 +70,12 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(f"--scale must be a positive number, got {scale}")
     check_output_path(args.out)
     try:
-        motion = load_motion(src, animation=args.animation) if is_gltf else load_motion(src, scale=scale)
+        if is_robot:
+            motion = robot_drawing(src, args.robot, args.mapping)
+        elif is_gltf:
+            motion = load_motion(src, animation=args.animation)
+        else:
+            motion = load_motion(src, scale=scale)
     except (EOFError, OSError) as err:  # e.g. a truncated .gz
         raise KinemaError(f"{src}: cannot read ({err})") from None
     targets = None if args.constraints is None else constraint_targets(args.constraints, motion)
@@ -79,6 +91,15 @@ def run(args: argparse.Namespace) -> int:
         out = render_gif(motion, args.out, fps=args.fps, targets=targets, title=title)
     print(f"wrote {out}: {motion.num_frames} frames @ {motion.fps:g} fps, {motion.num_joints} joints")
     return 0
+
+
+def robot_drawing(path: Path, robot: str | None, mapping: Path | None):
+    """A robot motion file as a kinema Motion of the robot's body frames (kinema.robot.drawing)."""
+    from kinema.robot import load_robot, load_robot_motion
+    from kinema.robot.drawing import robot_motion_for_drawing
+
+    robot_motion = load_robot_motion(path, robot)
+    return robot_motion_for_drawing(robot_motion, load_robot(robot_motion.robot, mapping=mapping))
 
 
 def constraint_targets(path: Path, motion) -> list[tuple]:
