@@ -93,7 +93,7 @@ def test_objectives_example_reads_and_binds(path, model, bandai_workdir, monkeyp
     model's skeleton for the 5-s motion its comment asks for; generating with them is tested in
     tests/test_objectives_generate.py (hand-to-head, goal reach, time-agnostic path)."""
     from kinema.constraints import load_constraints
-    from kinema.objectives.sample import collect_objectives
+    from kinema.human.objective_sampling import collect_objectives
 
     monkeypatch.chdir(bandai_workdir)  # goal_reach.json names a Bandai Namco clip relative to the repository
     frames = round(SECONDS * model.fps)

@@ -4,6 +4,8 @@ tests/hardening_fixtures.py."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -52,3 +54,42 @@ def test_npz_zero_quaternions_are_refused(tmp_path, bvh_file, capsys):
     assert main(["render", str(bad), "--out", str(out)]) == 2
     one_line_error(capsys, "allzero.npz", "zero length")
     assert not out.exists()
+
+
+# ---------------------------------------------------------------------------- very large rigs
+def _chain_bvh(path, joints: int):
+    """A BVH of one vertical chain of ``joints`` joints (2 frames): deeper than Python's recursion limit."""
+    lines = ["HIERARCHY", "ROOT j0", "{", "  OFFSET 0 0 0",
+             "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    for i in range(1, joints):
+        lines += [f"JOINT j{i}", "{", "  OFFSET 0 0.01 0", "  CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["End Site", "{", "  OFFSET 0 0.01 0", "}"] + ["}"] * joints
+    row = " ".join(["0"] * (6 + 3 * (joints - 1)))
+    lines += ["MOTION", "Frames: 2", "Frame Time: 0.05", row, row]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_inspect_a_5000_joint_chain(tmp_path, capsys):
+    chain = _chain_bvh(tmp_path / "chain.bvh", 5000)
+    t0 = time.perf_counter()
+    assert main(["inspect", str(chain)]) == 0
+    assert time.perf_counter() - t0 < 30
+    out = capsys.readouterr().out
+    assert "[depth 4999] j4999" in out and "chain.bvh: 5000 joints" in out
+    assert max(len(line) for line in out.splitlines()) < 200  # deep joints do not grow the indentation
+
+
+def test_any_rig_model_refuses_a_huge_rig_quickly(tmp_path, capsys, monkeypatch):
+    chain = _chain_bvh(tmp_path / "chain.bvh", 300)
+    out = tmp_path / "o.bvh"
+    t0 = time.perf_counter()
+    args = ["generate", "A creature walks.", "--model", "creatures", "--rig", str(chain), "--seconds", "1",
+            "--steps", "2", "--no-progress", "--out", str(out)]
+    assert main(args) == 2
+    assert time.perf_counter() - t0 < 30
+    one_line_error(capsys, "300 joints", "at most 256", "KINEMA_MAX_RIG_JOINTS")
+    assert not out.exists()
+    monkeypatch.setenv("KINEMA_MAX_RIG_JOINTS", "nonsense")
+    assert main(args) == 2
+    one_line_error(capsys, "KINEMA_MAX_RIG_JOINTS", "positive integer")

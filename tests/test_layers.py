@@ -61,3 +61,52 @@ def test_no_function_level_imports(pkg) -> None:
     for path in _files(pkg):
         local = [m for m, inside in _imports(path) if inside]
         assert not local, f"kinema/{pkg}/{path.name} imports {local} inside a function"
+
+
+#: faces (parse input, call a pipeline, write files) and the packages none of the layers below them may import
+FACES = ("kinema.cli", "kinema.server", "kinema.batch", "kinema.app")
+#: package -> packages it must not import, for the one-pipeline shape (docs/architecture.md)
+PIPELINE_RULES = {
+    "pipeline": ("kinema.generate", "kinema.human", "kinema.anyrig", *FACES),
+    "human": ("kinema.anyrig", "kinema.generate", *FACES),
+    "anyrig": ("kinema.human", "kinema.generate", *FACES),
+    "generate": FACES,
+    "objectives": ("kinema.human", "kinema.anyrig", "kinema.generate", *FACES),
+    "batch": ("kinema.server", "kinema.cli", "kinema.app"),
+    "server": ("kinema.batch", "kinema.cli", "kinema.app"),
+}
+
+
+def _package_graph() -> dict[str, set[str]]:
+    """Top-level package -> the kinema packages its modules import (module-level and in functions)."""
+    graph: dict[str, set[str]] = {}
+    for path in KINEMA.rglob("*.py"):
+        rel = path.relative_to(KINEMA).parts
+        src = rel[0].removesuffix(".py")
+        for module, _ in _imports(path):
+            parts = module.split(".")
+            if len(parts) > 1 and parts[1] != src:
+                graph.setdefault(src, set()).add(parts[1])
+    return graph
+
+
+@pytest.mark.parametrize("pkg", sorted(PIPELINE_RULES))
+def test_pipelines_and_faces_import_in_one_direction(pkg) -> None:
+    for path in (KINEMA / pkg).rglob("*.py"):
+        for module, _ in _imports(path):
+            bad = [f for f in PIPELINE_RULES[pkg] if module == f or module.startswith(f + ".")]
+            assert not bad, f"{path.relative_to(KINEMA)} imports {module}"
+
+
+def test_no_import_cycle_between_packages() -> None:
+    graph = _package_graph()
+
+    def reaches(a: str, b: str, seen: set[str]) -> bool:
+        return a == b or any(n not in seen and (seen.add(n) or reaches(n, b, seen)) for n in graph.get(a, ()))
+
+    cycles = sorted({tuple(sorted((a, b))) for a in graph for b in graph[a] if reaches(b, a, set())})
+    assert not cycles, f"packages importing each other (directly or through others): {cycles}"
+
+
+def test_no_module_is_named_anyrig_prefix() -> None:
+    assert not [p for p in KINEMA.rglob("anyrig_*.py")], "cut packages by concept (kinema/anyrig/...), not by prefix"

@@ -8,9 +8,9 @@ import math
 import pytest
 import torch
 
+from kinema.human.objective_sampling import worse_than_raw
 from kinema.objectives import ObjectiveError, bind_objectives, load_objectives
 from kinema.objectives.path import PathTimeAgnostic, arc_resample
-from kinema.objectives.sample import worse_than_raw
 from kinema.objectives.terms import Avoid, JointDistance, Reach, StayWithin
 from kinema.skeleton import Skeleton
 

@@ -13,9 +13,9 @@ import torch
 
 import kinema
 from kinema.errors import KinemaError
+from kinema.human.objective_sampling import add_final
 from kinema.objectives import ObjectiveError, Reach
 from kinema.objectives.io import bind_objectives, load_objectives
-from kinema.objectives.sample import add_final
 
 PROMPT = "A person walks forward."
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

@@ -54,9 +54,9 @@ from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, sin
 from kinema.anyrig.world import generate_world, load_constraints_file
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.human.segments import segment_bounds
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
+from kinema.limits import check_rig_joints
 from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
@@ -64,7 +64,7 @@ from kinema.pipeline.base import MotionPipeline, RigInfo
 from kinema.pipeline.progress import ProgressFn
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
-from kinema.pipeline.timeline import parse_timeline
+from kinema.pipeline.timeline import parse_timeline, segment_bounds
 from kinema.postprocess import postprocess as run_postprocess
 from kinema.postprocess.guard import plausibility, violations
 from kinema.representation.joint import JointRepresentation
@@ -208,6 +208,7 @@ class AnyRigPipeline(MotionPipeline):
         prompts, plan = self._plan(prompt, seconds)
         T = plan.frames
         rig_m = self.resolve_rig(rig)
+        check_rig_joints(rig_m.num_joints, f"rig {rig}" if isinstance(rig, str | Path) else "rig")
         scale = 1.0 / rest_extent(rig_m.skeleton)
         rig_n = Rig.from_dict(
             {k: v for k, v in rig_m.to_dict().items() if k != "skeleton"}, skeleton=rig_m.skeleton.scaled(scale)

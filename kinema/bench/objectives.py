@@ -1,6 +1,6 @@
 """``kinema bench objectives``: objective error against seconds for noise-optimisation settings.
 
-Noise optimisation (kinema.objectives.optimize) costs one forward and one backward pass through a
+Noise optimisation (kinema.human.noise_optimisation) costs one forward and one backward pass through a
 ``ddim_steps`` chain per iteration, so its price is set by (DDIM steps, iterations). For each setting
 this generates the same motions (prompt, seconds, seeds) with one objective and reports the objective's
 value before optimisation, after it (``optimised``), after snapping (raw output) and after

@@ -27,9 +27,9 @@ import torch
 from kinema.evaluate import distribution as D
 from kinema.evaluate import metrics as M
 from kinema.evaluate.suite import ground_truth_motion
-from kinema.human.segments import segment_bounds as _bounds
 from kinema.motion.core import Motion
 from kinema.pipeline.timeline import Segment
+from kinema.pipeline.timeline import segment_bounds as _bounds
 
 SEGMENTS = (2, 4)  # segments per case, inclusive
 SEGMENT_SECONDS = (2.5, 4.0)  # each segment: its clip's length clamped to this range

@@ -22,14 +22,14 @@ from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
 from kinema.human.keyjoint_planning import KeyjointPlanner, sample_two_stage
+from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
+from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.human.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, stack_targets
 from kinema.model.grounding import Grounded, Grounding, as_grounding, ground
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
 from kinema.motion.core import Motion
-from kinema.objectives.optimize import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
-from kinema.objectives.sample import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.pipeline.base import MotionPipeline, RigInfo
 from kinema.pipeline.progress import ProgressFn, StepProgress, split_progress
 from kinema.pipeline.request import GenerationRequest

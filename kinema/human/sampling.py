@@ -253,7 +253,7 @@ def clean_estimate_fn(denoiser: Denoiser, rep: FlatRepresentation, text_emb: tor
                       targets: SampleTargets, settings: SampleSettings):
     """The clean-estimate function ``(x_t, t) -> x0`` (normalised) that :func:`sample_features` hands to
     DDIM: guided denoiser plus the corrections of the module docstring. For callers that run their own
-    DDIM loop, e.g. a differentiable one (kinema.objectives.optimize); every operation is differentiable."""
+    DDIM loop, e.g. a differentiable one (kinema.human.noise_optimisation); every operation is differentiable."""
     return _StepCorrections(denoiser, rep, text_emb, targets.pruned(), settings)
 
 

@@ -39,11 +39,11 @@ from dataclasses import dataclass, field
 
 import torch
 
-from kinema.errors import KinemaError
 from kinema.human.sampling import SampleTargets
 from kinema.human.targets import UserTargets, encode_user_constraints, run_postprocess
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
+from kinema.pipeline.timeline import segment_bounds
 from kinema.representation.flat import FlatRepresentation
 
 #: seconds of each side of a join that its transition window regenerates
@@ -178,21 +178,6 @@ class SegmentPlan:
     def postprocess(self, motion: Motion) -> tuple[Motion, dict]:
         """Guarded post-processing of one finished motion; returns it with its own report."""
         return run_postprocess(motion, self.constraints, self.rep)
-
-
-def segment_bounds(segments, fps: float) -> list[int]:
-    """Frame boundaries ``[0, b_1, ..., T]`` of consecutive segments: ``b_k = round(fps * (s_1 + ... + s_k))``.
-
-    Rounding the running total (not each segment) gives exactly the frames asked for: 60 s at 20 fps in
-    seven 8.57-s windows is 1200 frames, not 7 x 171. A segment that would get no frame is an error."""
-    bounds, total = [0], 0.0
-    for i, s in enumerate(segments):
-        total += s.seconds
-        bounds.append(int(math.floor(total * fps + 0.5)))
-        if bounds[-1] <= bounds[-2]:
-            raise KinemaError(f"timeline segment {i} ({s.prompt!r}) lasts {s.seconds:g} s, shorter than one "
-                              f"frame at {fps:g} fps ({1 / fps:.3f} s)")
-    return bounds
 
 
 def plan_joins(segments: list[PlannedSegment], fps: float) -> list[PlannedJoin]:

@@ -117,3 +117,18 @@ def splice(motion: Motion, window: Motion, lo: int, fade_in: int, fade_out: int)
     hi = lo + window.num_frames
     out = crossfade(motion.crop(0, lo + fade_in), window, fade_in)
     return crossfade(out, motion.crop(hi - fade_out), fade_out)
+
+
+def segment_bounds(segments, fps: float) -> list[int]:
+    """Frame boundaries ``[0, b_1, ..., T]`` of consecutive segments: ``b_k = round(fps * (s_1 + ... + s_k))``.
+
+    Rounding the running total (not each segment) gives exactly the frames asked for: 60 s at 20 fps in
+    seven 8.57-s windows is 1200 frames, not 7 x 171. A segment that would get no frame is an error."""
+    bounds, total = [0], 0.0
+    for i, s in enumerate(segments):
+        total += s.seconds
+        bounds.append(int(math.floor(total * fps + 0.5)))
+        if bounds[-1] <= bounds[-2]:
+            raise KinemaError(f"timeline segment {i} ({s.prompt!r}) lasts {s.seconds:g} s, shorter than one "
+                              f"frame at {fps:g} fps ({1 / fps:.3f} s)")
+    return bounds

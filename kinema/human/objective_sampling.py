@@ -2,7 +2,7 @@
 
 The objectives of a call come from the constraints file's ``"objectives"`` list and the ``objectives``
 argument; they are bound to the model's rig and the motion length, the noise of a short DDIM chain is
-optimised for them (kinema.objectives.optimize) with the file's explicit constraints imputed as usual,
+optimised for them (kinema.human.noise_optimisation) with the file's explicit constraints imputed as usual,
 and the report gives every objective's value before optimisation, after it (raw) and on the final,
 post-processed motion. Objectives act on one motion of at most the model's ``max_seconds`` (one
 segment), not on multi-prompt timelines.
@@ -16,12 +16,12 @@ from dataclasses import replace
 import torch
 
 from kinema.errors import KinemaError
+from kinema.human.noise_optimisation import NoiseOptSettings, errors, optimise_noise
 from kinema.human.sampling import SampleSettings, sample_features
 from kinema.human.segments import SegmentPlan, stack_targets
 from kinema.human.targets import UserTargets
 from kinema.motion.core import Motion
 from kinema.objectives.io import ObjectiveError, bind_objectives, load_objectives
-from kinema.objectives.optimize import NoiseOptSettings, errors, optimise_noise
 from kinema.objectives.snap import snap_constraints
 from kinema.objectives.terms import Bound
 
