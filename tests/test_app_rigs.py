@@ -3,6 +3,8 @@ skinned view posing its bones, and what the app says when a model cannot generat
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -89,8 +91,9 @@ def test_human_model_cannot_generate_for_another_rig(tmp_path):
     quad = load_rig(synthetic_rig_glb(tmp_path / "quad.glb"), fps=20.0)
     human = model_rig(quad_motion().skeleton, name="quad-model")
 
-    class Model:
+    class Model:  # a model with its own skeleton (kinema.pipeline.base.MotionPipeline's properties)
         skeleton = human.skeleton
+        needs_rig = False
 
     assert cannot_generate(Model(), human, "m") is None
     assert cannot_generate(Model(), quad, "m") is None  # the same joints from a GLB file: fine
@@ -111,12 +114,16 @@ class _FakeAnyRig(AnyRigModel):
     """Stands in for a trained any-rig model: records the call, returns the rig's clip."""
 
     fps = 20.0
+    path = Path("fake-creatures")
 
     def __init__(self, clip):
         self.clip, self.calls = clip, []
 
-    def generate(self, prompt, *, rig, samples, steps, seed, **_):
-        self.calls.append((prompt, rig, samples, steps, seed))
+    def frames(self, prompt, seconds=4.0) -> int:
+        return self.clip.num_frames
+
+    def sample_on_rig(self, prompt, *, rig, samples, steps, seed, **_):
+        self.calls.append((prompt, rig.skeleton, samples, steps, seed))
         return AnyRigResult([self.clip] * samples, AnyRigReport(seconds=0.1, steps=steps))
 
 

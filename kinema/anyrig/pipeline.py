@@ -164,7 +164,7 @@ class AnyRigPipeline(MotionPipeline):
         if not world:
             return self.sample_on_rig(what, rig=rig, constraints=own, samples=r.samples, **kw)
         res, notes, _ = generate_world(self, what, rig=rig, constraints=world, samples=r.samples, **kw)
-        res.report.warnings[:0] = notes
+        res.report.left_out = notes
         return res
 
     def _constraints(self, r: GenerationRequest, rig: Rig, what, seconds: float) -> tuple[list, list[dict]]:

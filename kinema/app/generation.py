@@ -1,7 +1,6 @@
-"""What the app asks of a model, for both kinds kinema has: the human model (`KinemaModel`: its own
-skeleton, timelines, the constraints of docs/constraints.md, step progress) and the any-rig model
-(`AnyRigModel`, ``--model creatures``: any rig, timelines, the constraints kinema.anyrig.world
-translates; the rest are named in a note).
+"""What the app asks of a model, through the one pipeline interface (kinema.pipeline): a model with its
+own skeleton (the human model) generates on it, a model for any rig (``--model creatures``) on the app's
+rig; what a model cannot take is named in a note (the report's ``left_out``).
 
 `outcome` runs one generation and returns the motions with the status text and warnings, so that the
 session does not care which kind generated them.
@@ -11,11 +10,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from kinema.anyrig.pipeline import AnyRigModel
-from kinema.anyrig.world import generate_world
 from kinema.app.rigs import AppRig
 from kinema.motion.core import Motion
 from kinema.pipeline.progress import ProgressFn
+from kinema.pipeline.request import GenerationRequest
 
 
 @dataclass
@@ -27,15 +25,16 @@ class Outcome:
 
 
 def is_any_rig(model) -> bool:
-    return isinstance(model, AnyRigModel)
+    """Whether the model generates for the rig the app shows (it drives no skeleton of its own)."""
+    return bool(model.needs_rig)
 
 
 def default_steps(model) -> int:
-    return model.loaded.sampler.num_inference_steps
+    return model.default_steps
 
 
 def max_steps(model) -> int:
-    return model.loaded.sampler.num_train_steps if is_any_rig(model) else model.max_steps
+    return model.max_steps
 
 
 def cannot_generate(model, rig: AppRig, model_name: str) -> str | None:
@@ -52,33 +51,17 @@ def cannot_generate(model, rig: AppRig, model_name: str) -> str | None:
 def outcome(
     model, rig: AppRig, timeline: list[dict], *, constraints, samples: int, steps: int, seed: int, progress: ProgressFn
 ) -> Outcome:
-    """Generate ``samples`` motions for ``timeline`` (and ``constraints`` with the human model)."""
-    if not is_any_rig(model):
-        res = model.generate(
-            timeline, constraints=constraints, samples=samples, steps=steps, seed=seed, progress=progress
-        )
-        r = res.report
-        text = (
-            f"{len(res.motions)} sample(s), {r.frames} frames, {r.segments} segment(s), {r.steps} steps, "
-            f"seed {r.seed}: **{r.seconds:.1f} s**"
-        )
-        return Outcome(list(res.motions), text, list(r.warnings))
-    res, notes, took = generate_world(
-        model,
-        timeline,
-        rig=rig.skeleton,
-        constraints=list(constraints or []),
-        samples=samples,
-        steps=steps,
-        seed=seed,
-        progress=progress,
-    )
+    """Generate ``samples`` motions for ``timeline`` and ``constraints`` (docs/constraints.md, world frame)
+    on the app's rig: one `GenerationRequest` for any model (kinema.pipeline)."""
+    any_rig = is_any_rig(model)
+    request = GenerationRequest(timeline=timeline, constraints=list(constraints) if constraints else None,
+                                samples=samples, steps=steps, seed=seed, rig=rig.skeleton if any_rig else None)
+    res = model.generate(request, progress=progress)
     r = res.report
-    motions = [rig.with_contacts(m) for m in res.motions]
-    text = (
-        f"{len(motions)} sample(s) on {rig.name}, {motions[0].num_frames} frames, {r.segments} segment(s), "
-        f"{r.steps} steps, seed {seed}: **{took:.1f} s**"
-    )
+    motions = [rig.with_contacts(m) for m in res.motions] if any_rig else list(res.motions)
+    on = f" on {rig.name}" if any_rig else ""
+    text = (f"{len(motions)} sample(s){on}, {motions[0].num_frames} frames, {r.segments} segment(s), {r.steps} steps, "
+            f"seed {r.seed}: **{r.seconds:.1f} s**")
     if r.residuals_cm:
         text += f"; joint targets met within {max(r.residuals_cm):.1f} cm"
-    return Outcome(motions, text, list(r.warnings), notes)
+    return Outcome(motions, text, list(r.warnings), list(r.left_out))

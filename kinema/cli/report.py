@@ -92,4 +92,4 @@ def print_report(result) -> None:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
     if rep.residuals_deg:
         print(f"rotation target error after post-processing: max {max(rep.residuals_deg):.2f} deg")
-    print_warnings(rep.warnings)
+    print_warnings([*rep.left_out, *rep.warnings])

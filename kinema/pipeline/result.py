@@ -24,7 +24,8 @@ class GenerationReport:
 
     Common to every pipeline: ``seconds`` (wall time), ``steps``, ``seed``, ``guidance``, ``segments``,
     ``frames``, ``warnings`` (what a user must hear: unmet targets, unknown prompts, stages undone by the
-    guard), ``timings`` (wall seconds per stage).
+    guard), ``left_out`` (parts of the request the model cannot take and left out, e.g. foot contacts for
+    the any-rig model), ``timings`` (wall seconds per stage).
 
     The human pipeline (kinema.human): ``residuals`` holds one post-processing report per sample (empty
     dicts without post-processing: ``{"smooth", "foot_lock", "exact": {"before", "after", ...},
@@ -46,6 +47,7 @@ class GenerationReport:
     guidance: tuple[float, float] = (0.0, 0.0)
     seed: int = 0
     warnings: list[str] = field(default_factory=list)
+    left_out: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     residuals: list[dict] = field(default_factory=list)
     prompts: list[dict] = field(default_factory=list)

@@ -39,7 +39,7 @@ class ReplayReport:
 def _capsule(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> tuple[np.ndarray, np.ndarray, float]:
     """(end a, end b, radius) of a capsule or sphere geom in world coordinates."""
     centre, radius = data.geom_xpos[g], float(model.geom_size[g][0])
-    if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE:
+    if int(model.geom_type[g]) == int(mujoco.mjtGeom.mjGEOM_SPHERE):
         return centre, centre, radius
     axis = data.geom_xmat[g].reshape(3, 3)[:, 2] * model.geom_size[g][1]
     return centre - axis, centre + axis, radius
@@ -58,12 +58,12 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
 def leg_geoms(robot: Robot) -> dict[str, list[int]]:
     """Capsule and sphere geoms of each leg: geoms of the bodies from the hip body down."""
     m = robot.model
-    kinds = (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_SPHERE)
+    kinds = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE)}
     out = {}
     for s in SIDES:
         top = robot.body_ids[f"{s}_hip"]
         below = {top} | {b for b in range(m.nbody) if _ancestor(m, b, top)}
-        out[s] = [g for g in range(m.ngeom) if m.geom_bodyid[g] in below and m.geom_type[g] in kinds]
+        out[s] = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in below and int(m.geom_type[g]) in kinds]
     return out
 
 

@@ -3,7 +3,8 @@ forward, +Y left), scaled to the robot.
 
 The human world (Y up, +Z forward, +X left; docs/conventions.md) turns into the robot's by the cyclic axis
 permutation ``AXES`` (a rotation, so left stays left). Lengths are scaled by the ratio of leg lengths
-(hip to knee to ankle) for the root and the feet, and of arm lengths for the hands' reach from the
+(hip to knee to ankle) for the root and the feet (the feet then moved apart by how much wider the robot's
+hips are than the scaled human's), and of arm lengths for the hands' reach from the
 shoulders; knees and elbows keep the human limb *directions* at the robot's own segment lengths. Soles:
 kinema.robot.feet.
 """
@@ -81,13 +82,16 @@ def _planted_height(height: np.ndarray, planted: np.ndarray) -> float:
     return float(np.median(height[planted])) if planted.any() else float(np.percentile(height, 5))
 
 
-def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: float, heading: np.ndarray):
-    """(sole centre (T, 3), foot frame (T, 3, 3)) targets of one side; ``heading`` (T, 3) is the root's
-    forward direction, which steadies the foot's heading when the foot points steeply up or down."""
+def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: float, root: np.ndarray, widen: float):
+    """(sole centre (T, 3), foot frame (T, 3, 3)) targets of one side. ``root`` (T, 3, 3) is the root's frame:
+    its heading steadies the foot's when the foot points steeply up or down, and the foot moves ``widen``
+    metres outwards along its left axis (the robot's hips are further apart than the scaled human's)."""
+    heading = root[:, :, 0]
     ankle, toe = P[:, roles[f"{side}_ankle"]], P[:, roles[f"{side}_toe"]]
     a0, t0 = _planted_height(ankle[:, 2], planted), _planted_height(toe[:, 2], planted)
     lift = np.maximum(np.minimum(ankle[:, 2] - a0, toe[:, 2] - t0), 0.0)
-    ground = hold_planted(scale * (ankle[:, :2] + toe[:, :2]) / 2, planted)
+    outwards = (widen if side == "left" else -widen) * _unit(root[:, :2, 1])
+    ground = hold_planted(scale * (ankle[:, :2] + toe[:, :2]) / 2 + outwards, planted)
     up = np.maximum(hold_planted(scale * lift[:, None], planted, held=np.zeros(1)), 0.0)
     d = toe - ankle
     drop = (ankle[:, 2] - toe[:, 2]) - (a0 - t0)
@@ -150,7 +154,9 @@ def frame_targets(motion, sizes: RobotSizes) -> FrameTargets:
     hip_line = P[:, roles["left_hip"]] - P[:, roles["right_hip"]]
     shoulder_line = P[:, roles["left_upper_arm"]] - P[:, roles["right_upper_arm"]]
     pelvis_frame = frames_from(hip_line, P[:, roles["spine"]] - root)
-    feet = {s: _foot(P, roles, s, planted[s], leg_scale, pelvis_frame[:, :, 0]) for s in SIDES}
+    human_hips = float(np.median(np.linalg.norm(hip_line, axis=1))) / 2
+    widen = max((sizes.hips["left"][1] - sizes.hips["right"][1]) / 2 - leg_scale * human_hips, 0.0)
+    feet = {s: _foot(P, roles, s, planted[s], leg_scale, pelvis_frame, widen) for s in SIDES}
     pelvis[:, 2] = _reachable_height(pelvis, pelvis_frame, {s: feet[s][0] for s in SIDES}, sizes)
 
     def limb(a: str, b: str, s: str) -> np.ndarray:

@@ -211,6 +211,7 @@ class ReportOut(BaseModel):
     #: per distinct prompt: its nearest training captions and whether it counts as known (issue 18)
     prompts: list[dict[str, Any]] = []
     timings: dict[str, float] = {}
+    left_out: list[str] = []
     windows: int = 1
     joints: int = 0
     residuals_cm: list[float] = []
