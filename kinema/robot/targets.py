@@ -23,6 +23,7 @@ from kinema.skeleton import Skeleton
 AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 SIDES = ("left", "right")
 MAX_FOOT_TURN = 0.6  # radians a foot may point away from the root's heading
+MAX_FOOT_PITCH = 1.2  # radians a foot may pitch from flat
 HUMAN_ROLES = ("pelvis", "spine", "neck") + tuple(
     f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", "toe", "upper_arm", "elbow", "hand")
 )
@@ -93,12 +94,12 @@ def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: flo
     outwards = (widen if side == "left" else -widen) * _unit(root[:, :2, 1])
     ground = hold_planted(scale * (ankle[:, :2] + toe[:, :2]) / 2 + outwards, planted)
     up = np.maximum(hold_planted(scale * lift[:, None], planted, held=np.zeros(1)), 0.0)
-    d = toe - ankle
-    drop = (ankle[:, 2] - toe[:, 2]) - (a0 - t0)
-    pitch = np.arcsin(np.clip(drop / np.maximum(np.linalg.norm(d, axis=1), 1e-6), -1.0, 1.0))
-    flat = d[:, :2] / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-6) + 0.5 * heading[:, :2]
+    f = np.einsum("tji,tj->ti", root, toe - ankle)  # heel-to-toe in the root's frame: forward, left, up
+    sagittal = np.arctan2(-f[:, 2], f[:, 0])  # toe-down pitch; past 90 degrees when the toe trails the heel
+    rest = float(np.median(sagittal[planted])) if planted.any() else float(np.percentile(sagittal, 50))
+    pitch = np.clip(sagittal - rest, -MAX_FOOT_PITCH, MAX_FOOT_PITCH)
+    turn = np.arctan2(f[:, 1], np.abs(f[:, 0]) + 0.5 * np.linalg.norm(f, axis=1))  # never flips backwards
     root_yaw = np.unwrap(np.arctan2(heading[:, 1], heading[:, 0]))
-    turn = np.angle(np.exp(1j * (np.arctan2(flat[:, 1], flat[:, 0]) - root_yaw)))
     yaw = root_yaw + np.clip(turn, -MAX_FOOT_TURN, MAX_FOOT_TURN)
     angles = hold_planted(np.stack([yaw, pitch], 1), planted)
     angles[:, 1] = hold_planted(pitch[:, None], planted, held=np.zeros(1))[:, 0]
