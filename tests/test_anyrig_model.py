@@ -11,7 +11,7 @@ from kinema.model.anyrig.config import AnyRigConfig, get_anyrig_config
 from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.rig import Rig
-from kinema.train import anyrig_augment as aug
+from kinema.train.anyrig import augment as aug
 
 
 def _model(**over) -> AnyRigDenoiser:

@@ -74,6 +74,9 @@ PIPELINE_RULES = {
     "objectives": ("kinema.human", "kinema.anyrig", "kinema.generate", *FACES),
     "batch": ("kinema.server", "kinema.cli", "kinema.app"),
     "server": ("kinema.batch", "kinema.cli", "kinema.app"),
+    **{pkg: ("kinema.human", "kinema.anyrig", "kinema.generate", "kinema.pipeline", *FACES)
+       for pkg in ("constraints", "diffusion", "postprocess", "model", "representation", "rig", "motion", "io",
+                   "retarget", "robot")},
 }
 
 
