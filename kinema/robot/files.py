@@ -28,7 +28,7 @@ def write_csv(path: Path, arrays: dict) -> Path:
     ).reshape(T, -1)
     text = io.StringIO()
     text.write(",".join(ROOT_COLUMNS + tuple(arrays["joint_names"])) + "\n")
-    np.savetxt(text, table, delimiter=",", fmt="%.7g")
+    np.savetxt(text, table, delimiter=",", fmt="%.9g")
     atomic_write_bytes(path, text.getvalue().encode())
     return path
 
@@ -55,7 +55,10 @@ def read_csv(path: Path) -> dict:
     if table.shape[0] == 0 or table.shape[1] != len(header):
         raise KinemaError(f"{path}: expected rows of {len(header)} numbers, got shape {table.shape}")
     time = table[:, 0]
-    fps = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else 30.0
+    span = float(time[-1] - time[0]) if len(time) > 1 else 0.0
+    if len(time) > 1 and not (span > 0 and (np.diff(time) > 0).all()):
+        raise KinemaError(f"{path}: the time column must increase")
+    fps = (len(time) - 1) / span if len(time) > 1 else 30.0
     return {"time": time, "root_position": table[:, 1:4], "root_quaternion": table[:, 4:8],
             "joint_angles": table[:, 8:], "joint_names": header[8:], "fps": fps, "robot": None}
 

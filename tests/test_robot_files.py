@@ -1,0 +1,115 @@
+"""Robot motion files (CSV / npz), the `kinema robot` and `kinema render` commands on them, and an MJCF
+humanoid whose body names are not recognised, retargeted through a JSON mapping."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import kinema
+from kinema.cli import main
+from kinema.errors import KinemaError
+from kinema.robot import BUILTIN_ROBOTS, load_robot, load_robot_motion, retarget_to_robot
+from kinema.robot.files import ROOT_COLUMNS
+
+
+@pytest.fixture(scope="module")
+def bow_clip(bandai_root):
+    """A short captured bow (Bandai Namco, centimetres) as a kinema .bvh.gz path."""
+    clips = sorted(bandai_root.glob("*/data/*bow*normal*.bvh.gz")) or sorted(bandai_root.glob("*/data/*.bvh.gz"))
+    return clips[0]
+
+
+@pytest.fixture(scope="module")
+def bow(bow_clip):
+    human = kinema.load_motion(bow_clip, scale=0.01)
+    return human, retarget_to_robot(human, "g1")
+
+
+def test_csv_and_npz_round_trip(bow, tmp_path):
+    _, rm = bow
+    csv, npz = rm.save(tmp_path / "bow.csv"), rm.save(tmp_path / "bow.npz")
+    header = csv.read_text().splitlines()[0].split(",")
+    assert tuple(header[:8]) == ROOT_COLUMNS and tuple(header[8:]) == rm.joint_names
+    with np.load(npz) as z:
+        assert {"time", "root_position", "root_quaternion", "joint_angles", "joint_names", "fps"} <= set(z.files)
+        assert float(z["fps"]) == rm.fps and z["joint_angles"].shape == (rm.num_frames, 29)
+    for path in (csv, npz):
+        back = load_robot_motion(path)
+        assert back.joint_names == rm.joint_names and back.num_frames == rm.num_frames
+        assert back.fps == pytest.approx(rm.fps, rel=1e-5)
+        np.testing.assert_allclose(back.joint_angles, rm.joint_angles, atol=1e-6)
+        np.testing.assert_allclose(back.root_quaternion, rm.root_quaternion, atol=1e-6)
+    assert load_robot_motion(npz).sole_planted is not None and load_robot_motion(csv).sole_planted is None
+
+
+def test_robot_command_writes_and_render_draws(bow_clip, tmp_path, capsys):
+    out = tmp_path / "bow.csv"
+    assert main(["robot", str(bow_clip), "--scale", "0.01", "--robot", "g1", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "range overshoot 0.000 rad" in said and "lowest sole" in said
+    assert main(["render", str(out), "--out", str(tmp_path / "bow.png"), "--frames", "4"]) == 0
+    assert (tmp_path / "bow.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--robot", "missing.xml"], "no such robot file"),
+        (["--robot", "g1", "--mapping", "nope.json"], "no such mapping file"),
+        (["--out-suffix", ".txt"], "--out must end in .csv or .npz"),
+    ],
+)
+def test_robot_command_bad_input(bow_clip, tmp_path, capsys, extra, message):
+    out = tmp_path / ("walk.txt" if "--out-suffix" in extra else "walk.csv")
+    args = [a for a in extra if a not in ("--out-suffix", ".txt")]
+    assert main(["robot", str(bow_clip), "--scale", "0.01", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def _renamed_g1(tmp_path):
+    """The G1's MJCF with its limb bodies renamed so that no name says which limb or side it is."""
+    text = BUILTIN_ROBOTS["g1"].read_text()
+    renames = {}
+    for side, code in (("left", "a"), ("right", "b")):
+        for part in ("hip_roll", "knee", "ankle_roll", "shoulder_roll", "elbow", "wrist_yaw"):
+            renames[f"{side}_{part}_link"] = f"{code}_{part.replace('_', '')}_x"
+    for old, new in renames.items():
+        text = text.replace(f'<body name="{old}"', f'<body name="{new}"')
+    for old in ("left_", "right_"):
+        text = text.replace(f'<body name="{old}', f'<body name="{old[0]}q')  # no side word in other bodies
+    path = tmp_path / "robot.xml"
+    path.write_text(text)
+    return path, renames
+
+
+def test_unrecognised_mjcf_needs_and_uses_a_mapping(bow, tmp_path):
+    path, renames = _renamed_g1(tmp_path)
+    with pytest.raises(KinemaError, match="--mapping"):
+        load_robot(path)
+    landmarks = {"hip": "hip_roll", "knee": "knee", "foot": "ankle_roll", "shoulder": "shoulder_roll",
+                 "elbow": "elbow", "hand": "wrist_yaw"}
+    mapping = {f"{s}_{k}": renames[f"{s}_{v}_link"] for s in ("left", "right") for k, v in landmarks.items()}
+    mapping.update({"pelvis": "pelvis", "torso": "torso_link", "head": {"body": "torso_link", "offset": [0, 0, 0.43]}})
+    (tmp_path / "map.json").write_text(json.dumps(mapping))
+    robot = load_robot(path, mapping=tmp_path / "map.json")
+    human, g1_motion = bow
+    rm = retarget_to_robot(human, robot)
+    assert rm.joint_names == g1_motion.joint_names  # joints keep their names; the same kinematics
+    np.testing.assert_allclose(rm.joint_angles, g1_motion.joint_angles, atol=1e-6)
+
+
+def test_bad_mapping_file_is_one_clear_error(tmp_path):
+    bad = tmp_path / "map.json"
+    bad.write_text(json.dumps({"left_knee": {"body": "left_knee_link", "offset": [0, 0]}}))
+    with pytest.raises(KinemaError, match="offset must be three finite numbers"):
+        load_robot("g1", mapping=bad)
+    bad.write_text(json.dumps({"left_kneee": "left_knee_link"}))
+    with pytest.raises(KinemaError, match="unknown landmark"):
+        load_robot("g1", mapping=bad)
+    bad.write_text(json.dumps({"left_knee": "no_such_body"}))
+    with pytest.raises(KinemaError, match="does not have"):
+        load_robot("g1", mapping=bad)
