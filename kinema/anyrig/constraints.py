@@ -36,7 +36,19 @@ from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
-from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.representation.joint import (
+    NUM_CHANNELS,
+    POS,
+    POSE,
+    ROOT_FORWARD,
+    ROOT_HEADING_COS,
+    ROOT_HEADING_SIN,
+    ROOT_HEIGHT,
+    ROOT_LATERAL,
+    ROT,
+    JointRepresentation,
+    yaw_quat,
+)
 from kinema.skeleton import Skeleton
 
 
@@ -113,8 +125,8 @@ def encode_constraints(
 ) -> FeatureTargets:
     """Feature targets ``(T, J, 13)`` (rig units) and their mask for ``constraints`` (see module)."""
     J = rep.num_joints
-    x = torch.zeros(frames, J, 13)
-    m = torch.zeros(frames, J, 13)
+    x = torch.zeros(frames, J, NUM_CHANNELS)
+    m = torch.zeros(frames, J, NUM_CHANNELS)
     root = rep.rig.root
     for c in constraints:
         if isinstance(c, JointTarget):
@@ -122,20 +134,20 @@ def encode_constraints(
             if j == root and c.position is not None:
                 raise KinemaError("a joint position target on the root joint: use RootPath for where the root goes")
             if c.position is not None:
-                x[f, j, 0:3] = torch.as_tensor(c.position, dtype=torch.float32) * scale
-                m[f, j, 0:3] = 1.0
+                x[f, j, POS] = torch.as_tensor(c.position, dtype=torch.float32) * scale
+                m[f, j, POS] = 1.0
             if c.rotation is not None:
-                x[f, j, 3:9] = quat_to_sixd(c.unit_rotation()).to(x.dtype)
-                m[f, j, 3:9] = 1.0
+                x[f, j, ROT] = quat_to_sixd(c.unit_rotation()).to(x.dtype)
+                m[f, j, ROT] = 1.0
         elif isinstance(c, Keyframe):
             f = _frame(c.frame, frames, "keyframe")
             if c.pose.num_joints != J:
                 raise KinemaError(f"keyframe pose has {c.pose.num_joints} joints, the rig has {J}")
             feats = rep.from_motion(_scaled(c.pose, rep, scale).crop(c.pose_frame, c.pose_frame + 1))[0]
-            x[f], m[f, :, 0:9] = feats, 1.0
+            x[f], m[f, :, POSE] = feats, 1.0
             m[f, root] = 0.0
-            m[f, root, 1] = 1.0  # the root row: height only (its rotation is the root joint's)
-            m[f, root, 3:9] = 1.0
+            m[f, root, ROOT_HEIGHT] = 1.0  # the root row: height only (its rotation is the root joint's)
+            m[f, root, ROT] = 1.0
         elif isinstance(c, RootPath):
             _root_path(c, x, m, root, scale, frames, rep.fps)
         elif isinstance(c, RootMotion):
@@ -171,9 +183,10 @@ def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -
         speed = math.hypot(dx, dz) * fps / (fb - fa) * scale
         psi = math.atan2(dx, dz)
         span = slice(fa, fb)
-        x[span, root, 0], x[span, root, 2] = 0.0, speed
-        x[span, root, 9], x[span, root, 10] = math.cos(psi), math.sin(psi)
-        m[span, root, 0] = m[span, root, 2] = m[span, root, 9] = m[span, root, 10] = 1.0
+        x[span, root, ROOT_LATERAL], x[span, root, ROOT_FORWARD] = 0.0, speed
+        x[span, root, ROOT_HEADING_COS], x[span, root, ROOT_HEADING_SIN] = math.cos(psi), math.sin(psi)
+        for channel in (ROOT_LATERAL, ROOT_FORWARD, ROOT_HEADING_COS, ROOT_HEADING_SIN):
+            m[span, root, channel] = 1.0
 
 
 def post_targets(

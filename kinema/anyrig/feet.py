@@ -42,7 +42,7 @@ from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
 from kinema.postprocess.footlock import contact_segments
-from kinema.representation.joint import JointRepresentation, yaw_quat
+from kinema.representation.joint import POS, ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation, yaw_quat
 from kinema.rig import Rig
 from kinema.rig.find import rest_positions
 from kinema.skeleton import Skeleton
@@ -291,9 +291,9 @@ def with_floor_translations(m: Motion, feats: torch.Tensor, rep: JointRepresenta
         return m
     G, P = m.global_transforms()
     f = feats.to(P.dtype)
-    psi = torch.atan2(f[:, root, 10], f[:, root, 9])
+    psi = torch.atan2(f[:, root, ROOT_HEADING_SIN], f[:, root, ROOT_HEADING_COS])
     T = m.num_frames
-    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, 0:3])
+    world = P[:, root : root + 1] + quat_rotate(yaw_quat(psi)[:, None].expand(T, len(joints), 4), f[:, joints, POS])
     trans = m.root_translation.to(P.dtype).clone()
     if move_root:
         trans[:, 1] -= P[:, 0, 1]  # joint 0 back on the floor; the root's own translation carries the height

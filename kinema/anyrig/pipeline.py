@@ -67,7 +67,7 @@ from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.pipeline.timeline import parse_timeline, segment_bounds
 from kinema.postprocess import postprocess as run_postprocess
 from kinema.postprocess.guard import plausibility, violations
-from kinema.representation.joint import JointRepresentation
+from kinema.representation.joint import ROOT_HEADING, ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -399,10 +399,10 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     """Turn every sample so that its heading at frame 0 is ``heading`` (features are heading-invariant
     except the root's cos/sin of the heading)."""
     out = feats.clone()
-    cs = out[:, :, root, 9:11]
+    cs = out[:, :, root, ROOT_HEADING]
     psi = torch.atan2(cs[..., 1], cs[..., 0])
     psi = psi - psi[:, :1] + heading
-    out[:, :, root, 9], out[:, :, root, 10] = torch.cos(psi), torch.sin(psi)
+    out[:, :, root, ROOT_HEADING_COS], out[:, :, root, ROOT_HEADING_SIN] = torch.cos(psi), torch.sin(psi)
     return out
 
 

@@ -15,6 +15,7 @@ import time
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 
+from kinema.batch.ray_connect import init_bounded
 from kinema.batch.spec import Task
 from kinema.batch.worker import Worker, init_process, process_ping, process_run
 from kinema.errors import KinemaError
@@ -113,7 +114,7 @@ class RayExecutor:
         if address == "local":
             ray.init(address="local", include_dashboard=False, log_to_driver=False, num_cpus=workers)
         else:
-            ray.init(address=address, log_to_driver=False)
+            init_bounded(ray, address, log_to_driver=False)
         cpus = int(ray.cluster_resources().get("CPU", 1))
         self.workers = max(1, min(workers or cpus, cpus))
         actor = ray.remote(num_cpus=1)(Worker)

@@ -19,7 +19,7 @@ from kinema.batch.executors import make_executor
 from kinema.batch.manifest import FolderLock, Manifest, remove_stale_temps
 from kinema.batch.spec import Task, read_jobs
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes
+from kinema.io.atomic import atomic_write_bytes, make_output_folder
 
 
 @dataclass
@@ -122,7 +122,7 @@ def run_batch(jobs_path: str | Path, out: str | Path, *, model: str = "default",
     jobs_path, out = Path(jobs_path), Path(out)
     if not jobs_path.is_file():
         raise KinemaError(f"{jobs_path}: no such jobs file")
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_folder(out)
     lock = FolderLock(out)
     manifest = Manifest(out)
     summary = BatchSummary()

@@ -41,6 +41,19 @@ def check_output_path(path: str | Path) -> Path:
     return path
 
 
+def make_output_folder(path: str | Path) -> Path:
+    """Create the output folder ``path`` (and its parents) if needed; a one-line `KinemaError` when it
+    is a file, a parent is a file, or it cannot be created."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise KinemaError(f"{path}: is a file; give a folder for the outputs")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise KinemaError(f"{path}: cannot create the output folder ({err.strerror or err})") from None
+    return path
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (creating the parent folder)."""
     path = Path(path)

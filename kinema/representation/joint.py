@@ -32,7 +32,14 @@ from kinema.rig import Rig
 
 CHANNELS = {"pos": slice(0, 3), "rot": slice(3, 9), "vel": slice(9, 12), "contact": slice(12, 13)}
 NUM_CHANNELS = 13
-CONTACT = 12
+#: every joint row: position relative to the root (m), global rotation in 6D, the planted flag
+POS, ROT, CONTACT = CHANNELS["pos"], CHANNELS["rot"], 12
+#: position and rotation together (what a full-body keyframe pins)
+POSE = slice(POS.start, ROT.stop)
+#: the root row: lateral and forward ground velocity, height, and the heading's cosine and sine
+ROOT_LATERAL, ROOT_HEIGHT, ROOT_FORWARD = 0, 1, 2
+ROOT_HEADING_COS, ROOT_HEADING_SIN = 9, 10
+ROOT_HEADING = slice(ROOT_HEADING_COS, ROOT_HEADING_SIN + 1)
 
 
 def yaw_quat(psi: torch.Tensor) -> torch.Tensor:

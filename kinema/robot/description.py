@@ -91,14 +91,17 @@ def _hinges(model: mujoco.MjModel, where: str) -> tuple[tuple[str, ...], np.ndar
         raise KinemaError(f"{where}: the robot's first body needs a <freejoint/> (a floating base)")
     others = [j for j in range(1, model.njnt) if types[j] != mujoco.mjtJoint.mjJNT_HINGE]
     if others:
-        raise KinemaError(f"{where}: only hinge joints are supported below the base; not {model.joint(others[0]).name!r}")
+        raise KinemaError(
+            f"{where}: only hinge joints are supported below the base; not {model.joint(others[0]).name!r}"
+        )
     hinge = list(range(1, model.njnt))
     names = tuple(model.joint(j).name or f"joint{j}" for j in hinge)
     ranges = np.array([model.jnt_range[j] if model.jnt_limited[j] else (-np.inf, np.inf) for j in hinge]).reshape(-1, 2)
     return names, model.jnt_qposadr[hinge].copy(), model.jnt_dofadr[hinge].copy(), ranges
 
 
-def _subtree(model: mujoco.MjModel, root: int) -> list[int]:
+def subtree(model: mujoco.MjModel, root: int) -> list[int]:
+    """Body ids of ``root`` and every body below it."""
     return [b for b in range(model.nbody) if b == root or _is_below(model, b, root)]
 
 
@@ -114,7 +117,7 @@ def _sole(model: mujoco.MjModel, data: mujoco.MjData, foot: int, where: str) -> 
     """The lowest geom-box corners (world z at rest) of a foot body and the bodies below it."""
     corners = []
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
-    bodies = _subtree(model, foot)
+    bodies = subtree(model, foot)
     for g in range(model.ngeom):
         if int(model.geom_bodyid[g]) not in bodies:
             continue
@@ -154,7 +157,16 @@ def load_robot(name_or_path: str | Path, mapping: str | Path | dict | None = Non
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
     soles = {side: _sole(model, data, body_ids[f"{side}_foot"], where) for side in ("left", "right")}
-    robot = Robot(key.lower() if key.lower() in BUILTIN_ROBOTS else str(path), model, points, body_ids, names,
-                  qadr, dadr, ranges, soles)
+    robot = Robot(
+        key.lower() if key.lower() in BUILTIN_ROBOTS else str(path),
+        model,
+        points,
+        body_ids,
+        names,
+        qadr,
+        dadr,
+        ranges,
+        soles,
+    )
     _check_facing(robot, data, where)
     return robot

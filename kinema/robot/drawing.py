@@ -42,8 +42,14 @@ def robot_skeleton(robot: Robot) -> Skeleton:
     body = {k: m.body(robot.body_ids[k]).name for k in robot.body_ids}
     roles = {"pelvis": body["pelvis"], "neck": body["torso"]}
     for s in SIDES:
-        roles.update({f"{s}_hip": body[f"{s}_hip"], f"{s}_upper_arm": body[f"{s}_shoulder"],
-                      f"{s}_ankle": body[f"{s}_foot"], f"{s}_toe": f"{s}_sole"})
+        roles.update(
+            {
+                f"{s}_hip": body[f"{s}_hip"],
+                f"{s}_upper_arm": body[f"{s}_shoulder"],
+                f"{s}_ankle": body[f"{s}_foot"],
+                f"{s}_toe": f"{s}_sole",
+            }
+        )
     if "head" in names:
         roles["head"] = "head"
     return Skeleton(names, parents, np.array(offsets), role_overrides=roles, name=robot.name)
@@ -80,5 +86,11 @@ def robot_motion_for_drawing(motion: RobotMotion, robot: Robot) -> Motion:
     contacts = None
     if motion.sole_planted is not None:
         contacts = torch.as_tensor(np.repeat(motion.sole_planted.astype(float), 2, axis=1))
-    return Motion.from_global(sk, motion.fps, torch.as_tensor(P[:, 0]), torch.as_tensor(_quaternions(R)),
-                              foot_contacts=contacts, positions=torch.as_tensor(P))
+    return Motion.from_global(
+        sk,
+        motion.fps,
+        torch.as_tensor(P[:, 0]),
+        torch.as_tensor(_quaternions(R)),
+        foot_contacts=contacts,
+        positions=torch.as_tensor(P),
+    )

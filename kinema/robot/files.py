@@ -59,8 +59,15 @@ def read_csv(path: Path) -> dict:
     if len(time) > 1 and not (span > 0 and (np.diff(time) > 0).all()):
         raise KinemaError(f"{path}: the time column must increase")
     fps = (len(time) - 1) / span if len(time) > 1 else 30.0
-    return {"time": time, "root_position": table[:, 1:4], "root_quaternion": table[:, 4:8],
-            "joint_angles": table[:, 8:], "joint_names": header[8:], "fps": fps, "robot": None}
+    return {
+        "time": time,
+        "root_position": table[:, 1:4],
+        "root_quaternion": table[:, 4:8],
+        "joint_angles": table[:, 8:],
+        "joint_names": header[8:],
+        "fps": fps,
+        "robot": None,
+    }
 
 
 def read_npz(path: Path) -> dict:

@@ -3,9 +3,10 @@ forward kinematics and Jacobians (``mj_kinematics``, ``mj_comPos``, ``mj_jac``, 
 
 Each frame is solved from the previous frame's solution (warm start), so the solver never jumps to
 another IK branch; a small pull towards that previous pose and towards the zero pose keeps redundant
-joints (wrists, waist) still. Sole points below the floor are pushed up by one-sided rows. Joint limits are enforced inside the iterations: a joint at a bound whose
-step points outwards is frozen for that step and the step is solved again without it, and every step
-is clamped into the ranges, so later iterations work with the clamped pose.
+joints (wrists, waist) still. Sole points below the floor are pushed up by one-sided rows. Joint limits
+are enforced inside the iterations: a joint at a bound whose step points outwards is frozen for that
+step and the step is solved again without it, and every step is clamped into the ranges, so later
+iterations work with the clamped pose.
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
 class HingeIK:
     """Per-frame IK for one robot (see the module docstring)."""
 
-    def __init__(self, robot: Robot, sizes: RobotSizes, weights: IKWeights = IKWeights()):
+    def __init__(self, robot: Robot, sizes: RobotSizes, weights: IKWeights | None = None):
+        weights = weights or IKWeights()
         self.robot, self.sizes, self.w = robot, sizes, weights
         self.model, self.data = robot.model, mujoco.MjData(robot.model)
         nv = robot.model.nv

@@ -73,8 +73,10 @@ _WORDS = {
 }
 _LAST_WINS = ("foot", "hand", "hip", "shoulder")  # e.g. the ankle-roll link below the ankle-pitch link
 _FALLBACK = {"torso": "pelvis", "head": "torso"}  # a robot without a torso or head body uses the one below
-_SIDE = {"left": re.compile(r"(^|[_\-. ])(left|l)([_\-. ]|$)|^left", re.I),
-         "right": re.compile(r"(^|[_\-. ])(right|r)([_\-. ]|$)|^right", re.I)}
+_SIDE = {
+    "left": re.compile(r"(^|[_\-. ])(left|l)([_\-. ]|$)|^left", re.I),
+    "right": re.compile(r"(^|[_\-. ])(right|r)([_\-. ]|$)|^right", re.I),
+}
 
 
 @dataclass(frozen=True)
@@ -107,7 +109,7 @@ def _read_entry(key: str, value, where: str) -> BodyPoint:
     if isinstance(value, str):
         return BodyPoint(value)
     if not isinstance(value, dict) or not isinstance(value.get("body"), str):
-        raise KinemaError(f"{where}: {key!r} must be a body name or {{\"body\": NAME, \"offset\": [x, y, z]}}")
+        raise KinemaError(f'{where}: {key!r} must be a body name or {{"body": NAME, "offset": [x, y, z]}}')
     offset = value.get("offset", [0.0, 0.0, 0.0])
     arr = np.asarray(offset, dtype=object)
     if arr.shape != (3,) or not all(isinstance(x, int | float) and np.isfinite(x) for x in offset):

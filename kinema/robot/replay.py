@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from kinema.robot.description import Robot
+from kinema.robot.description import Robot, subtree
 from kinema.robot.motion import RobotMotion
 from kinema.robot.targets import SIDES
 
@@ -61,18 +61,9 @@ def leg_geoms(robot: Robot) -> dict[str, list[int]]:
     kinds = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE)}
     out = {}
     for s in SIDES:
-        top = robot.body_ids[f"{s}_hip"]
-        below = {top} | {b for b in range(m.nbody) if _ancestor(m, b, top)}
+        below = set(subtree(m, robot.body_ids[f"{s}_hip"]))
         out[s] = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) in below and int(m.geom_type[g]) in kinds]
     return out
-
-
-def _ancestor(model: mujoco.MjModel, body: int, top: int) -> bool:
-    while body > 0:
-        body = int(model.body_parentid[body])
-        if body == top:
-            return True
-    return False
 
 
 def _overlap(robot: Robot, data: mujoco.MjData, geoms: dict[str, list[int]]) -> float:

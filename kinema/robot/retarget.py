@@ -57,13 +57,13 @@ def _continuous(quats: np.ndarray) -> np.ndarray:
     return out
 
 
-def retarget_to_robot(motion, robot: Robot | str, weights: IKWeights = IKWeights()) -> RobotMotion:
+def retarget_to_robot(motion, robot: Robot | str, weights: IKWeights | None = None) -> RobotMotion:
     """The robot's motion (MuJoCo poses at the motion's fps) for a human kinema ``Motion``; ``robot`` is a
     `Robot` or anything `load_robot` takes (``"g1"``, an MJCF path)."""
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
     sizes = robot_sizes(robot)
     targets = frame_targets(motion, sizes)
-    ik = HingeIK(robot, sizes, weights)
+    ik = HingeIK(robot, sizes, weights or IKWeights())
     q = robot.model.qpos0.copy()
     q[0:3] = targets.pelvis[0]
     q[3:7] = _quaternion(targets.pelvis_frame[0] @ ik.rest["pelvis"])

@@ -44,7 +44,7 @@ from kinema.evaluate.metrics import position_jerk
 from kinema.geometry.rotations import sixd_to_quat
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
-from kinema.representation.joint import JointRepresentation
+from kinema.representation.joint import POS, JointRepresentation
 from kinema.rig import Rig
 
 WINDOW = 10
@@ -95,7 +95,7 @@ def _stretch(m: Motion) -> float:
 def _local_positions(m: Motion, rep: JointRepresentation) -> torch.Tensor:
     f = rep.from_motion(m.to(torch.float64))
     keep = [j for j in range(m.num_joints) if j != rep.rig.root]
-    return f[:, keep, 0:3].reshape(f.shape[0], -1)
+    return f[:, keep, POS].reshape(f.shape[0], -1)
 
 
 def _target(rig: Rig, ref: Motion, rep: JointRepresentation, frames: int) -> JointTarget | None:
@@ -133,7 +133,7 @@ def motion_descriptor(m: Motion, rep: JointRepresentation) -> torch.Tensor:
     pose and how much it moves), then the root's mean ground speed and its height's mean and std."""
     f = rep.from_motion(m.to(torch.float64))
     root = rep.rig.root
-    pos = f[:, [j for j in range(m.num_joints) if j != root], 0:3]
+    pos = f[:, [j for j in range(m.num_joints) if j != root], POS]
     r = f[:, root]
     tail = torch.stack([r[:, [0, 2]].norm(dim=-1).mean(), r[:, 1].mean(), r[:, 1].std()])
     return torch.cat([pos.mean(0).flatten(), pos.std(0).flatten(), tail])

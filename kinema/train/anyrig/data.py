@@ -21,7 +21,7 @@ from kinema.data.multirig import MultiRigData
 from kinema.errors import DataError
 from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.skeleton_codes import CodeBatch, SkeletonCodes, batch_codes, skeleton_codes
-from kinema.representation.joint import JointRepresentation
+from kinema.representation.joint import NUM_CHANNELS, POS, ROOT_HEADING, JointRepresentation
 from kinema.rig import Rig
 from kinema.train.anyrig.augment import augment
 
@@ -55,7 +55,7 @@ class Batch:
 
 
 def _loops(f: torch.Tensor) -> bool:
-    return f.shape[0] > 4 and float((f[0, :, 0:3] - f[-1, :, 0:3]).abs().max()) < LOOP_TOL
+    return f.shape[0] > 4 and float((f[0, :, POS] - f[-1, :, POS]).abs().max()) < LOOP_TOL
 
 
 def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str) -> Clip:
@@ -111,20 +111,20 @@ class AnyRigClips:
     def stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and std ``(2, 13)`` (root row, other joints) over every real channel of every frame; the
         heading's cos/sin get mean 0 and std sqrt(1/2), as training turns clips to random headings."""
-        mean, std = torch.zeros(2, 13), torch.ones(2, 13)
+        mean, std = torch.zeros(2, NUM_CHANNELS), torch.ones(2, NUM_CHANNELS)
         for row in (0, 1):
             xs, ms = [], []
             for c in self.clips:
                 is_root = c.codes.flags[:, 0] > 0.5
                 sel = is_root if row == 0 else ~is_root
-                xs.append(c.features[:, sel].reshape(-1, 13).double())
+                xs.append(c.features[:, sel].reshape(-1, NUM_CHANNELS).double())
                 ms.append(c.channel_mask[sel].expand(c.features.shape[0], -1, -1).reshape(-1, 13))
             x, m = torch.cat(xs), torch.cat(ms).double()
             n = m.sum(0).clamp_min(1)
             mu = (x * m).sum(0) / n
             sd = (((x - mu) ** 2 * m).sum(0) / n).sqrt()
             mean[row], std[row] = mu.float(), sd.clamp_min(1e-2).float()
-        mean[0, 9:11], std[0, 9:11] = 0.0, math.sqrt(0.5)
+        mean[0, ROOT_HEADING], std[0, ROOT_HEADING] = 0.0, math.sqrt(0.5)
         return mean, std
 
     def sample_batch(self, gen: torch.Generator, token_budget: int) -> Batch:
@@ -154,7 +154,8 @@ class AnyRigClips:
             channel_mask[b, : c.num_joints] = c.channel_mask
             captions.append(c.captions[int(torch.randint(len(c.captions), (1,), generator=gen))])
             root = int(c.codes.flags[:, 0].argmax())
-            x[b, :, root, 9:11] = _turn(x[b, :, root, 9:11], float(torch.rand(1, generator=gen)) * 2 * math.pi)
+            turn = float(torch.rand(1, generator=gen)) * 2 * math.pi
+            x[b, :, root, ROOT_HEADING] = _turn(x[b, :, root, ROOT_HEADING], turn)
         x = x * frame_mask[:, :, None, None]
         return Batch(x, frame_mask, channel_mask, batch_codes([c.codes for c in clips], J), captions)
 

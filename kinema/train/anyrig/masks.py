@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import torch
 
+from kinema.representation.joint import POS
+
 KINDS = ("keyframes", "joints", "prefix", "root")
 
 
@@ -26,7 +28,7 @@ def _one(mask, frames, J, root, gen):
         others = [j for j in range(J) if j != root] or [root]
         js = torch.tensor(others)[_pick(len(others), int(torch.randint(1, 4, (1,), generator=gen)), gen)]
         fs = _pick(frames, int(torch.randint(1, 5, (1,), generator=gen)), gen)
-        mask[fs[:, None], js[None, :], 0:3] = 1.0
+        mask[fs[:, None], js[None, :], POS] = 1.0
     elif kind == "prefix":
         mask[: int(torch.randint(1, max(2, frames // 2 + 1), (1,), generator=gen))] = 1.0
     else:
