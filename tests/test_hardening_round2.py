@@ -4,6 +4,7 @@ tests/hardening_fixtures.py."""
 
 from __future__ import annotations
 
+import socket
 import time
 
 import numpy as np
@@ -93,3 +94,51 @@ def test_any_rig_model_refuses_a_huge_rig_quickly(tmp_path, capsys, monkeypatch)
     monkeypatch.setenv("KINEMA_MAX_RIG_JOINTS", "nonsense")
     assert main(args) == 2
     one_line_error(capsys, "KINEMA_MAX_RIG_JOINTS", "positive integer")
+
+
+# ---------------------------------------------------------------------------- batch
+def _jobs(tmp_path):
+    jobs = tmp_path / "jobs.jsonl"
+    jobs.write_text('{"prompt": "A person walks.", "seconds": 1, "steps": 2}\n')
+    return jobs
+
+
+def test_batch_out_that_is_a_file_is_one_line_error(tmp_path, capsys):
+    existing = tmp_path / "existing.txt"
+    existing.write_text("keep me")
+    assert main(["batch", str(_jobs(tmp_path)), "--out", str(existing)]) == 2
+    one_line_error(capsys, "existing.txt", "is a file")
+    assert main(["batch", str(_jobs(tmp_path)), "--out", str(existing / "sub")]) == 2
+    one_line_error(capsys, "existing.txt/sub", "cannot create the output folder")
+    assert existing.read_text() == "keep me"
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_batch_ray_address_without_ray_fails_fast(tmp_path, capsys):
+    pytest.importorskip("ray")
+    port = _closed_port()
+    t0 = time.perf_counter()
+    assert main(["batch", str(_jobs(tmp_path)), "--out", str(tmp_path / "o"), "--ray", f"127.0.0.1:{port}"]) == 2
+    assert time.perf_counter() - t0 < 30
+    one_line_error(capsys, f"--ray 127.0.0.1:{port}", "cannot reach a Ray head")
+
+
+def test_batch_ray_address_that_is_no_ray_head_times_out(tmp_path, capsys, monkeypatch):
+    """Something accepts connections there but never answers as Ray: bounded by KINEMA_RAY_TIMEOUT."""
+    pytest.importorskip("ray")
+    monkeypatch.setenv("KINEMA_RAY_TIMEOUT", "3")
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        t0 = time.perf_counter()
+        args = ["batch", str(_jobs(tmp_path)), "--out", str(tmp_path / "o"), "--ray", f"127.0.0.1:{port}"]
+        assert main(args) == 2
+        assert time.perf_counter() - t0 < 40
+    last = capsys.readouterr().err.strip().splitlines()[-1]  # Ray logs its own attempt first
+    assert last.startswith("kinema: error: --ray") and "no Ray cluster answered within 3 s" in last, last
