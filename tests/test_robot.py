@@ -104,8 +104,13 @@ def test_replay_measures_catch_bad_poses(walk, g1):
     """The measures are not vacuous: a joint pushed out of range, a sunk root, crossed legs are reported."""
     _, good = walk
     bad = RobotMotion(
-        good.robot, good.fps, good.joint_names, good.root_position - [0, 0, 0.1], good.root_quaternion,
-        good.joint_angles.copy(), good.sole_planted,
+        good.robot,
+        good.fps,
+        good.joint_names,
+        good.root_position - [0, 0, 0.1],
+        good.root_quaternion,
+        good.joint_angles.copy(),
+        good.sole_planted,
     )
     knee = g1.joint_names.index("left_knee_joint")
     bad.joint_angles[5, knee] = g1.ranges[knee, 1] + 0.3

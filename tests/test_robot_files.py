@@ -90,8 +90,14 @@ def test_unrecognised_mjcf_needs_and_uses_a_mapping(bow, tmp_path):
     path, renames = _renamed_g1(tmp_path)
     with pytest.raises(KinemaError, match="--mapping"):
         load_robot(path)
-    landmarks = {"hip": "hip_roll", "knee": "knee", "foot": "ankle_roll", "shoulder": "shoulder_roll",
-                 "elbow": "elbow", "hand": "wrist_yaw"}
+    landmarks = {
+        "hip": "hip_roll",
+        "knee": "knee",
+        "foot": "ankle_roll",
+        "shoulder": "shoulder_roll",
+        "elbow": "elbow",
+        "hand": "wrist_yaw",
+    }
     mapping = {f"{s}_{k}": renames[f"{s}_{v}_link"] for s in ("left", "right") for k, v in landmarks.items()}
     mapping.update({"pelvis": "pelvis", "torso": "torso_link", "head": {"body": "torso_link", "offset": [0, 0, 0.43]}})
     (tmp_path / "map.json").write_text(json.dumps(mapping))
