@@ -23,7 +23,7 @@ from kinema.errors import SkeletonError
 if TYPE_CHECKING:
     from kinema.mesh import SkinnedMesh
 
-#: Roles every locomotion feature needs (see kinema.representation.kimodo).
+#: Roles every locomotion feature needs (see kinema.representation.kimodo_features).
 LOCOMOTION_ROLES = ("pelvis", "left_hip", "right_hip", "left_ankle", "right_ankle", "left_toe", "right_toe")
 
 

@@ -62,7 +62,7 @@ def main() -> None:
             rows.append((f, motion_stats(m.global_transforms()[1], m.fps, list(m.skeleton.names))))
     else:
         from kinema.data.dataset import MotionDataset
-        from kinema.representation.kimodo import features_to_motion
+        from kinema.representation.kimodo_features import features_to_motion
 
         per: dict[str, list[dict[str, float]]] = {c: [] for c in args.content}
         for split in ("train", "val", "test"):

@@ -22,7 +22,7 @@ from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_to_axis_angle
 from kinema.io.bvh import read_bvh
 from kinema.representation.encode import encode_constraints, world_to_relative
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo_features import motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 

@@ -24,7 +24,7 @@ from kinema.data.dataset import MotionDataset
 from kinema.data.phrasings import speed_band, speed_captions
 from kinema.data.split import assign_splits, group_of
 from kinema.errors import DataError
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo_features import motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 

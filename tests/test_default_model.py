@@ -41,7 +41,7 @@ def test_shipped_files_size_and_licence() -> None:
 def test_default_model_meets_waypoints_after_postprocessing(model) -> None:
     cons = [{"type": "root2d", "times": [1.5, 3.0], "smooth_root_2d": [[0.0, 1.5], [1.0, 3.0]]}]
     m = model.generate("A person walks forward.", seconds=4, constraints=cons, seed=1, steps=20)[0]
-    from kinema.representation.kimodo import motion_to_features
+    from kinema.representation.kimodo_features import motion_to_features
 
     root = motion_to_features(m)[:, [0, 2]]  # smoothed root x, z
     for t, xz in ((1.5, (0.0, 1.5)), (3.0, (1.0, 3.0))):

@@ -61,12 +61,12 @@ def test_suite_ee_part_runs_the_suites_end_effector_cases_both_ways(tiny_data) -
     out = evaluate_suite_ee(
         model, cases[: first + 1], planner=KeyjointPlanner.load("default"), steps=2, progress=lines.append
     )
-    assert set(out) == {"single-stage", "two-stage"} and len(lines) == 1
-    one, two = out["single-stage"][0], out["two-stage"][0]
+    assert set(out) == {"direct", "keyjoint-planned"} and len(lines) == 1
+    one, two = out["direct"][0], out["keyjoint-planned"][0]
     assert one["id"] == two["id"] == cases[first]["id"] and one["ee_pos_cm"] >= 0 and two["ee_pos_cm"] >= 0
     assert one["ee_pos_cm"] != two["ee_pos_cm"]  # the two rows are different generations
     table = summarize_suite(out)
-    assert table["two-stage"]["cases"] == 1 and table["single-stage"]["ee_pos_cm"] == one["ee_pos_cm"]
+    assert table["keyjoint-planned"]["cases"] == 1 and table["direct"]["ee_pos_cm"] == one["ee_pos_cm"]
 
 
 def test_sparse_rows_get_r3_and_fid_from_the_shipped_retrieval_model(tiny_data) -> None:
@@ -76,10 +76,10 @@ def test_sparse_rows_get_r3_and_fid_from_the_shipped_retrieval_model(tiny_data) 
 
     (case,) = sparse_cases(tiny_data, 2, split="all")[:1]  # the tiny build has one clip of 5 s or more
     cases = [case, dict(case, prompt="A person walks forward slowly.")]
-    res = evaluate_sparse(kinema.load_model(), cases, rows=["single-stage"], steps=2, progress=lambda _: None)
+    res = evaluate_sparse(kinema.load_model(), cases, rows=["direct"], steps=2, progress=lambda _: None)
     warn: list[str] = []
     out = text_scores(load_retrieval(default_retrieval_path()), cases, res, warn=warn)
-    assert set(out) == {"ground_truth", "single-stage"}
-    assert out["ground_truth"]["fid"] < 1e-3 < out["single-stage"]["fid"]  # FID against the crops themselves
+    assert set(out) == {"ground_truth", "direct"}
+    assert out["ground_truth"]["fid"] < 1e-3 < out["direct"]["fid"]  # FID against the crops themselves
     assert out["ground_truth"]["r3_whole"] == 1.0  # 2 captions: each is in its own top 3
-    assert out["single-stage"]["r3_batch32"] is None and any("R@3 (batch 32) skipped" in w for w in warn)
+    assert out["direct"]["r3_batch32"] is None and any("R@3 (batch 32) skipped" in w for w in warn)

@@ -10,7 +10,7 @@ import torch
 from kinema.geometry.rotations import axis_angle_to_quat
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
-from kinema.representation.kimodo import (
+from kinema.representation.kimodo_features import (
     features_to_motion,
     global_to_local_root,
     heading_from_positions,

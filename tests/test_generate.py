@@ -44,7 +44,7 @@ def test_same_seed_same_motion(model):
 
 
 def test_heading_sets_the_first_frame_facing(model):
-    from kinema.representation.kimodo import heading_from_positions
+    from kinema.representation.kimodo_features import heading_from_positions
 
     m = model.generate("", seconds=1.0, steps=5, heading=np.pi / 2, postprocess=False)[0]
     h = heading_from_positions(m.positions[:1], m.skeleton)[0]

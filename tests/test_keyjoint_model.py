@@ -1,4 +1,4 @@
-"""Keyjoint trajectories: representation, masks, the denoiser's files, two-stage sampling, training."""
+"""Keyjoint trajectories: representation, masks, the denoiser's files, keyjoint-planned sampling, training."""
 
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ import torch
 
 from kinema.human.keyjoints import KeyjointTargets, displace_joints, gaussian_spread
 from kinema.representation.flat import FlatRepresentation
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 

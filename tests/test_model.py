@@ -18,7 +18,7 @@ from kinema.model import (
     padded_local_root,
     preset_names,
 )
-from kinema.representation.kimodo import global_to_local_root
+from kinema.representation.kimodo_features import global_to_local_root
 
 J = 5  # small skeleton keeps the tests fast: D = 5 + 60 + 4 = 69
 LENGTHS = (24, 17, 6)

@@ -15,7 +15,7 @@ from kinema.evaluate.probe_expectations import (
 )
 from kinema.evaluate.probe_measures import window_speed
 from kinema.model.vocabulary import KnownPrompts
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 from kinema.text import get_text_encoder
 
 SEP = 2.0

@@ -16,7 +16,7 @@ from kinema.data.split import assign_splits, group_of
 from kinema.data.synthetic import CLIPS, PINNED_DURATION_S, animate, clip_ids, write_synthetic_bandai
 from kinema.io.bvh import parse_bvh, read_bvh
 from kinema.motion.contacts import foot_contacts
-from kinema.representation.kimodo import heading_from_positions, motion_to_features
+from kinema.representation.kimodo_features import heading_from_positions, motion_to_features
 
 D2 = "Bandai-Namco-Research-Motiondataset-2/data"
 

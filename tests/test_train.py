@@ -13,7 +13,7 @@ import torch
 
 from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 from kinema.model.loading import load_denoiser
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 from kinema.representation.transform import canonicalize_start
 from kinema.train.trainer import TrainConfig, Trainer
 

@@ -9,7 +9,7 @@ import torch
 from kinema.geometry.rotations import axis_angle_to_quat, matrix_to_sixd, sixd_to_matrix
 from kinema.motion.contacts import contact_joints
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import features_to_motion, motion_to_features
+from kinema.representation.kimodo_features import features_to_motion, motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.skeleton import Skeleton

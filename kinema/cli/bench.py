@@ -15,8 +15,8 @@ from pathlib import Path
 
 from kinema.cli._args import positive_float, positive_int
 from kinema.cli.batch import register_bench as register_batch_bench
+from kinema.cli.bench_keyjoint_planning import register_bench as register_keyjoint_planning_bench
 from kinema.cli.bench_objectives import register_bench as register_objectives_bench
-from kinema.cli.bench_twostage import register_bench as register_twostage_bench
 from kinema.errors import DataError
 
 
@@ -32,7 +32,7 @@ def register(sub) -> None:
     _register_generate(targets)
     register_batch_bench(targets)
     register_objectives_bench(targets)
-    register_twostage_bench(targets)
+    register_keyjoint_planning_bench(targets)
     _register_all(targets)
 
 

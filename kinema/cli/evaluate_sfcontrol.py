@@ -14,7 +14,7 @@ from pathlib import Path
 
 from kinema.io.atomic import atomic_write_bytes
 
-SPARSE_ROWS = ("single-stage", "two-stage", "single-stage + noise opt")
+SPARSE_ROWS = ("direct", "keyjoint-planned", "direct + noise opt")
 
 
 def add_arguments(p) -> None:
@@ -25,14 +25,15 @@ def add_arguments(p) -> None:
         help="'suite' (Kimodo-style test suite, default) or 'sfcontrol' (sparse keyjoint control, "
         "goal reaching, implicit tasks; docs/objectives.md)",
     )
-    p.add_argument("--keyjoint-model", help="sfcontrol: keyjoint model ('default' or a folder) for the two-stage rows")
+    p.add_argument("--keyjoint-model",
+                   help="sfcontrol: keyjoint model ('default' or a folder) for the keyjoint-planned rows")
     p.add_argument("--objective-steps", type=int, default=8, help="sfcontrol: noise iterations (default 8)")
     p.add_argument(
         "--sparse-rows",
         nargs="+",
         choices=SPARSE_ROWS,
         default=SPARSE_ROWS,
-        help="sfcontrol: rows of the sparse protocol (default all; two-stage needs --keyjoint-model)",
+        help="sfcontrol: rows of the sparse protocol (default all; keyjoint-planned needs --keyjoint-model)",
     )
     p.add_argument(
         "--parts",
@@ -40,7 +41,7 @@ def add_arguments(p) -> None:
         choices=("sparse", "ee", "goal", "tasks"),
         default=("sparse", "goal", "tasks"),
         help="sfcontrol: which protocols to run (default sparse goal tasks; 'ee': the suite's end-effector "
-        "cases (--suite, else --cases built) single-stage vs two-stage)",
+        "cases (--suite, else --cases built) direct vs keyjoint-planned)",
     )
 
 
@@ -85,7 +86,7 @@ def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
     if args.keyjoint_model is not None:
         kj = KeyjointPlanner.load(args.keyjoint_model)
     else:
-        rows = [r for r in rows if not r.startswith("two-stage")]
+        rows = [r for r in rows if not r.startswith("keyjoint-planned")]
     cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
     raw = S.evaluate_sparse(
         model, cases, rows=rows, keyjoint=kj, steps=args.steps, objective_steps=args.objective_steps, seed=args.seed

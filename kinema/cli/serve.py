@@ -49,6 +49,8 @@ def register(sub) -> None:
                    help=f"largest request body (default {d.max_body_bytes}); 413 above")
     p.add_argument("--timeout", type=positive_float, default=d.timeout_s,
                    help=f"seconds POST /v1/generate waits for its result (default {d.timeout_s:g}); 504 after")
+    p.add_argument("--read-timeout", type=positive_float, default=d.read_timeout_s,
+                   help=f"seconds to wait for the next part of a request body (default {d.read_timeout_s:g}); 408 after")
     p.add_argument("--max-jobs", type=positive_int, default=d.max_jobs, help=f"jobs kept (default {d.max_jobs})")
     p.add_argument("--job-ttl", type=positive_float, default=d.job_ttl_s,
                    help=f"seconds a finished job's result is kept (default {d.job_ttl_s:g})")
@@ -64,7 +66,8 @@ def build_config(args: argparse.Namespace):
 
     limits = ServerLimits(max_seconds=args.max_seconds, max_samples=args.max_samples, max_steps=args.max_steps,
                           max_body_bytes=args.max_body_bytes, workers=args.workers, queue=args.queue,
-                          timeout_s=args.timeout, max_jobs=args.max_jobs, job_ttl_s=args.job_ttl)
+                          timeout_s=args.timeout, max_jobs=args.max_jobs, job_ttl_s=args.job_ttl,
+                          read_timeout_s=args.read_timeout)
     keys = read_api_keys(args.api_key_file) if args.api_key_file is not None else ()
     return ServerConfig(host=args.host, port=args.port, api_keys=keys, cors_origins=tuple(args.cors_origin),
                         limits=limits)

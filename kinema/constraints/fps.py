@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from kinema.constraints.kimodo import KIMODO_FPS, find_kimodo_meta
+from kinema.constraints.kimodo_examples import KIMODO_FPS, find_kimodo_meta
 from kinema.constraints.types import (
     Constraint,
     ConstraintError,

@@ -6,7 +6,7 @@ A constraints file is a JSON list of objects (or ``{"fps": 30, "constraints": [.
 ``root2d``, ``foot-contact``), keyframes as
 ``frame_indices`` or ``times`` and per-type arrays with one row per keyframe. Kimodo's field names are
 accepted (``smooth_root_2d``, ``global_root_heading``, ``local_joints_rot``, ``root_positions``), and
-so are Kimodo's whole-pose end-effector constraints (kinema.constraints.kimodo).
+so are Kimodo's whole-pose end-effector constraints (kinema.constraints.kimodo_examples).
 `load_constraints` validates everything against the model skeleton, fps and duration and raises
 `ConstraintError` naming the file, the constraint (counted from 0), the field and the reason.
 Keys starting with ``_`` (and ``comment``) are ignored, any other unknown key is an error (typos).
@@ -28,7 +28,7 @@ from kinema.constraints.bvh_poses import fullbody_from_bvh as fullbody_from_bvh
 from kinema.constraints.bvh_poses import poses_from_bvh
 from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
 from kinema.constraints.json_values import int_list, time_list
-from kinema.constraints.kimodo import adapt_pose_form, warn_foreign
+from kinema.constraints.kimodo_examples import adapt_pose_form, warn_foreign
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -195,7 +195,7 @@ def load_constraints(
     file's ``"fps"`` (they must agree when both are given), or Kimodo's 30 fps for a file next to a
     Kimodo ``meta.json``, else at ``fps``; they are converted to ``fps`` by time (kinema.constraints.fps).
     Poses written for another skeleton keep their root (x, z) as waypoints with a `ConstraintWarning`
-    (``foreign_poses="root"``) or raise (``"error"``), see kinema.constraints.kimodo.
+    (``foreign_poses="root"``) or raise (``"error"``), see kinema.constraints.kimodo_examples.
     Raises `ConstraintError` (``file: constraint i (type): field 'f': reason``).
     """
     data, source, base_dirs, file_fps = read_constraints_json(path_or_obj, base_dir)

@@ -37,7 +37,7 @@ from kinema.data.split import SPLITS, assign_splits, group_of
 from kinema.errors import DataError
 from kinema.motion.contacts import ContactThresholds
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo_features import motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.representation.transform import canonicalize_start
@@ -161,7 +161,7 @@ def with_clean_rest_pose(skeleton: Skeleton, feats: list, records: list[dict], f
     BVH export re-bases onto it so the exported rest pose is clean (kinema.motion.rest) instead of
     Bandai's pose lying along +X."""
     from kinema.motion.rest import standing_rest_pose
-    from kinema.representation.kimodo import features_to_motion
+    from kinema.representation.kimodo_features import features_to_motion
 
     def preference(i: int):
         r = records[i]

@@ -24,7 +24,7 @@ from kinema.errors import DataError, KinemaError
 from kinema.motion.contacts import ContactThresholds
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo_features import motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.representation.transform import canonicalize_start

@@ -24,7 +24,7 @@ from pathlib import Path
 from kinema.data.motion_cache import MotionCache, is_motion_cache, rest_extent, topology_key
 from kinema.errors import DataError
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 
 MANIFEST_FORMAT = "kinema-manifest"
 DEFAULT_EXCLUDE = ("prop",)

@@ -44,7 +44,7 @@ from kinema.evaluate.probe_measures import (
     window_speed,
 )
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 
 PROBE_SECONDS = 4.0
 SPEED_CONTENTS = ("walk", "run", "dash")

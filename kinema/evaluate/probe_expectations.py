@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 
 from kinema.evaluate.probe_measures import group_step, window_speed
-from kinema.representation.kimodo import features_to_motion
+from kinema.representation.kimodo_features import features_to_motion
 
 
 def nearest_captions(prompts: list[str], known, encode) -> dict[str, tuple[str, float]]:

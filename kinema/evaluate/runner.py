@@ -25,7 +25,7 @@ from kinema.evaluate.scores import COLUMNS, by_keyframes, by_kind, finite, score
 from kinema.evaluate.suite import CASE_KINDS, case_ground_truth, case_targets
 from kinema.evaluate.timeline import run_timeline_case, timeline_summary
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import motion_to_features
+from kinema.representation.kimodo_features import motion_to_features
 
 MODE_NAMES = {False: "raw", True: "post"}
 ROWS = ("ground_truth", "raw", "post")

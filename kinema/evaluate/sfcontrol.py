@@ -5,11 +5,11 @@ the origin facing +Z. Targets: one frame every 1.5 s (frames 0, 30, 60, 90 at 20
 a random half (3) of the six keyjoints (pelvis, head, hands, ankles) at their ground-truth world
 positions. Rows (all *raw*, no post-processing):
 
-- ``single-stage``: today's sampler, each target an ``end-effector`` constraint (imputation plus the
+- ``direct``: today's sampler, each target an ``end-effector`` constraint (imputation plus the
   sampler's root/joint corrections);
-- ``two-stage``: the same constraints with ``keyjoint_model``: the keyjoint model plans the six
+- ``keyjoint-planned``: the same constraints with ``keyjoint_model``: the keyjoint model plans the six
   keyjoints, the body model follows them (kinema.human.keyjoint_planning);
-- ``single-stage + noise opt``: single-stage with each target also a ``reach`` objective on its frame
+- ``direct + noise opt``: direct with each target also a ``reach`` objective on its frame
   (noise optimisation, then snapping: kinema.objectives).
 
 Metrics: control error (mean distance of the FK joint to its target, cm), foot skate (cm/s, on the
@@ -124,7 +124,7 @@ def evaluate_sparse(
                 postprocess=False,
                 objectives=objs,
                 objective_steps=objective_steps if objs else None,
-                keyjoint_model=keyjoint if row == "two-stage" else None,
+                keyjoint_model=keyjoint if row == "keyjoint-planned" else None,
             )[0]
             out[row]["scores"].append(score(m, case, time.perf_counter() - t0))
             out[row]["motions"].append(m)

@@ -1,10 +1,10 @@
-"""The test suite's end-effector cases, single-stage against two-stage (issue 17's "done when").
+"""The test suite's end-effector cases, direct against keyjoint-planned (issue 17's "done when").
 
 The cases are the Kimodo-style suite's (kinema.evaluate.suite: ``kinema evaluate`` builds or reads the
 same file), restricted to those with end-effector *position* targets (the ``end_effector`` kind and the
 ``mixed`` cases holding one). Each is generated exactly as the suite runner does (same prompt, length,
 constraints, heading and seed ``seed * 100003 + i`` with ``i`` the case's index in the whole suite,
-raw), once as today (single-stage) and once with the keyjoint model planning first
+raw), once as today (direct) and once with the keyjoint model planning first
 (``keyjoint_model``, kinema.human.keyjoint_planning), and scored with the runner's own metrics.
 """
 
@@ -16,7 +16,7 @@ import time
 from kinema.evaluate.runner import score_motion
 from kinema.evaluate.suite import EFFECTORS, case_targets
 
-SUITE_ROWS = ("single-stage", "two-stage")
+SUITE_ROWS = ("direct", "keyjoint-planned")
 METRICS = ("ee_pos_cm", "ee_rot_deg", "root2d_pos_cm", "fullbody_pos_cm", "foot_skate_cm_s", "jerk", "seconds")
 
 
@@ -35,9 +35,9 @@ def ee_cases(cases: list[dict]) -> list[tuple[int, dict]]:
 def evaluate_suite_ee(
     model, cases: list[dict], *, planner=None, steps: int | None = None, seed: int = 0, progress=print
 ) -> dict:
-    """Per row (``single-stage``, and ``two-stage`` when ``planner`` is given): per-case metrics
+    """Per row (``direct``, and ``keyjoint-planned`` when ``planner`` is given): per-case metrics
     (``{"id", "kind", **METRICS}``) of the suite's end-effector cases."""
-    rows = ["single-stage"] + (["two-stage"] if planner is not None else [])
+    rows = ["direct"] + (["keyjoint-planned"] if planner is not None else [])
     out: dict = {r: [] for r in rows}
     picked = ee_cases(cases)
     for n, (i, case) in enumerate(picked):
@@ -52,7 +52,7 @@ def evaluate_suite_ee(
                 seed=seed * 100003 + i,
                 postprocess=False,
                 heading=case["heading"],
-                keyjoint_model=planner if row == "two-stage" else None,
+                keyjoint_model=planner if row == "keyjoint-planned" else None,
             )[0]
             seconds = time.perf_counter() - t0
             metrics, _ = score_motion(motion, targets)

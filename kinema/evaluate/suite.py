@@ -34,7 +34,7 @@ from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
 from kinema.kinematics import forward_kinematics
 from kinema.motion.contacts import ContactThresholds, foot_contacts
 from kinema.motion.core import Motion
-from kinema.representation.kimodo import features_to_motion, motion_to_features
+from kinema.representation.kimodo_features import features_to_motion, motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.transform import canonicalize_start, translate_features
 

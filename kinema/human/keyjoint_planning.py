@@ -1,4 +1,4 @@
-"""Two-stage control (SFControl Sec. 3.1 + 3.2): plan the keyjoints first, then pose the body on them.
+"""Keyjoint planning (SFControl Sec. 3.1 + 3.2): plan the keyjoints first, then pose the body on them.
 
 Stage 1 samples a dense keyjoint trajectory ``(B, T, 20)`` (kinema.representation.keyjoint: pelvis,
 head, hands, ankles in world metres, Y up, then the heading) from the small keyjoint denoiser
@@ -47,7 +47,7 @@ KEYJOINT_TEXT_WEIGHT = 2.0
 KEYJOINT_SIGMA_SECONDS = 0.3
 #: Gaussian (seconds) over the finished trajectory: the small model's keyjoints shake (acceleration far
 #: from targets 4-5 x ground truth), and the body stage copies that into the pelvis; 0.1 s took the
-#: sparse protocol's jerk 310 -> 92 (single-stage 277) and its control error 8.9 -> 8.5 cm, and on the
+#: sparse protocol's jerk 310 -> 92 (direct 277) and its control error 8.9 -> 8.5 cm, and on the
 #: suite's end-effector cases jerk 835 -> 204
 KEYJOINT_SMOOTH_SECONDS = 0.1
 #: Gaussian (seconds) of the displacement that bends the smoothed trajectory back onto the targets
@@ -206,7 +206,7 @@ def with_keyjoint_plan(
     follows a planned trajectory to about 8 cm, and the untargeted ones only add disagreement); on the
     sparse protocol, where most keyjoints are targeted somewhere, the two were equal (8.45 / 8.49 cm).
     With ``override`` the planned keyjoints' positions replace the user's own on every frame (the
-    refinement pass of :func:`sample_two_stage` aims them past the targets by the body's miss)."""
+    refinement pass of :func:`sample_with_keyjoint_plan` aims them past the targets by the body's miss)."""
     B, T, _ = keys.shape
     x_tgt = torch.zeros(B, T, rep.dim) if targets.x_tgt is None else torch.nan_to_num(targets.x_tgt.float()).clone()
     mask = torch.zeros(B, T, rep.dim) if targets.mask is None else targets.mask.float().clone()
@@ -274,7 +274,7 @@ class KeyjointPlanner:
         return cls(model, DDIMSampler(), info)
 
 
-def sample_two_stage(
+def sample_with_keyjoint_plan(
     denoiser: Denoiser,
     sampler: DDIMSampler,
     rep: FlatRepresentation,

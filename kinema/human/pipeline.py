@@ -21,7 +21,7 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
-from kinema.human.keyjoint_planning import KeyjointPlanner, sample_two_stage
+from kinema.human.keyjoint_planning import KeyjointPlanner, sample_with_keyjoint_plan
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
 from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
@@ -191,13 +191,13 @@ class HumanPipeline(MotionPipeline):
 
     # ------------------------------------------------------------------ internals
     def _planner(self, keyjoint_model, plan: SegmentPlan, bound) -> KeyjointPlanner | None:
-        """The keyjoint planner of a two-stage call (None for single-stage), checked against the call."""
+        """The keyjoint planner of a keyjoint-planned call (None for direct), checked against the call."""
         if keyjoint_model is None:
             return None
         if bound:
-            raise KinemaError("keyjoint_model (two-stage control) cannot be combined with objectives")
+            raise KinemaError("keyjoint_model (keyjoint planning) cannot be combined with objectives")
         if len(plan.segments) > 1:
-            raise KinemaError(f"keyjoint_model (two-stage control) plans one segment of up to "
+            raise KinemaError(f"keyjoint_model (keyjoint planning) plans one segment of up to "
                               f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
         return keyjoint_model if isinstance(keyjoint_model, KeyjointPlanner) else KeyjointPlanner.load(keyjoint_model)
 
@@ -313,7 +313,7 @@ class HumanPipeline(MotionPipeline):
         targets, shift = stack_targets(rows)
         text = self._text(prompt, texts)
         text = None if text is None else text.expand(len(rows), -1)
-        sample = sample_features if planner is None else partial(sample_two_stage, planner=planner)
+        sample = sample_features if planner is None else partial(sample_with_keyjoint_plan, planner=planner)
         settings = replace(self._settings(num_frames, guide, steps), strength=strength)
         feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=bar, on_step=on_step)
         rep.shift_root_xz(feats, shift[:, None])

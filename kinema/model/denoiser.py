@@ -33,7 +33,7 @@ from torch import nn
 from kinema.diffusion.guidance import Guidance, combine, split_branches, stack_branches
 from kinema.model.config import ModelConfig
 from kinema.model.layers import StageTransformer
-from kinema.representation.kimodo import global_to_local_root
+from kinema.representation.kimodo_features import global_to_local_root
 from kinema.representation.layout import LOCAL_ROOT_DIM, ROOT_DIM
 from kinema.representation.stats import NormStats
 

@@ -49,7 +49,7 @@ from kinema.constraints.types import (
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, quat_to_sixd
 from kinema.kinematics import forward_kinematics
-from kinema.representation.kimodo import heading_from_positions
+from kinema.representation.kimodo_features import heading_from_positions
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.masks import contacts_mask, fullbody_mask, root2d_mask, root_path_mask
 from kinema.skeleton import Skeleton

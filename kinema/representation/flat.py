@@ -6,7 +6,7 @@ sampler, planner or post-processing step does index arithmetic of its own:
 - ``layout`` (kinema.representation.layout) and the named channel accessors samplers need (root x/z,
   heading, joint positions per axis, the pelvis offset, the motion channels a segment join copies);
 - ``normalize`` / ``denormalize`` with the statistics saved next to the weights;
-- ``from_motion`` / ``to_motion`` (kinema.representation.kimodo);
+- ``from_motion`` / ``to_motion`` (kinema.representation.kimodo_features);
 - ``encode(constraints)`` -> targets and masks (kinema.representation.encode, masks from
   kinema.representation.masks, shared with training's curriculum);
 - ``pose(features)``: world joint positions exactly as ``to_motion`` would pose them (for keyjoints).
@@ -24,7 +24,7 @@ import torch
 from kinema.kinematics import positions_from_sixd
 from kinema.motion.core import Motion
 from kinema.representation.encode import ConstraintTargets, encode_constraints
-from kinema.representation.kimodo import features_to_motion, motion_to_features
+from kinema.representation.kimodo_features import features_to_motion, motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
 from kinema.rig import Rig

@@ -3,7 +3,7 @@ index computation on it (no other module does index arithmetic on flat features)
 
 Per frame, for a skeleton of J joints, ``D = 5 + 12 J + 4`` channels:
 ``[root_pos (3), heading (2), joint_pos (3J), joint_vel (3J), joint_rot (6J), contacts (4)]``
-(see kinema.representation.kimodo for what each means). Channel indices are plain ints / lists /
+(see kinema.representation.kimodo_features for what each means). Channel indices are plain ints / lists /
 slices, valid on any ``(..., D)`` tensor.
 """
 

@@ -77,7 +77,7 @@ def create_app(config: ServerConfig, registry: ModelRegistry) -> FastAPI:
     app = FastAPI(title="kinema", version=__version__, lifespan=lifespan,
                   description="Text- and constraint-driven skeletal motion generation (docs/server.md).")
     _install_error_handlers(app)
-    app.add_middleware(BodyLimitMiddleware, max_bytes=limits.max_body_bytes)
+    app.add_middleware(BodyLimitMiddleware, max_bytes=limits.max_body_bytes, read_timeout_s=limits.read_timeout_s)
     if config.cors_origins:
         app.add_middleware(CORSMiddleware, allow_origins=list(config.cors_origins), allow_methods=["GET", "POST"],
                            allow_headers=["Authorization", "X-API-Key", "Content-Type"])

@@ -27,7 +27,8 @@ class ServerLimits:
     ``max_body_bytes`` caps a request body (413 above it); ``workers`` generation threads share the
     loaded models and at most ``queue`` more requests wait (429 with Retry-After past that);
     ``timeout_s`` bounds how long ``POST /v1/generate`` waits for its result (504 after it: use jobs);
-    ``max_jobs`` finished jobs are kept at most ``job_ttl_s`` seconds each (the oldest go first).
+    ``max_jobs`` finished jobs are kept at most ``job_ttl_s`` seconds each (the oldest go first);
+    ``read_timeout_s`` is the longest wait for the next part of a request body (408 after it).
     """
 
     max_seconds: float = 30.0
@@ -42,6 +43,7 @@ class ServerLimits:
     timeout_s: float = 120.0
     max_jobs: int = 64
     job_ttl_s: float = 900.0
+    read_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("max_samples", "max_steps", "max_body_bytes", "max_prompt_chars", "max_segments",
@@ -51,7 +53,7 @@ class ServerLimits:
                 raise KinemaError(f"--{name.replace('_', '-')} must be a positive integer, got {value!r}")
         if isinstance(self.queue, bool) or not isinstance(self.queue, int) or self.queue < 0:
             raise KinemaError(f"--queue must be an integer >= 0, got {self.queue!r}")
-        for name in ("max_seconds", "timeout_s", "job_ttl_s"):
+        for name in ("max_seconds", "timeout_s", "job_ttl_s", "read_timeout_s"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise KinemaError(f"--{name.replace('_', '-')} must be a positive number, got {value!r}")

@@ -7,6 +7,7 @@ appears in the OpenAPI document as the scheme clients must use (no ``from __futu
 annotations`` here: FastAPI must read the dependency's annotations, which name closure variables).
 """
 
+import asyncio
 import hmac
 import json
 from typing import Annotated
@@ -16,11 +17,14 @@ from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBea
 
 
 class BodyLimitMiddleware:
-    """Answer 413 to any request whose body is larger than ``max_bytes``."""
+    """Answer 413 to any request whose body is larger than ``max_bytes``, and 408 when the body stops
+    arriving: each part of it must come within ``read_timeout_s`` seconds (a client that announces more
+    bytes than it sends would otherwise hold a connection and a request open for ever)."""
 
-    def __init__(self, app, max_bytes: int):
+    def __init__(self, app, max_bytes: int, read_timeout_s: float = 10.0):
         self.app = app
         self.max_bytes = max_bytes
+        self.read_timeout_s = read_timeout_s
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http":
@@ -34,7 +38,12 @@ class BodyLimitMiddleware:
 
         async def limited_receive():
             nonlocal received
-            message = await receive()
+            try:
+                message = await asyncio.wait_for(receive(), self.read_timeout_s)
+            except TimeoutError:
+                raise HTTPException(408, f"request body not received: nothing came for {self.read_timeout_s:g} s "
+                                         "(does Content-Length match the body sent?)",
+                                    headers={"Connection": "close"}) from None
             if message["type"] == "http.request":
                 received += len(message.get("body", b""))
                 if received > self.max_bytes:

@@ -3,7 +3,7 @@
 ``L = g1 |r_p| + g2 |r_a| + g3 |j_p| + g4 |j_v| + g5 |j_a| + g6 |f| + g7 |FK(j_a) - j_p|`` where each
 ``|.|`` is a smooth L1 between prediction and ground truth (``torch.nn.functional.smooth_l1_loss``,
 quadratic below ``beta``, linear above). The first six terms compare *normalised* feature groups (see
-kinema.representation.kimodo for the layout and kinema.representation.stats for the normalisation). The FK term
+kinema.representation.kimodo_features for the layout and kinema.representation.stats for the normalisation). The FK term
 turns the predicted global 6D rotations into joint positions and compares them with the ground-truth
 joint positions in metres, so that rotations are trained to agree with positions.
 

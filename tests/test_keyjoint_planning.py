@@ -1,4 +1,4 @@
-"""Two-stage control (kinema.human.keyjoint_planning): stage-1 targets, the keyjoint displacement, the plan
+"""Keyjoint planning (kinema.human.keyjoint_planning): stage-1 targets, the keyjoint displacement, the plan
 handed to the body sampler, and generate(keyjoint_model=...) with the shipped models."""
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def test_two_stage_meets_far_sparse_targets_better_than_single_stage(model) -> N
     sk = model.skeleton
     idx = keyjoint_indices(sk)
     # hands at hip height, ahead and ever further to the side: only a body that walks there reaches them
-    # (measured at 20 steps: single-stage misses by 1.3 / 2.7 / 3.8 m, two-stage by 9 / 15 / 11 cm)
+    # (measured at 20 steps: direct misses by 1.3 / 2.7 / 3.8 m, keyjoint-planned by 9 / 15 / 11 cm)
     cons = [
         {"type": "end-effector", "joint": sk.names[idx[3]], "frame_indices": [30], "positions": [[1.2, 0.85, 1.8]]},
         {"type": "end-effector", "joint": sk.names[idx[2]], "frame_indices": [60], "positions": [[2.2, 0.85, 3.4]]},
@@ -194,10 +194,10 @@ def test_two_stage_misuse_is_one_line_errors(model, tmp_path) -> None:
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "keyjoint.json" in r.stderr
 
 
-def test_bench_twostage_times_both_rows(model, tmp_path) -> None:
+def test_bench_keyjoint_planning_times_both_rows(model, tmp_path) -> None:
     import json
 
-    from kinema.bench.twostage import sparse_example
+    from kinema.bench.keyjoint_planning import sparse_example
 
     cons = sparse_example(model.skeleton, 5.0, model.fps)
     assert [c["frame_indices"][0] for c in cons] == [30, 60, 90]
@@ -209,7 +209,7 @@ def test_bench_twostage_times_both_rows(model, tmp_path) -> None:
         "-m",
         "kinema",
         "bench",
-        "twostage",
+        "keyjoint-planning",
         "--steps",
         "3",
         "--repeats",
@@ -224,5 +224,5 @@ def test_bench_twostage_times_both_rows(model, tmp_path) -> None:
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     rows = json.loads(out.read_text())["rows"]
-    assert [x["row"] for x in rows] == ["single-stage", "two-stage"] and all(x["raw_s"] > 0 for x in rows)
-    assert "| 3 | two-stage |" in r.stdout
+    assert [x["row"] for x in rows] == ["direct", "keyjoint-planned"] and all(x["raw_s"] > 0 for x in rows)
+    assert "| 3 | keyjoint-planned |" in r.stdout

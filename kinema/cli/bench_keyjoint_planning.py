@@ -1,4 +1,5 @@
-"""``kinema bench twostage``: explicit sparse control, single-stage vs two-stage (kinema.bench.twostage)."""
+"""``kinema bench keyjoint-planning``: explicit sparse control, direct vs keyjoint-planned
+(kinema.bench.keyjoint_planning)."""
 
 from __future__ import annotations
 
@@ -6,15 +7,15 @@ import argparse
 import json
 from pathlib import Path
 
-from kinema.bench.twostage import HEADER, bench_two_stage
+from kinema.bench.keyjoint_planning import HEADER, bench_keyjoint_planning
 from kinema.cli._args import positive_float, positive_int
 from kinema.io.atomic import atomic_write_bytes
 
 
 def register_bench(targets) -> None:
     p = targets.add_parser(
-        "twostage",
-        help="sparse control: seconds and raw error, single-stage vs the keyjoint model first",
+        "keyjoint-planning",
+        help="sparse control: seconds and raw error, direct vs the keyjoint model first",
         description="Generates a walk with end-effector targets every 1.5 s, with and without the keyjoint "
         "model planning first (generate --keyjoint-model), and prints seconds per motion and the raw "
         "target error for each DDIM step count.",
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model("default", text_cache=Path("cache/text"))
     print(f"sparse control, {args.seconds:g}-s walk, {args.repeats} seed(s), {threads} thread(s)")
     print(HEADER)
-    rows = bench_two_stage(model, planner, args.seconds, args.steps, args.repeats)
+    rows = bench_keyjoint_planning(model, planner, args.seconds, args.steps, args.repeats)
     if args.out is not None:
         atomic_write_bytes(args.out, (json.dumps({"seconds": args.seconds, "rows": rows}, indent=1) + "\n").encode())
     return 0

@@ -1,5 +1,5 @@
-"""``kinema bench twostage``: seconds and raw target error of explicit sparse control, single-stage
-against two-stage (the keyjoint model plans first; kinema.human.keyjoint_planning), per DDIM step count.
+"""``kinema bench keyjoint-planning``: seconds and raw target error of explicit sparse control, direct
+against keyjoint-planned (the keyjoint model plans first; kinema.human.keyjoint_planning), per DDIM step count.
 
 The constraints are a sparse-control set like the SFControl protocol's: one frame every 1.5 s, a hand
 or the pelvis on each, on a walk that drifts to the side (a body that does not plan the walk misses
@@ -45,13 +45,13 @@ def _error(motion, cons) -> float:
     )
 
 
-def bench_two_stage(model, planner, seconds: float, steps_list, repeats: int = 2) -> list[dict]:
-    """One row per (steps, single-/two-stage): mean seconds raw and post-processed, mean raw error."""
+def bench_keyjoint_planning(model, planner, seconds: float, steps_list, repeats: int = 2) -> list[dict]:
+    """One row per (steps, single-/keyjoint-planned): mean seconds raw and post-processed, mean raw error."""
     cons = sparse_example(model.skeleton, seconds, model.fps)
     model.generate(PROMPT, seconds=1.0, steps=2, keyjoint_model=planner)  # warm-up: text, allocator
     rows = []
     for steps in steps_list:
-        for name, kj in (("single-stage", None), ("two-stage", planner)):
+        for name, kj in (("direct", None), ("keyjoint-planned", planner)):
             raw_s, post_s, errs = [], [], []
             for r in range(repeats):
                 kw = {"seconds": seconds, "constraints": cons, "steps": steps, "seed": r, "keyjoint_model": kj}
