@@ -195,12 +195,10 @@ class AnyRigPipeline(MotionPipeline):
         """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.anyrig.constraints;
         frames at the model's fps, counted over the whole motion).
 
-        ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline: a list of ``{"prompt",
-        "seconds"}`` / ``(prompt, seconds)`` segments or a timeline .json path (kinema.pipeline.timeline;
-        ``seconds`` is then ignored). A timeline's segments are denoised together, each by windows with its
-        own prompt that re-play the end of the previous segment and are cross-faded with it
-        (kinema.anyrig.windows). ``heading`` (radians, from +Z towards +X) is the facing at frame 0
-        when no root path or keyframe fixes it. ``progress(done, total)`` is called after every denoiser step."""
+        ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline (kinema.pipeline.timeline)
+        whose segments are denoised together by windows that re-play the end of the previous segment and are
+        cross-faded with it (kinema.anyrig.windows). ``heading`` (radians, +Z towards +X): the facing at
+        frame 0 unless a root path or keyframe fixes it. ``progress(done, total)``: after every step."""
         t0 = time.perf_counter()
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
             raise KinemaError(f"samples must be a positive integer, got {samples!r}")
@@ -209,11 +207,8 @@ class AnyRigPipeline(MotionPipeline):
         T = plan.frames
         rig_m = self.resolve_rig(rig)
         check_rig_joints(rig_m.num_joints, f"rig {rig}" if isinstance(rig, str | Path) else "rig")
-        scale = 1.0 / rest_extent(rig_m.skeleton)
-        rig_n = Rig.from_dict(
-            {k: v for k, v in rig_m.to_dict().items() if k != "skeleton"}, skeleton=rig_m.skeleton.scaled(scale)
-        )
-        rep_n = JointRepresentation(rig_n, self.fps)
+        rep_n, scale = self._normalised(rig_m)
+        rig_n = rep_n.rig
         constraints = list(constraints)
         targets = encode_constraints(constraints, rep_n, scale, T) if constraints else None
         feats = sample_features(
@@ -241,6 +236,14 @@ class AnyRigPipeline(MotionPipeline):
         g = self._guidance(guidance)
         report.guidance = (g.w_text, g.w_constr)
         return GenerationResult(motions, report)
+
+    def _normalised(self, rig_m: Rig) -> tuple[JointRepresentation, float]:
+        """The representation of ``rig_m`` scaled to the model's units (rest pose 1 across) and that scale."""
+        scale = 1.0 / rest_extent(rig_m.skeleton)
+        rig_n = Rig.from_dict(
+            {k: v for k, v in rig_m.to_dict().items() if k != "skeleton"}, skeleton=rig_m.skeleton.scaled(scale)
+        )
+        return JointRepresentation(rig_n, self.fps), scale
 
     def frames(self, prompt: str | Sequence | Path, seconds: float = 4.0) -> int:
         """Frames (at ``fps``) that ``generate`` makes for ``prompt`` (a text or a timeline) and ``seconds``."""
