@@ -72,6 +72,9 @@ class KinemaSettings(bpy.types.PropertyGroup):
     seconds: bpy.props.FloatProperty(name="Seconds", default=4.0, min=0.1, max=120.0)
     steps: bpy.props.IntProperty(name="Steps", default=0, min=0, max=1000, description="0 = the model's default")
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0)
+    model: bpy.props.StringProperty(name="Model", default="", description="a served model's name ('' = the first)")
+    rig: bpy.props.StringProperty(name="Rig", default="",
+                                  description="a rig id from GET /v1/models ('' = the model's own skeleton)")
 
 
 class KINEMA_OT_generate(bpy.types.Operator):
@@ -86,7 +89,7 @@ class KINEMA_OT_generate(bpy.types.Operator):
         s = context.scene.kinema
         try:
             text, report = generate_bvh(prefs.server, prompt=s.prompt, seconds=s.seconds, steps=s.steps, seed=s.seed,
-                                        api_key=prefs.api_key)
+                                        api_key=prefs.api_key, model=s.model, rig=s.rig)
             arm = import_bvh_text(text)
         except (KinemaClientError, RuntimeError) as err:
             self.report({"ERROR"}, str(err))
@@ -106,7 +109,7 @@ class KINEMA_PT_panel(bpy.types.Panel):
 
     def draw(self, context):
         s = context.scene.kinema
-        for prop in ("prompt", "seconds", "steps", "seed"):
+        for prop in ("prompt", "seconds", "steps", "seed", "model", "rig"):
             self.layout.prop(s, prop)
         self.layout.operator(KINEMA_OT_generate.bl_idname)
 

@@ -47,11 +47,17 @@ def request_json(url: str, api_key: str = "", body: dict | None = None, timeout:
 
 
 def generate_bvh(server: str, *, prompt: str, seconds: float, steps: int = 0, seed: int = 0, api_key: str = "",
-                 timeout: float = 300.0) -> tuple[str, dict]:
-    """``(BVH text, report)`` of one motion from ``POST {server}/v1/generate``; ``steps`` 0 = the model's."""
+                 model: str = "", rig: str = "", timeout: float = 300.0) -> tuple[str, dict]:
+    """``(BVH text, report)`` of one motion from ``POST {server}/v1/generate``; ``steps`` 0 = the model's,
+    ``model`` "" = the server's first, ``rig`` "" = the model's own skeleton (a model for any rig needs a
+    rig id from ``GET /v1/models``)."""
     body: dict = {"prompt": prompt, "seconds": seconds, "seed": seed, "format": "bvh"}
     if steps > 0:
         body["steps"] = steps
+    if model:
+        body["model"] = model
+    if rig:
+        body["rig"] = rig
     answer = request_json(server.rstrip("/") + "/v1/generate", api_key, body, timeout)
     motions = answer.get("motions") or []
     if not motions or motions[0].get("encoding") != "text":
