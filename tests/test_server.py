@@ -18,6 +18,7 @@ import socket
 import subprocess
 import sys
 import threading
+import tempfile
 import time
 from pathlib import Path
 
@@ -51,6 +52,8 @@ LIMITS = [
     "60",
     "--threads",
     "1",
+    "--read-timeout",
+    "2",
 ]
 TINY = {"prompt": "A person walks forward.", "seconds": 1, "steps": 2}
 BLENDER = shutil.which("blender")
@@ -276,6 +279,45 @@ def test_oversized_bodies_are_refused(server):
     resp = httpx.post(f"{url}/v1/generate", content=chunks(), headers=AUTH | {"content-type": "application/json"})
     assert resp.status_code == 413
     assert httpx.get(f"{url}/healthz").status_code == 200
+
+
+def test_a_body_that_never_arrives_times_out(server):
+    """Issue 36: Content-Length promises more than is sent -> 408 after --read-timeout (2 s here), and
+    the connection is closed (it was held open for over 40 s)."""
+    url, _ = server
+    host, port = url.removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port)), timeout=30) as conn:
+        conn.sendall(f"POST /v1/generate HTTP/1.1\r\nHost: {host}\r\nAuthorization: Bearer {KEY}\r\n"
+                     "Content-Type: application/json\r\nContent-Length: 500\r\n\r\n{\"prompt\": ".encode())
+        t0 = time.monotonic()
+        answer = b""
+        while chunk := conn.recv(65536):
+            answer += chunk
+        waited = time.monotonic() - t0
+    assert answer.startswith(b"HTTP/1.1 408"), answer[:200]
+    assert b"nothing came for 2 s" in answer and 1.5 < waited < 15
+    assert httpx.get(f"{url}/healthz").status_code == 200
+
+
+def test_malformed_json_is_400_as_documented(server):
+    """docs/server.md: a body that is no JSON text is a 400 (it was a 422 with a 'JSON decode error')."""
+    url, _ = server
+    headers = AUTH | {"content-type": "application/json"}
+    for raw, where in ((b'{"prompt": "A person walks", ', "character 29"), (b"\xff\xfe", "character 0")):
+        resp = httpx.post(f"{url}/v1/generate", content=raw, headers=headers)
+        assert resp.status_code == 400, resp.text
+        assert "not valid JSON" in resp.json()["detail"] and where in resp.json()["detail"]
+    assert post(url, "/v1/generate", {"prompt": 3}).status_code == 422  # valid JSON, wrong field: still 422
+
+
+def test_a_broken_inline_bvh_names_no_server_path(server):
+    url, _ = server
+    body = TINY | {"constraints": [{"type": "fullbody", "bvh": "HIERARCHY\nROOT Hips\n{ nonsense",
+                                    "source_frames": [0], "frame_indices": [0]}]}
+    resp = post(url, "/v1/generate", body)
+    assert resp.status_code in (400, 422), resp.text
+    assert "/tmp" not in resp.text and "kinema-serve-" not in resp.text and tempfile.gettempdir() not in resp.text
+    assert "bvh" in resp.text.lower()
 
 
 def test_cors_is_off_and_public_binds_need_a_key(server, tmp_path, capsys):

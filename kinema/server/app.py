@@ -22,7 +22,7 @@ from fastapi.responses import JSONResponse, Response
 from kinema import __version__
 from kinema.server.config import ServerConfig, ServerLimits
 from kinema.server.encode import MEDIA, SUFFIX, compact, expand
-from kinema.server.errors import RequestError, from_pydantic
+from kinema.server.errors import RequestError, from_pydantic, json_syntax_error
 from kinema.server.jobs import Job, JobStore, StoreFull
 from kinema.server.middleware import BodyLimitMiddleware, api_key_dependency
 from kinema.server.models import ModelRegistry
@@ -42,7 +42,7 @@ log = logging.getLogger("kinema.server")
 JobId = Annotated[str, PathParam(pattern="^[0-9a-f]{32}$", description="the id POST /v1/jobs returned")]
 RETRY_AFTER = {"Retry-After": {"description": "seconds to wait before retrying", "schema": {"type": "integer"}}}
 ERRORS = {
-    400: {"model": ErrorOut, "description": "the body is not JSON text (e.g. not UTF-8)"},
+    400: {"model": ErrorOut, "description": "the body is not JSON text (a syntax error, or not UTF-8)"},
     413: {"model": ErrorOut, "description": "request body too large"},
     422: {"model": ValidationErrorOut, "description": "invalid request; each item names the field"},
     429: {"model": ErrorOut, "description": "queue full", "headers": RETRY_AFTER},
@@ -102,6 +102,9 @@ def create_app(config: ServerConfig, registry: ModelRegistry) -> FastAPI:
 def _install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _invalid(_request, exc: RequestValidationError):
+        syntax = json_syntax_error(exc.errors())
+        if syntax is not None:
+            return JSONResponse({"detail": syntax}, status_code=400)
         return JSONResponse({"detail": from_pydantic(exc.errors())}, status_code=422)
 
     @app.exception_handler(RequestError)

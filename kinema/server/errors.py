@@ -50,6 +50,16 @@ def from_pydantic(errors: Sequence[dict]) -> list[dict]:
     return items
 
 
+def json_syntax_error(errors: Sequence[dict]) -> str | None:
+    """The 400 message when the body is no JSON text at all (pydantic's ``json_invalid``: a syntax
+    error, or bytes that are not UTF-8), naming the character where parsing stopped; else None."""
+    if not errors or any(e.get("type") != "json_invalid" for e in errors):
+        return None
+    loc = tuple(errors[0].get("loc", ()))
+    at = f" at character {loc[-1]}" if loc and isinstance(loc[-1], int) else ""
+    return f"the body is not valid JSON{at} (check quotes, commas and brackets, and that it is UTF-8 text)"
+
+
 def from_kinema(err: KinemaError, hide: str | None = None) -> RequestError:
     """A KinemaError raised while generating -> a RequestError located in the request where possible.
 
