@@ -142,3 +142,14 @@ def test_batch_ray_address_that_is_no_ray_head_times_out(tmp_path, capsys, monke
         assert time.perf_counter() - t0 < 40
     last = capsys.readouterr().err.strip().splitlines()[-1]  # Ray logs its own attempt first
     assert last.startswith("kinema: error: --ray") and "no Ray cluster answered within 3 s" in last, last
+
+
+# ---------------------------------------------------------------------------- app bind address
+def test_app_refuses_a_public_bind_without_public(capsys):
+    from kinema.cli.app import check_host
+
+    assert main(["app", "--host", "0.0.0.0"]) == 2
+    one_line_error(capsys, "--host 0.0.0.0", "no login", "--public")
+    check_host("0.0.0.0", public=True)  # the explicit opt-in passes
+    for host in ("127.0.0.1", "localhost", "::1"):
+        check_host(host, public=False)

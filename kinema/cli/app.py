@@ -13,6 +13,7 @@ from pathlib import Path
 from kinema.cli._args import positive_int
 from kinema.cli.serve import _port
 from kinema.errors import KinemaError
+from kinema.server.config import is_loopback
 
 MISSING_EXTRA = "kinema app needs the app extra: pip install 'kinema[app]' (viser)"
 
@@ -39,7 +40,10 @@ def register(sub) -> None:
         default="centimetres",
         help="length unit of a .bvh --rig (default centimetres)",
     )
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only; "
+                   "another address needs --public)")
+    p.add_argument("--public", action="store_true", help="allow a --host other than loopback: the app has no "
+                   "login, so anyone who can reach the address can use it and its CPU")
     p.add_argument("--port", type=_port, default=8080, help="TCP port (default 8080; the next free one if taken)")
     p.add_argument(
         "--steps",
@@ -52,7 +56,19 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def check_host(host: str, public: bool) -> None:
+    """Refuse a non-loopback bind unless ``--public`` says so: unlike `kinema serve` (API keys), the app
+    has no login to protect it."""
+    if not is_loopback(host) and not public:
+        raise KinemaError(f"--host {host} is not a loopback address and the app has no login: anyone who can reach "
+                          "it could use it; bind to 127.0.0.1 (an SSH tunnel reaches it from elsewhere) or add "
+                          "--public to accept that")
+
+
 def run(args: argparse.Namespace) -> int:
+    check_host(args.host, args.public)
+    if args.public and not is_loopback(args.host):
+        print(f"kinema app: warning: --public: anyone who can reach {args.host} can use this app", flush=True)
     try:
         from kinema.app.generation import max_steps
         from kinema.app.server import AppServer
