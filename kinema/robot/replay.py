@@ -3,8 +3,8 @@ kinematic demonstration must respect: joint ranges, soles above the floor, plant
 slide, how far it travels, and whether the legs pass through each other.
 
 Planted frames are the motion's ``sole_planted`` flags (from the source's contacts) when it has them;
-otherwise a sole counts as planted on frames where its lowest point is within 1 cm of the floor on this
-frame and the next. Leg self-intersection uses the MJCF's capsule and sphere geoms of the two legs
+otherwise a sole counts as planted on frames where all of it is within 1 cm of the floor (flat on it) on
+this frame and the next. Leg self-intersection uses the MJCF's capsule and sphere geoms of the two legs
 (the bodies below each hip): the deepest overlap of a left-leg geom with a right-leg geom, in metres.
 """
 
@@ -76,9 +76,9 @@ def _overlap(robot: Robot, data: mujoco.MjData, geoms: dict[str, list[int]]) -> 
     return worst
 
 
-def _planted(motion: RobotMotion, lowest: np.ndarray) -> np.ndarray:
+def _planted(motion: RobotMotion, highest: np.ndarray) -> np.ndarray:
     """(T - 1, 2) whether each sole is planted on a frame and the next."""
-    flags = motion.sole_planted if motion.sole_planted is not None else lowest < _PLANTED_HEIGHT
+    flags = motion.sole_planted if motion.sole_planted is not None else highest < _PLANTED_HEIGHT
     return flags[1:] & flags[:-1]
 
 
@@ -88,21 +88,22 @@ def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
         raise ValueError(f"the motion's joints do not match robot {robot.name}'s hinge joints")
     data, geoms = mujoco.MjData(robot.model), leg_geoms(robot)
     T = motion.num_frames
-    centres, lowest, overlap = np.zeros((T, 2, 3)), np.zeros((T, 2)), 0.0
+    centres, lowest, highest, overlap = np.zeros((T, 2, 3)), np.zeros((T, 2)), np.zeros((T, 2)), 0.0
     points = {k: np.zeros((T, 3)) for k in robot.points}
     for t in range(T):
         data.qpos[:] = robot.qpos(motion.root_position[t], motion.root_quaternion[t], motion.joint_angles[t])
         mujoco.mj_kinematics(robot.model, data)
         for i, s in enumerate(SIDES):
             centres[t, i] = robot.sole_centre(data, s)
-            lowest[t, i] = robot.sole_points(data, s)[:, 2].min()
+            heights = robot.sole_points(data, s)[:, 2]
+            lowest[t, i], highest[t, i] = heights.min(), heights.max()
         for k in points:
             points[k][t] = robot.point(data, k)
         overlap = max(overlap, _overlap(robot, data, geoms))
     lo, hi = robot.ranges[:, 0], robot.ranges[:, 1]
     over = np.maximum(lo - motion.joint_angles, motion.joint_angles - hi).max(initial=0.0)
     speed = np.linalg.norm(np.diff(centres[..., :2], axis=0), axis=-1) * motion.fps
-    planted = _planted(motion, lowest)
+    planted = _planted(motion, highest)
     return ReplayReport(
         range_overshoot=float(max(over, 0.0)),
         lowest_sole=float(lowest.min()),

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kinema.motion.contacts import contact_joints, foot_contacts
+from kinema.motion.contacts import ContactThresholds, contact_joints, foot_contacts
 from kinema.robot.feet import clean_flags, hold_planted
 from kinema.skeleton import Skeleton
 
@@ -24,6 +24,9 @@ AXES = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 SIDES = ("left", "right")
 MAX_FOOT_TURN = 0.6  # radians a foot may point away from the root's heading
 MAX_FOOT_PITCH = 1.2  # radians a foot may pitch from flat
+#: A source foot near the floor moving slower than this is planted; looser than kinema's default (0.3 m/s)
+#: so that a generated foot that skates a little while down is held still on the robot.
+CONTACTS = ContactThresholds(speed=0.6)
 HUMAN_ROLES = ("pelvis", "spine", "neck") + tuple(
     f"{s}_{p}" for s in SIDES for p in ("hip", "knee", "ankle", "toe", "upper_arm", "elbow", "hand")
 )
@@ -144,7 +147,7 @@ def frame_targets(motion, sizes: RobotSizes) -> FrameTargets:
     sk.require_roles(list(HUMAN_ROLES))
     roles = sk.roles
     world = motion.positions.detach().double().numpy()
-    contacts = foot_contacts(motion.positions.detach().double(), motion.fps, sk).numpy() > 0.5
+    contacts = foot_contacts(motion.positions.detach().double(), motion.fps, sk, CONTACTS).numpy() > 0.5
     P = world @ AXES.T  # robot axes, human metres
     leg_scale, arm_scale = _limb_scales(sk, roles, sizes)
     planted = {s: clean_flags(contacts[:, 2 * i] & contacts[:, 2 * i + 1]) for i, s in enumerate(SIDES)}
