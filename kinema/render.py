@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from kinema import naming
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError, SkeletonError
-from kinema.io.atomic import atomic_write_bytes
 from kinema.render_bones import drawn_bones, helper_root
 
 SIDE_COLOURS = {"L": "#1f6fd1", "R": "#e0452b", None: "#3c3c3c"}

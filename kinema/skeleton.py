@@ -301,3 +301,10 @@ class Skeleton:
 
     def __repr__(self) -> str:
         return f"Skeleton({self.name or 'unnamed'}, {self.num_joints} joints)"
+
+
+def side_contacts(roles: dict[str, int], side: str) -> tuple[int, int] | None:
+    """(heel, toe) joint indices of one side (the ankle stands in for a missing heel), or None."""
+    heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
+    toe = roles.get(f"{side}_toe")
+    return None if heel is None or toe is None else (heel, toe)

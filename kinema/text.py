@@ -34,7 +34,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from kinema.io.atomic import atomic_write_bytes
+from kinema.atomic_files import atomic_write_bytes
 
 from .errors import KinemaError
 

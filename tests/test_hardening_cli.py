@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from kinema.atomic_files import check_output_path
 from kinema.cli import main
 from kinema.errors import KinemaError
-from kinema.io.atomic import check_output_path
 from tests import hardening_fixtures as fixtures
 from tests.hardening_fixtures import FAST, one_line_error
 

@@ -18,7 +18,7 @@ from kinema.errors import KinemaError
 
 MANIFEST = "manifest.jsonl"
 LOCK = ".kinema-batch.lock"
-#: Temporary files of kinema.io.atomic writes of batch outputs (".NAME.XXXXXXXX.tmp").
+#: Temporary files of kinema.atomic_files writes of batch outputs (".NAME.XXXXXXXX.tmp").
 TEMP_FILE = re.compile(r"^\..+\.(?:bvh|bvh\.gz|npz)\.[A-Za-z0-9_]+\.tmp$")
 
 

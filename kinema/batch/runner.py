@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
+from kinema.atomic_files import atomic_write_bytes, make_output_folder
 from kinema.batch.executors import make_executor
 from kinema.batch.manifest import FolderLock, Manifest, remove_stale_temps
 from kinema.batch.spec import Task, read_jobs
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes, make_output_folder
 
 
 @dataclass

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import torch
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.bench.suite import GenerateSuiteOptions, format_generate_suite, run_generate_suite
 from kinema.bench.train import bench_config
 from kinema.bench.train import format_table as train_table
-from kinema.io.atomic import atomic_write_bytes
 from kinema.runtime import load_average
 
 

@@ -7,9 +7,9 @@ import argparse
 import json
 from pathlib import Path
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.bench.keyjoint_planning import HEADER, bench_keyjoint_planning
 from kinema.cli._args import positive_float, positive_int
-from kinema.io.atomic import atomic_write_bytes
 
 
 def register_bench(targets) -> None:
@@ -30,9 +30,9 @@ def register_bench(targets) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from kinema.atomic_files import check_output_path
     from kinema.generate import load_model
     from kinema.human.keyjoint_planning import KeyjointPlanner
-    from kinema.io.atomic import check_output_path
     from kinema.runtime import configure_threads
 
     if args.out is not None:

@@ -6,9 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.bench.objectives import HEADER, SETTINGS, TASKS, bench_objectives, parse_settings
 from kinema.cli._args import positive_float, positive_int
-from kinema.io.atomic import atomic_write_bytes
 
 
 def register_bench(targets) -> None:

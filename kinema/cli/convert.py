@@ -95,8 +95,8 @@ def _read_clips(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    from kinema.atomic_files import check_output_path
     from kinema.errors import KinemaError
-    from kinema.io.atomic import check_output_path
     from kinema.io.gltf_writer import write_glb
 
     if not args.input.exists():

@@ -28,11 +28,11 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from kinema.atomic_files import atomic_write_text, check_output_path
     from kinema.errors import KinemaError
     from kinema.evaluate.anyrig.groups import similarity_table, split_summary, training_shapes
     from kinema.evaluate.anyrig.suite import TABLE_HEADER, evaluate_split
     from kinema.generate import load_model
-    from kinema.io.atomic import atomic_write_text, check_output_path
     from kinema.runtime import configure_threads
 
     configure_threads(args.threads)

@@ -12,7 +12,7 @@ import json
 import time
 from pathlib import Path
 
-from kinema.io.atomic import atomic_write_bytes
+from kinema.atomic_files import atomic_write_bytes
 
 SPARSE_ROWS = ("direct", "keyjoint-planned", "direct + noise opt")
 

@@ -101,10 +101,10 @@ def _check_inputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from kinema.atomic_files import check_output_path
     from kinema.cli.report import print_report, use_plain_warnings
     from kinema.errors import KinemaError
     from kinema.generate import load_model
-    from kinema.io.atomic import check_output_path
     from kinema.runtime import configure_threads
 
     use_plain_warnings()

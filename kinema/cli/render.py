@@ -35,9 +35,9 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import math
 
+    from kinema.atomic_files import check_output_path
     from kinema.errors import KinemaError
     from kinema.io import load_motion
-    from kinema.io.atomic import check_output_path
     from kinema.render import render_filmstrip, render_gif
     from kinema.robot.files import is_robot_npz
 

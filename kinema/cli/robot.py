@@ -32,8 +32,8 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # imported here like every sub-command's work, so that `kinema --help` does not load torch and mujoco
+    from kinema.atomic_files import check_output_path
     from kinema.io import load_motion
-    from kinema.io.atomic import check_output_path
     from kinema.robot import load_robot, replay_report, retarget_to_robot
 
     if args.out.suffix.lower() not in OUTPUTS:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import torch
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.constraints.bvh_poses import SCALE_RATIO_LIMIT as SCALE_RATIO_LIMIT
 from kinema.constraints.bvh_poses import fullbody_from_bvh as fullbody_from_bvh
 from kinema.constraints.bvh_poses import poses_from_bvh
@@ -38,7 +39,6 @@ from kinema.constraints.types import (
     FullBodyConstraint,
     json_array,
 )
-from kinema.io.atomic import atomic_write_bytes
 from kinema.skeleton import Skeleton
 
 #: Per type: JSON key -> dataclass attribute (first key of each attribute is the one `save` writes).

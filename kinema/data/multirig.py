@@ -32,7 +32,7 @@ DEFAULT_EXCLUDE = ("prop",)
 
 def write_manifest(path: str | Path, dirs: list[str | Path], exclude_flags=DEFAULT_EXCLUDE) -> dict:
     """Write a manifest at ``path`` listing ``dirs`` (checked to be builds); returns its contents."""
-    from kinema.io.atomic import atomic_write_text, check_output_path
+    from kinema.atomic_files import atomic_write_text, check_output_path
 
     path = check_output_path(path).absolute()
     entries = []

@@ -188,8 +188,8 @@ def counts(asm: Assembly, files: list[SourceFile]) -> dict:
 
 def write_build(out_dir: Path, asm: Assembly, meta: dict, extra: Callable[[Path], dict] | None = None) -> dict:
     """Write the cache to ``out_dir`` atomically; ``extra(tmp)`` may add files and returns meta keys."""
+    from kinema.atomic_files import atomic_folder
     from kinema.data.build import _prepare_out
-    from kinema.io.atomic import atomic_folder
 
     t0 = meta.pop("_t0", time.time())
     _prepare_out(out_dir)

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.evaluate.report_phrasings import fmt as _fmt
 from kinema.evaluate.report_phrasings import format_phrasings_table
-from kinema.io.atomic import atomic_write_bytes
 
 ROW_LABELS = {"ground_truth": "Ground truth", "raw": "Model (raw)", "post": "Model (post-processed)"}
 #: (column key, header, scale, decimals) of the main table, in Kimodo Table 1 order

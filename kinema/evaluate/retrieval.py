@@ -38,8 +38,8 @@ from safetensors.torch import load_file
 from safetensors.torch import save as save_safetensors_bytes
 from torch import nn
 
+from kinema.atomic_files import atomic_write_bytes, atomic_write_text
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes, atomic_write_text
 from kinema.model.config import reject_unknown_keys
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats

@@ -252,7 +252,7 @@ def build_suite(data_dir, split: str = "test", num_cases: int = 100, seed: int =
 
 def save_suite(cases: list[dict], path) -> Path:
     """Write the suite as JSON (atomically); :func:`load_suite` reads it back unchanged."""
-    from kinema.io.atomic import atomic_write_bytes
+    from kinema.atomic_files import atomic_write_bytes
 
     doc = {"format": SUITE_FORMAT, "version": SUITE_VERSION, "cases": cases}
     path = Path(path)

@@ -12,7 +12,7 @@ Adding a format (e.g. glTF)::
 
 ``reader(path, **options) -> Motion`` and ``writer(motion, path, **options) -> Path`` may be callables
 or lazy ``"module:function"`` strings (imported on first use). A suffix already taken is an error unless
-``replace=True``. Writers should write atomically (kinema.io.atomic). This package imports no torch.
+``replace=True``. Writers should write atomically (kinema.atomic_files). This package imports no torch.
 """
 
 from __future__ import annotations

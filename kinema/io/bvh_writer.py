@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_to_euler
-from kinema.io.atomic import atomic_write_bytes
 from kinema.io.bvh import BVHData
 from kinema.motion.core import Motion
 from kinema.motion.rest import rebase_rest_pose

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_make_continuous
-from kinema.io.atomic import atomic_write_bytes
 from kinema.kinematics import forward_kinematics
 from kinema.mesh import SkinnedMesh, bone_mesh
 from kinema.motion.core import Motion

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 

@@ -16,9 +16,9 @@ from pathlib import Path
 import torch
 from safetensors.torch import save_file
 
+from kinema.atomic_files import atomic_folder
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_folder
 from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.grounding import Grounding
 from kinema.model.loading import (

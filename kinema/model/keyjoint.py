@@ -19,8 +19,8 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 from torch import nn
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes
 from kinema.model.config import ModelConfig, reject_unknown_keys
 from kinema.model.layers import StageTransformer
 from kinema.representation.keyjoint import KEYJOINT_DIM

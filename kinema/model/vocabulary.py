@@ -26,8 +26,8 @@ import torch
 from safetensors import SafetensorError, safe_open
 from safetensors.torch import save
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes
 
 FILE_NAME = "known_prompts.safetensors"
 #: cosine similarity below which a prompt counts as unknown (see the module docstring for the numbers)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import torch
 
-from kinema.skeleton import Skeleton
+from kinema.skeleton import Skeleton, side_contacts
 
 
 @dataclass(frozen=True)
@@ -23,13 +23,6 @@ class ContactThresholds:
     heel_height: float = 0.15  # ankle joints sit 8-10 cm above the floor when planted
     toe_height: float = 0.08  # toe joints sit 2-5.5 cm up inside the shoe when planted (Bandai)
     speed: float = 0.30
-
-
-def side_contacts(roles: dict[str, int], side: str) -> tuple[int, int] | None:
-    """(heel, toe) joint indices of one side (the ankle stands in for a missing heel), or None."""
-    heel = roles.get(f"{side}_heel", roles.get(f"{side}_ankle"))
-    toe = roles.get(f"{side}_toe")
-    return None if heel is None or toe is None else (heel, toe)
 
 
 def contact_joints(skeleton: Skeleton) -> list[int]:

@@ -33,8 +33,7 @@ import re
 import torch
 
 from kinema.kinematics import forward_kinematics
-from kinema.motion.contacts import side_contacts
-from kinema.skeleton import Skeleton
+from kinema.skeleton import Skeleton, side_contacts
 
 #: a foot lies in this fraction of the skeleton's height above its lowest joint
 FOOT_BAND = 0.15

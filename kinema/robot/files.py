@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_write_bytes
 
 ROOT_COLUMNS = ("time", "root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz")
 NPZ_KEYS = ("time", "root_position", "root_quaternion", "joint_angles", "joint_names", "fps", "robot")

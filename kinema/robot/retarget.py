@@ -11,6 +11,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from kinema.errors import KinemaError
 from kinema.robot.description import Robot, load_robot
 from kinema.robot.ik import HingeIK, IKWeights
 from kinema.robot.motion import RobotMotion
@@ -60,6 +61,8 @@ def _continuous(quats: np.ndarray) -> np.ndarray:
 def retarget_to_robot(motion, robot: Robot | str, weights: IKWeights | None = None) -> RobotMotion:
     """The robot's motion (MuJoCo poses at the motion's fps) for a human kinema ``Motion``; ``robot`` is a
     `Robot` or anything `load_robot` takes (``"g1"``, an MJCF path)."""
+    if not motion.is_finite():
+        raise KinemaError("cannot retarget a motion with NaN or infinite values onto a robot")
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
     sizes = robot_sizes(robot)
     targets = frame_targets(motion, sizes)

@@ -28,8 +28,8 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
+from kinema.atomic_files import atomic_folder, atomic_write_text
 from kinema.errors import KinemaError
-from kinema.io.atomic import atomic_folder, atomic_write_text
 from kinema.model.loading import find_checkpoint
 
 KEEP_LAST = 2

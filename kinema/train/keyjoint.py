@@ -24,9 +24,9 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file, save_file
 
+from kinema.atomic_files import atomic_write_bytes
 from kinema.data.dataset import MotionDataset
 from kinema.diffusion.schedule import NoiseSchedule
-from kinema.io.atomic import atomic_write_bytes
 from kinema.model.keyjoint import KeyjointConfig, KeyjointDenoiser, save_keyjoint_model
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.keyjoint import (

@@ -47,7 +47,7 @@ def plot_losses(run_dir: str | Path, out: str | Path | None = None) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from kinema.io.atomic import atomic_write_bytes
+    from kinema.atomic_files import atomic_write_bytes
 
     run_dir = Path(run_dir)
     recs = read_log(run_dir)
