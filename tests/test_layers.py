@@ -21,7 +21,8 @@ INFERENCE = ("rig", "representation", "model", "diffusion", "generate", "postpro
 #: package -> packages it must not import
 FORBIDDEN = {
     "motion": ("kinema.io", "kinema.rig", "kinema.representation", "kinema.model", "kinema.generate"),
-    "rig": ("kinema.io", "kinema.representation", "kinema.model", "kinema.generate", "kinema.postprocess"),
+    "rig": ("kinema.io", "kinema.motion", "kinema.representation", "kinema.model", "kinema.generate",
+            "kinema.postprocess"),
     "representation": ("kinema.model", "kinema.generate", "kinema.postprocess", "kinema.diffusion"),
     **{pkg: ("kinema.train", "kinema.data") for pkg in INFERENCE if pkg not in ("rig", "representation")},
 }
@@ -113,3 +114,9 @@ def test_no_import_cycle_between_packages() -> None:
 
 def test_no_module_is_named_anyrig_prefix() -> None:
     assert not [p for p in KINEMA.rglob("anyrig_*.py")], "cut packages by concept (kinema/anyrig/...), not by prefix"
+
+
+@pytest.mark.parametrize("module", ["render.py", "render_bones.py"])
+def test_drawing_reads_no_file_format(module) -> None:
+    """Drawing works on motions, not files: a face reads the file and hands the motion over."""
+    assert not [m for m, _ in _imports(KINEMA / module) if m == "kinema.io" or m.startswith("kinema.io.")]
