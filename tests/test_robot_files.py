@@ -119,3 +119,16 @@ def test_bad_mapping_file_is_one_clear_error(tmp_path):
     bad.write_text(json.dumps({"left_knee": "no_such_body"}))
     with pytest.raises(KinemaError, match="does not have"):
         load_robot("g1", mapping=bad)
+
+
+def test_source_motions_the_robot_cannot_take(bow):
+    human, _ = bow
+    one = retarget_to_robot(human.crop(0, 1), "g1")  # a single pose is fine
+    assert one.num_frames == 1 and np.isfinite(one.joint_angles).all()
+    armless = human.prune([n for n in human.skeleton.names if "Arm" in n or "Hand" in n or "Shoulder" in n])
+    with pytest.raises(KinemaError, match="left_hand"):
+        retarget_to_robot(armless, "g1")
+    broken = human.crop(0, 5)
+    broken.root_translation[2, 1] = float("nan")
+    with pytest.raises(KinemaError, match="NaN"):
+        retarget_to_robot(broken, "g1")
