@@ -1,0 +1,190 @@
+"""Rest-pose alignment: each mapped bone of the target points, in the world, where the source's points.
+
+With ``G0`` the world rest rotations and ``P0`` the world rest positions of a skeleton (its rest
+rotations, else identity), a source joint ``a`` animated to ``G_s(t)`` has turned by the world rotation
+``Q(t) = G_s(t) G0_s^-1`` since its rest pose. Its target joint ``b`` gets
+
+    ``G_t(t) = Q(t) R_b G0_t``
+
+where ``R_b`` is the constant world rotation taking the target's rest bone directions (from ``b`` to its
+mapped children) onto the source's: the shortest arc for one child, the best rotation for several
+(Kabsch on unit directions). So a T-pose source drives an A-pose target, and bones whose local axes
+differ (Bandai's lie along +X, Mixamo's along +Y) do not matter: only world directions are compared.
+For humanoids each bone is then turned about itself so that the body's forward and left
+directions at rest line up too (the roll: a knee keeps facing forward even when the source's rest
+pose lies along +X, as Bandai's does). A mapped joint without mapped children (a hand, a foot without toes) borrows the ``R`` of its chain
+parent (kinema.retarget.mapping). Unmapped joints keep their rest rotation relative to their parent
+(twist bones, fingers, extra spine joints: they follow their chain).
+
+Shapes: rotations ``(..., J, 4)`` wxyz, positions ``(..., J, 3)``, float64.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.geometry.rotations import (
+    matrix_to_quat,
+    quat_between,
+    quat_inverse,
+    quat_mul,
+    quat_normalize,
+    quat_rotate,
+)
+from kinema.kinematics import forward_kinematics
+from kinema.skeleton import Skeleton
+
+#: bones shorter than this fraction of the skeleton's rest height give no direction
+SHORT_BONE = 1e-4
+
+
+def rest_locals(skeleton: Skeleton) -> torch.Tensor:
+    """(J, 4) local rest rotations: the skeleton's, else identity."""
+    if skeleton.rest_rotations is not None:
+        return skeleton.rest_rotations.double()
+    out = torch.zeros(skeleton.num_joints, 4, dtype=torch.float64)
+    out[:, 0] = 1.0
+    return out
+
+
+def rest_frames(skeleton: Skeleton) -> tuple[torch.Tensor, torch.Tensor]:
+    """(world rest rotations (J, 4), world rest positions (J, 3)), the root at ``offsets[0]``."""
+    G, P = forward_kinematics(rest_locals(skeleton), skeleton.offsets[0].double(), skeleton.offsets, skeleton.parents)
+    return G, P
+
+
+def _best_rotation(target_dirs: torch.Tensor, source_dirs: torch.Tensor) -> torch.Tensor:
+    """Rotation (4,) taking unit directions ``target_dirs (C, 3)`` onto ``source_dirs``."""
+    if target_dirs.shape[0] == 1:
+        return quat_between(target_dirs[0], source_dirs[0])
+    U, _, Vh = torch.linalg.svd(source_dirs.T @ target_dirs)
+    flip = torch.ones(3, dtype=torch.float64)
+    flip[2] = torch.sign(torch.linalg.det(U @ Vh))
+    return matrix_to_quat(U @ torch.diag(flip) @ Vh)
+
+
+def _roll(R1: torch.Tensor, axis: torch.Tensor, sec_t: torch.Tensor, sec_s: torch.Tensor) -> torch.Tensor:
+    """``R1`` followed by the turn about ``axis`` (unit, 3) that best lines up the secondary directions
+    ``sec_t`` (after ``R1``) with ``sec_s`` (both (K, 3)) seen across the axis."""
+    a = quat_rotate(R1.expand(sec_t.shape[0], 4), sec_t)
+    a = a - (a @ axis)[:, None] * axis
+    b = sec_s - (sec_s @ axis)[:, None] * axis
+    sin = (torch.linalg.cross(a, b) @ axis).sum()
+    cos = (a * b).sum()
+    if float(sin.abs() + cos.abs()) < 1e-9:
+        return R1
+    half = torch.atan2(sin, cos) / 2
+    turn = torch.cat([half.cos().reshape(1), half.sin() * axis])
+    return quat_mul(turn, R1)
+
+
+def _align_one(vt: torch.Tensor, vs: torch.Tensor, frames) -> torch.Tensor:
+    """Rotation taking the target's child directions ``vt (C, 3)`` onto the source's ``vs``: the exact
+    shortest arc for one child, turned about the bone to line up the body frames when given, else the
+    best rotation of the child directions and the frames together."""
+    ut, us = vt / vt.norm(dim=-1, keepdim=True), vs / vs.norm(dim=-1, keepdim=True)
+    if ut.shape[0] == 1:
+        R1 = quat_between(ut[0], us[0])
+        return R1 if frames is None else _roll(R1, us[0], frames[0], frames[1])
+    if frames is not None:
+        ut, us = torch.cat([ut, frames[0]]), torch.cat([us, frames[1]])
+    return _best_rotation(ut, us)
+
+
+def bone_alignment(
+    target: Skeleton,
+    source: Skeleton,
+    pairs: dict[int, int],
+    chain_parent: dict[int, int],
+    frames: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """(J_t, 4) world rotations ``R_b`` of every mapped target joint (identity elsewhere).
+
+    ``pairs``: target joint -> source joint; ``chain_parent``: target joint -> the mapped target joint
+    whose ``R`` it borrows when it has no mapped child; ``frames``: the body's (forward, left) unit
+    directions at rest, ``(2, 3)`` for the target and for the source, which fix each bone's roll
+    about itself (humanoids; without them a bone takes the shortest arc)."""
+    _, P0t = rest_frames(target)
+    _, P0s = rest_frames(source)
+    tiny = SHORT_BONE * float(max(P0t[:, 1].max() - P0t[:, 1].min(), 1e-9))
+    tiny_s = SHORT_BONE * float(max(P0s[:, 1].max() - P0s[:, 1].min(), 1e-9))
+    kids: dict[int, list[int]] = {b: [] for b in pairs}
+    for c in pairs:
+        p = target.parents[c]
+        while p >= 0 and p not in pairs:
+            p = target.parents[p]
+        if p >= 0:
+            kids[p].append(c)
+    R = torch.zeros(target.num_joints, 4, dtype=torch.float64)
+    R[:, 0] = 1.0
+    for b in sorted(pairs):  # parents before children
+        a = pairs[b]
+        vt = torch.stack([P0t[c] - P0t[b] for c in kids[b]]) if kids[b] else torch.zeros(0, 3, dtype=torch.float64)
+        vs = torch.stack([P0s[pairs[c]] - P0s[a] for c in kids[b]]) if kids[b] else torch.zeros(0, 3, dtype=torch.float64)
+        ok = (vt.norm(dim=-1) > tiny) & (vs.norm(dim=-1) > tiny_s)
+        if ok.any():
+            R[b] = _align_one(vt[ok], vs[ok], frames)
+        elif b in chain_parent:
+            R[b] = R[chain_parent[b]]
+    return quat_normalize(R)
+
+
+def transfer_rotations(
+    source_globals: torch.Tensor,
+    target: Skeleton,
+    source: Skeleton,
+    pairs: dict[int, int],
+    R: torch.Tensor,
+) -> torch.Tensor:
+    """(T, J_t, 4) target world rotations from the source's ``(T, J_s, 4)`` (module docstring)."""
+    G0s, _ = rest_frames(source)
+    G0t, _ = rest_frames(target)
+    Gs = source_globals.double()
+    T = Gs.shape[0]
+    out = torch.empty(T, target.num_joints, 4, dtype=torch.float64)
+    for b, a in pairs.items():
+        Q = quat_mul(Gs[:, a], quat_inverse(G0s[a]).expand(T, 4))
+        out[:, b] = quat_mul(Q, quat_mul(R[b], G0t[b]).expand(T, 4))
+    fill_chain(out, target, set(pairs))
+    return quat_normalize(out)
+
+
+def fill_chain(G: torch.Tensor, target: Skeleton, fixed: set[int]) -> None:
+    """In place: every joint not in ``fixed`` gets its parent's world rotation times its rest local
+    rotation (a root not in ``fixed`` keeps its rest rotation)."""
+    G0t, _ = rest_frames(target)
+    L0 = rest_locals(target)
+    T = G.shape[0]
+    for b, p in enumerate(target.parents):
+        if b in fixed:
+            continue
+        G[:, b] = G0t[b] if p < 0 else quat_mul(G[:, p], L0[b].expand(T, 4))
+
+
+def positions_from_globals(target: Skeleton, G: torch.Tensor, placed: dict[int, torch.Tensor]) -> torch.Tensor:
+    """(T, J, 3) positions: ``placed`` joints at their given (T, 3) world positions, every other joint
+    at its parent plus its offset turned by the parent's world rotation ``G (T, J, 4)``; an unplaced
+    root stays at its rest position."""
+    T = G.shape[0]
+    off = target.offsets.double()
+    P = torch.empty(T, target.num_joints, 3, dtype=torch.float64)
+    for j, p in enumerate(target.parents):
+        if j in placed:
+            P[:, j] = placed[j]
+        elif p < 0:
+            P[:, j] = off[j]
+        else:
+            P[:, j] = P[:, p] + quat_rotate(G[:, p], off[j].expand(T, 3))
+    return P
+
+
+def body_frame(skeleton: Skeleton, hips: int, chest: int, left_leg: int, right_leg: int) -> torch.Tensor:
+    """(2, 3) unit (forward, left) directions of a humanoid's rest pose: left from the right to the
+    left upper leg, up from the hips to the chest, forward = left x up (kinema: +Z when left is +X)."""
+    _, P0 = rest_frames(skeleton)
+    up = P0[chest] - P0[hips]
+    up = up / up.norm().clamp_min(1e-12)
+    left = P0[left_leg] - P0[right_leg]
+    left = left - (left @ up) * up
+    left = left / left.norm().clamp_min(1e-12)
+    return torch.stack([torch.linalg.cross(left, up), left])

@@ -1,0 +1,155 @@
+"""`retarget`: a motion on one skeleton -> the same motion on another rig (its names, offsets, units,
+rest pose and skin).
+
+Steps (each in its own module):
+
+1. map joints (kinema.retarget.mapping): humanoid slots, same names, or an explicit table;
+2. world rotations (kinema.retarget.align): every mapped bone points where the source's points,
+   unmapped joints keep their rest rotation relative to their parent;
+3. placement and scale (kinema.retarget.proportions): the hips at the source's displacement scaled by
+   leg length;
+4. legs (kinema.retarget.legs): each ankle to the scaled source ankle, held where the source's
+   contacts are planted, by two-bone IK; a foot hanging off the leg (an IK foot bone under the root)
+   is put at the leg chain's end, and IK helpers that stand for the foot follow it;
+5. floor: the lowest joint where the target's rest pose puts it;
+6. `Motion.from_global` on the target skeleton: bone translations come out as
+   ``local_translations`` wherever a joint was placed rather than hung from its parent.
+
+The source's contacts are ``motion.foot_contacts`` when they match its rig's contact joints, else
+estimated from its joint heights and speeds (kinema.motion.contacts, metres); the result carries
+contacts for the target rig's contact joints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import torch
+
+from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
+from kinema.motion.contacts import foot_contacts
+from kinema.motion.core import Motion
+from kinema.retarget import legs as leg_ik
+from kinema.retarget.align import bone_alignment, fill_chain, positions_from_globals, rest_frames, transfer_rotations
+from kinema.retarget.mapping import JointMap, build_joint_map
+from kinema.retarget.proportions import (
+    body_scale,
+    floor_shift,
+    lowest_rest_height,
+    placed_positions,
+    source_body,
+    standing_height,
+    target_body,
+)
+from kinema.rig import Rig
+from kinema.skeleton import Skeleton
+
+
+def source_planted(motion: Motion) -> dict[int, torch.Tensor]:
+    """{source contact joint: (T,) bool planted} from the motion's contacts or its joint motion."""
+    rig = Rig.from_skeleton(motion.skeleton)
+    joints = list(rig.contacts)
+    if not joints:
+        return {}
+    c = motion.foot_contacts
+    if c is None or c.shape[1] != len(joints):
+        c = foot_contacts(motion.positions.double(), motion.fps, motion.skeleton, joints=joints)
+    return {j: c[:, k] > 0.5 for k, j in enumerate(joints)}
+
+
+def _moving_joints(motion: Motion) -> list[int]:
+    """Source joints whose bone translation the motion animates."""
+    if motion.local_translations is None:
+        return []
+    off = motion.skeleton.offsets.to(motion.local_translations)
+    moved = (motion.local_translations - off).abs().amax(dim=(0, 2)) > 1e-6
+    return [j for j in range(1, motion.num_joints) if bool(moved[j])]
+
+
+def _forward(G: torch.Tensor, jm: JointMap) -> torch.Tensor:
+    """(T, 3) the target hips' forward (the source hips' forward turned like the hips)."""
+    t, _ = jm.hips if jm.hips is not None else (0, 0)
+    G0t, _ = rest_frames(jm.target)
+    rest_fwd = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    local = quat_rotate(quat_inverse(G0t[t]), rest_fwd)
+    return quat_rotate(G[:, t], local.expand(G.shape[0], 3))
+
+
+def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -> None:
+    """Legs to their (held) goals; detached feet and followers placed (in ``G`` and ``placed``)."""
+    G0t, P0t = rest_frames(jm.target)
+    _, P0s = rest_frames(jm.source)
+    fwd = _forward(G, jm)
+    hips_t, hips_s = jm.hips
+    low_t, body_s = lowest_rest_height(jm.target, target_body(jm)), source_body(jm)
+    base = float(P0t[hips_t, 1]) - s * float(P0s[hips_s, 1])  # target y = base + s * source y at the hips
+    for leg in jm.legs:
+        seg1 = leg_ik.segment(G0t, P0t, leg.upper, leg.lower)
+        seg2 = leg_ik.segment(G0t, P0t, leg.lower, leg.foot)
+        goal = P[:, leg.upper] + s * (Ps[:, leg.source_foot] - Ps[:, leg.source_upper])
+        heel = planted.get(leg.source_foot, torch.zeros(goal.shape[0], dtype=torch.bool))
+        lift = (float(P0t[leg.foot, 1]) - low_t) - s * standing_height(Ps, leg.source_foot, heel, body_s)
+        goal[:, 1] = base + s * Ps[:, leg.source_foot, 1] + lift
+        toe_off = None
+        if leg.toes is not None:
+            toe_off = quat_rotate(G[:, leg.foot], leg_ik.segment(G0t, P0t, leg.foot, leg.toes).expand_as(goal))
+        toe = planted.get(leg.source_toes) if leg.source_toes is not None else None
+        goal = leg_ik.planted_goals(goal, heel, toe, toe_off, fps)
+        end = leg_ik.two_bone_ik(G, P, leg, seg1, seg2, goal, fwd)
+        if leg.detached:
+            placed[leg.foot] = end
+        for f in jm.followers.get(leg.foot, ()):
+            rel = quat_mul(quat_inverse(G0t[leg.foot]), G0t[f])
+            G[:, f] = quat_mul(G[:, leg.foot], rel.expand(G.shape[0], 4))
+            placed[f] = end + quat_rotate(G[:, leg.foot], leg_ik.segment(G0t, P0t, leg.foot, f).expand_as(end))
+
+
+def _target_contacts(jm: JointMap, planted: dict[int, torch.Tensor], T: int) -> torch.Tensor | None:
+    rig = Rig.from_skeleton(jm.target)
+    if not rig.contacts:
+        return None
+    cols = []
+    for j in rig.contacts:
+        a = jm.pairs.get(j)
+        cols.append(planted[a].double() if a in planted else torch.zeros(T, dtype=torch.float64))
+    return torch.stack(cols, dim=1)
+
+
+def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
+    """:func:`retarget` with a ready joint map (kinema.retarget.mapping.build_joint_map)."""
+    Gs, Ps = (x.double() for x in motion.global_transforms())
+    s = body_scale(jm)
+    R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames)
+    G = transfer_rotations(Gs, jm.target, jm.source, dict(jm.pairs), R)
+    placed = placed_positions(jm, Ps, _moving_joints(motion), s)
+    P = positions_from_globals(jm.target, G, placed)
+    planted = source_planted(motion)
+    if jm.legs:
+        _solve_legs(G, P, placed, jm, Ps, planted, s, motion.fps)
+        fixed = set(jm.pairs) | {f for fs in jm.followers.values() for f in fs}
+        fill_chain(G, jm.target, fixed)
+        P = positions_from_globals(jm.target, G, placed)
+    lift = floor_shift(jm, P)
+    placed = {j: p + torch.tensor([0.0, lift, 0.0], dtype=p.dtype) for j, p in placed.items()}
+    P = positions_from_globals(jm.target, G, placed)
+    contacts = _target_contacts(jm, planted, motion.num_frames)
+    out = Motion.from_global(jm.target, motion.fps, P[:, 0], G, contacts, positions=P)
+    return out.to(motion.dtype)
+
+
+def retarget(
+    motion: Motion,
+    target: Skeleton | Rig,
+    mapping: Mapping[str, str] | None = None,
+    *,
+    overrides=None,
+    source_overrides=None,
+) -> Motion:
+    """``motion`` on ``target`` (a Skeleton, or a Rig whose skeleton is used): the target's joint names,
+    offsets, units, rest pose and skin (``Skeleton.mesh``, carried when the target came from a GLB or
+    FBX). ``mapping``: {target joint: source joint} names that replace the found correspondence;
+    ``overrides`` / ``source_overrides``: rig overrides JSON (path or mapping) for odd joint names
+    (kinema.retarget.detect). Raises `KinemaError` when the rigs share nothing to map."""
+    skeleton = target.skeleton if isinstance(target, Rig) else target
+    jm = build_joint_map(motion.skeleton, skeleton, mapping, overrides, source_overrides)
+    return retarget_with_map(motion, jm)

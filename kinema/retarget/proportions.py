@@ -1,0 +1,104 @@
+"""Proportions: the body scale between two rigs, where placed joints go, and the floor.
+
+- Body scale ``s``: the target's hips height above its lowest rest joint over the source's (leg
+  length; for non-humanoid maps the whole rest height), so root motion, heights and foot goals are
+  scaled by leg length and the character walks as far, relative to its size, as the source. Units
+  follow: a centimetre BVH character gets ``s`` near 100 for a metre source.
+- A placed joint (the hips; for same-name maps every joint whose bone translation the source
+  animates) goes to ``P0_t + s (P_s - P0_s)``: its rest position plus the source's displacement
+  from rest, scaled.
+- Floor: the whole motion is then shifted vertically so that its lowest joint over the clip sits
+  where the target's rest pose puts its lowest joint (helper bones left out, kinema.rig.find.helpers).
+
+Shapes: positions ``(T, J, 3)``, float64.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.retarget.align import rest_frames
+from kinema.retarget.mapping import JointMap
+from kinema.rig.find import helpers
+from kinema.skeleton import Skeleton
+
+
+def body_joints(skeleton: Skeleton, top: int | None = None, extra: tuple[int, ...] = ()) -> list[int]:
+    """Joints that are part of the body: ``top`` (the hips) and the joints below it, plus ``extra``
+    (feet that hang off the legs and the helpers that follow them), less IK/pole/control helpers by
+    name; every non-helper joint when ``top`` is None. Static joints beside the body (an armature,
+    ``Root``, UE's ``ik_foot_root`` at the origin) are left out."""
+    skip = helpers(skeleton)
+    joints = range(skeleton.num_joints)
+    if top is not None:
+        joints = [j for j in joints if top in skeleton.path_from_root(j) or j in extra]
+    return [j for j in joints if j not in skip] or list(range(skeleton.num_joints))
+
+
+def target_body(jm: JointMap) -> list[int]:
+    """:func:`body_joints` of the target: below its hips, with its feet and their followers."""
+    extra = tuple(g.foot for g in jm.legs) + tuple(f for fs in jm.followers.values() for f in fs)
+    return body_joints(jm.target, jm.hips[0] if jm.hips else None, extra)
+
+
+def source_body(jm: JointMap) -> list[int]:
+    """:func:`body_joints` of the source: below its hips, with its feet and toes."""
+    extra = tuple(j for g in jm.legs for j in (g.source_foot, g.source_toes) if j is not None)
+    return body_joints(jm.source, jm.hips[1] if jm.hips else None, extra)
+
+
+def lowest_rest_height(skeleton: Skeleton, body: list[int]) -> float:
+    """Height (y) of the lowest of the ``body`` joints in the rest pose."""
+    _, P0 = rest_frames(skeleton)
+    return float(P0[body, 1].min())
+
+
+def _chain_length(skeleton: Skeleton, joints: list[int]) -> float:
+    _, P0 = rest_frames(skeleton)
+    return float(sum((P0[b] - P0[a]).norm() for a, b in zip(joints, joints[1:], strict=False)))
+
+
+def body_scale(jm: JointMap) -> float:
+    """Target size over source size: the mean leg length (upper leg -> lower leg -> foot, summed) for
+    humanoids, the summed length of the mapped bones otherwise. Both ignore the rest pose's posture,
+    so a source whose rest pose lies along +X scales like one that stands."""
+    if jm.legs:
+        t = sum(_chain_length(jm.target, [g.upper, g.lower, g.foot]) for g in jm.legs)
+        s = sum(_chain_length(jm.source, [g.source_upper, g.source_lower, g.source_foot]) for g in jm.legs)
+    else:
+        t = sum(_chain_length(jm.target, [c, b]) for b, c in jm.chain_parent.items())
+        s = sum(_chain_length(jm.source, [jm.pairs[c], jm.pairs[b]]) for b, c in jm.chain_parent.items())
+    if not (t > 0 and s > 0):
+        raise KinemaError(
+            f"cannot scale between {jm.source.name or 'the source'} and {jm.target.name or 'the target'}: "
+            "the mapped bones have no length"
+        )
+    return t / s
+
+
+def placed_positions(jm: JointMap, source_positions: torch.Tensor, moving: list[int], s: float) -> dict[int, torch.Tensor]:
+    """{target joint: (T, 3) world position} for the hips (or top joint) and the ``moving`` source
+    joints' targets: rest position plus the scaled displacement of the source from its rest."""
+    _, P0s = rest_frames(jm.source)
+    _, P0t = rest_frames(jm.target)
+    chosen = {b: a for b, a in jm.pairs.items() if a in moving}
+    if jm.hips is not None:
+        chosen[jm.hips[0]] = jm.hips[1]
+    return {b: P0t[b] + s * (source_positions[:, a] - P0s[a]) for b, a in chosen.items()}
+
+
+def standing_height(positions: torch.Tensor, joint: int, planted: torch.Tensor | None, body: list[int]) -> float:
+    """Height of ``joint`` above the clip's lowest body joint while planted (median; the joint's lowest
+    height when it never is)."""
+    floor = float(positions[:, body, 1].min())
+    y = positions[:, joint, 1]
+    if planted is not None and bool(planted.any()):
+        return float(y[planted].median()) - floor
+    return float(y.min()) - floor
+
+
+def floor_shift(jm: JointMap, positions: torch.Tensor) -> float:
+    """Vertical shift putting the clip's lowest body joint at the rest pose's lowest joint height."""
+    body = target_body(jm)
+    return lowest_rest_height(jm.target, body) - float(positions[:, body, 1].min())

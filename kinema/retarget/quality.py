@@ -1,0 +1,80 @@
+"""How well a retargeted motion follows its source: the numbers docs/retarget.md tabulates per rig.
+
+- ``direction_deg``: mean and largest angle (degrees) between each mapped bone's world direction on
+  the target (joint -> mapped child) and the same bone on the source, over every frame;
+- ``skate_cm_s``: foot skate of source and target (kinema.postprocess.footlock.foot_skate: mean
+  horizontal speed of the contact joints over consecutive planted frames, the source's planted flags
+  for both), the target's divided by the body scale so both are in source centimetres per second;
+- ``lowest``: the target's lowest body joint over the clip and where its rest pose puts it;
+- ``bone_drift_mm``: the largest change of any bone length of the target against its rest offsets
+  (joints placed in the world, such as the hips or IK feet, left out), in the target's units x 1000.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from kinema.motion.core import Motion
+from kinema.postprocess.footlock import foot_skate
+from kinema.retarget.core import source_planted
+from kinema.retarget.mapping import JointMap
+from kinema.retarget.proportions import body_scale, lowest_rest_height, target_body
+
+
+def _bones(jm: JointMap) -> list[tuple[int, int, int, int]]:
+    """(target joint, target child, source joint, source child) of every mapped bone."""
+    return [(p, c, jm.pairs[p], jm.pairs[c]) for c, p in jm.chain_parent.items() if p in jm.pairs]
+
+
+def direction_errors(source: Motion, target: Motion, jm: JointMap) -> torch.Tensor:
+    """(T, B) angles in degrees between target and source bone directions (module docstring)."""
+    Ps, Pt = source.positions.double(), target.positions.double()
+    bones = _bones(jm)
+    vt = torch.stack([Pt[:, c] - Pt[:, p] for p, c, _, _ in bones], dim=1)
+    vs = torch.stack([Ps[:, c] - Ps[:, p] for _, _, p, c in bones], dim=1)
+    cos = torch.nn.functional.cosine_similarity(vt, vs, dim=-1).clamp(-1, 1)
+    return torch.rad2deg(torch.arccos(cos))
+
+
+def _placed(jm: JointMap, target: Motion) -> set[int]:
+    if target.local_translations is None:
+        return set()
+    off = target.skeleton.offsets.to(target.local_translations)
+    moved = (target.local_translations - off).abs().amax(dim=(0, 2)) > 1e-6
+    return {j for j in range(target.num_joints) if bool(moved[j])}
+
+
+def bone_drift(target: Motion, jm: JointMap) -> float:
+    """Largest bone length change (target units) of joints hung from their parent."""
+    P = target.positions.double()
+    skel = target.skeleton
+    placed = _placed(jm, target)
+    worst = 0.0
+    for j, p in enumerate(skel.parents):
+        if p < 0 or j in placed:
+            continue
+        length = (P[:, j] - P[:, p]).norm(dim=-1)
+        worst = max(worst, float((length - skel.offsets[j].norm()).abs().max()))
+    return worst
+
+
+def retarget_report(source: Motion, target: Motion, jm: JointMap) -> dict:
+    """The numbers of the module docstring as a JSON-friendly dict."""
+    s = body_scale(jm)
+    err = direction_errors(source, target, jm)
+    out = {
+        "scale": s,
+        "direction_deg_mean": float(err.mean()),
+        "direction_deg_max": float(err.max()),
+        "bone_drift_mm": 1000.0 * bone_drift(target, jm),
+    }
+    body = target_body(jm)
+    out["lowest"] = float(target.positions[:, body, 1].min())
+    out["lowest_rest"] = lowest_rest_height(target.skeleton, body)
+    planted = source_planted(source)
+    feet = [(g.foot, g.source_foot) for g in jm.legs if g.source_foot in planted]
+    if feet:
+        flags = torch.stack([planted[a] for _, a in feet], dim=1)
+        out["skate_source_cm_s"] = foot_skate(source, flags, [a for _, a in feet])
+        out["skate_target_cm_s"] = foot_skate(target, flags, [t for t, _ in feet]) / s
+    return out
