@@ -1,4 +1,7 @@
-"""Process-wide runtime settings: how many CPU threads torch may use.
+"""Process-wide runtime settings: how many CPU threads torch may use, and where caches live.
+
+Caches (text embeddings) go to a user-level folder, not the current one (:func:`user_cache_dir`):
+``$KINEMA_CACHE_DIR``, else ``$XDG_CACHE_HOME/kinema``, else ``~/.cache/kinema``.
 
 Why this exists: kinema's tensors are small (a 2.9 M-parameter denoiser, batches of a few hundred frames),
 so torch's intra-op parallelism gains little on a quiet machine and loses a lot on a busy one: when other
@@ -12,14 +15,34 @@ see docs/speed.md). One function, :func:`configure_threads`, decides the thread 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 from kinema.errors import KinemaError
 
 #: Environment variable read when no thread count is given explicitly.
 ENV_VAR = "KINEMA_THREADS"
+#: Environment variable naming kinema's cache folder (default: the XDG user cache).
+CACHE_ENV_VAR = "KINEMA_CACHE_DIR"
 
 #: Idle cores (cores minus the 1-minute load average) needed before a second thread is used.
 MIN_FREE_FOR_TWO = 1.75
+
+
+def user_cache_dir(*parts: str) -> Path:
+    """kinema's user cache folder (not created here), or a sub-folder of it: ``$KINEMA_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/kinema``, else ``~/.cache/kinema`` (the XDG base-directory convention)."""
+    own = os.environ.get(CACHE_ENV_VAR, "").strip()
+    if own:
+        base = Path(own).expanduser()
+    else:
+        xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
+        base = (Path(xdg).expanduser() if xdg and Path(xdg).is_absolute() else Path.home() / ".cache") / "kinema"
+    return base.joinpath(*parts)
+
+
+def text_cache_dir() -> Path:
+    """Where the CLI keeps text embeddings between processes (``user_cache_dir("text")``)."""
+    return user_cache_dir("text")
 
 
 def _check_count(value, source: str) -> int:

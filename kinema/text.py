@@ -261,12 +261,16 @@ class CachedEncoder(_EncoderWrapper):
         return arr
 
     def _write(self, key: str, vec: np.ndarray) -> None:
-        """Atomically store one vector: write a temp file in the same folder, then rename it."""
+        """Atomically store one vector: write a temp file in the same folder, then rename it (skipped
+        when the folder cannot be written)."""
         path = self._path(key)
-        path.parent.mkdir(parents=True, exist_ok=True)
         buf = io.BytesIO()
         np.save(buf, np.ascontiguousarray(vec, dtype=np.float32), allow_pickle=False)
-        atomic_write_bytes(path, buf.getvalue())
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, buf.getvalue())
+        except OSError:
+            pass  # a cache folder that cannot be written (read-only home) only costs the re-encoding
 
     def encode(self, texts: list[str]) -> torch.Tensor:
         """Embed ``texts``, computing (once each) only the texts not already on disk."""

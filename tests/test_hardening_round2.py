@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import socket
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -153,3 +154,22 @@ def test_app_refuses_a_public_bind_without_public(capsys):
     check_host("0.0.0.0", public=True)  # the explicit opt-in passes
     for host in ("127.0.0.1", "localhost", "::1"):
         check_host(host, public=False)
+
+
+# ---------------------------------------------------------------------------- text cache location
+def test_generate_keeps_its_text_cache_out_of_the_current_folder(tmp_path, monkeypatch):
+    from kinema.runtime import text_cache_dir, user_cache_dir
+
+    work, cache = tmp_path / "work", tmp_path / "user-cache"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    monkeypatch.delenv("KINEMA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    assert text_cache_dir() == cache / "kinema" / "text"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")  # the XDG spec: relative paths are ignored
+    assert user_cache_dir() == Path.home() / ".cache" / "kinema"
+    monkeypatch.setenv("KINEMA_CACHE_DIR", str(cache / "own"))
+    assert main(["generate", "A person walks in a small circle.", "--steps", "2", "--seconds", "1",
+                 "--no-progress", "--out", "o.bvh"]) == 0
+    assert sorted(p.name for p in work.iterdir()) == ["o.bvh"]  # no ./cache/text
+    assert list((cache / "own" / "text").rglob("*.npy"))

@@ -2,7 +2,7 @@
 
 Why: a user's first command pays for the interpreter, imports, model and text-encoder load and an empty
 text cache on top of sampling; only a fresh process in an empty working directory measures that.
-``cli_times`` runs the real CLI twice in a temporary cwd (cold: empty ``cache/text``, a prompt never seen
+``cli_times`` runs the real CLI twice in a temporary cwd (cold: an empty text cache, a prompt never seen
 before; warm: the same command again, text cache filled, OS file cache hot). ``phase_breakdown`` runs the
 pieces of ``KinemaModel.generate`` one by one in a fresh interpreter with ``perf_counter`` between them,
 without touching kinema.generate: imports, model load, text encoding (first prompt), sampling (DDIM and
@@ -20,13 +20,16 @@ import time
 import uuid
 from pathlib import Path
 
+from kinema.runtime import CACHE_ENV_VAR, text_cache_dir
+
 #: Phases reported by phase_breakdown, in order.
 PHASES = ("startup", "imports", "model_load", "text_encoding", "sampling", "postprocess", "writing")
 
 
-def _env(threads: int | None) -> dict[str, str]:
-    """The child's environment: ours, with ``KINEMA_THREADS`` set when a thread count is asked for."""
-    env = dict(os.environ)
+def _env(threads: int | None, cwd: str) -> dict[str, str]:
+    """The child's environment: ours, with ``KINEMA_THREADS`` set when a thread count is asked for and
+    the text cache in the temporary ``cwd`` (empty at first, as on a fresh machine)."""
+    env = dict(os.environ) | {CACHE_ENV_VAR: str(Path(cwd) / "cache")}
     if threads is not None:
         env["KINEMA_THREADS"] = str(threads)
     return env
@@ -48,7 +51,7 @@ def cli_times(model: str, seconds: float = 5.0, threads: int | None = None, step
             cmd += ["--steps", str(steps)]
         for key in ("cold_s", "warm_s"):
             t0 = time.perf_counter()
-            proc = subprocess.run(cmd, cwd=cwd, env=_env(threads), capture_output=True, text=True)
+            proc = subprocess.run(cmd, cwd=cwd, env=_env(threads, cwd), capture_output=True, text=True)
             out[key] = time.perf_counter() - t0
             if proc.returncode != 0:
                 raise RuntimeError(f"kinema generate failed ({proc.returncode}): {proc.stderr[-2000:]}")
@@ -64,7 +67,7 @@ def run_phases(model: str, prompt: str, seconds: float, steps: int | None, out_p
 
     times: dict[str, float] = {}
     t0 = time.perf_counter()
-    m = load_model(model, text_cache=Path("cache/text"))
+    m = load_model(model, text_cache=text_cache_dir())
     times["model_load"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     m.encode_text(prompt)  # first prompt: loads the encoder weights, encodes, fills the cache
@@ -98,7 +101,7 @@ def phase_breakdown(model: str, seconds: float = 5.0, threads: int | None = None
     with tempfile.TemporaryDirectory(prefix="kinema-bench-") as cwd:
         args = json.dumps([model, unique_prompt(), seconds, steps, str(Path(cwd) / "out.bvh")])
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-c", _CHILD, args], cwd=cwd, env=_env(threads),
+        proc = subprocess.run([sys.executable, "-c", _CHILD, args], cwd=cwd, env=_env(threads, cwd),
                               capture_output=True, text=True)
         wall = time.perf_counter() - t0
     if proc.returncode != 0:

@@ -18,6 +18,7 @@ from kinema.cli.batch import register_bench as register_batch_bench
 from kinema.cli.bench_keyjoint_planning import register_bench as register_keyjoint_planning_bench
 from kinema.cli.bench_objectives import register_bench as register_objectives_bench
 from kinema.errors import DataError
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -232,7 +233,7 @@ def _register_train_modes(targets) -> None:
     p.add_argument("--steps", type=_positive_int, default=300)
     p.add_argument("--batch-size", type=_positive_int, default=32)
     p.add_argument("--warmup", type=_positive_int, default=20, help="first steps timed apart (compilation)")
-    p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    p.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     p.add_argument("--json", type=Path, help="also write rows and loss curves to this JSON file")
     p.add_argument("--threads", type=_positive_int, default=None,
                    help="torch threads (default: KINEMA_THREADS, else chosen by kinema.runtime)")

@@ -10,6 +10,7 @@ from pathlib import Path
 from kinema.atomic_files import atomic_write_bytes
 from kinema.bench.keyjoint_planning import HEADER, bench_keyjoint_planning
 from kinema.cli._args import positive_float, positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register_bench(targets) -> None:
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         check_output_path(args.out)
     planner = KeyjointPlanner.load(args.keyjoint_model)
     threads = configure_threads(args.threads)
-    model = load_model("default", text_cache=Path("cache/text"))
+    model = load_model("default", text_cache=text_cache_dir())
     print(f"sparse control, {args.seconds:g}-s walk, {args.repeats} seed(s), {threads} thread(s)")
     print(HEADER)
     rows = bench_keyjoint_planning(model, planner, args.seconds, args.steps, args.repeats)

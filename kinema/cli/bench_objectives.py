@@ -9,6 +9,7 @@ from pathlib import Path
 from kinema.atomic_files import atomic_write_bytes
 from kinema.bench.objectives import HEADER, SETTINGS, TASKS, bench_objectives, parse_settings
 from kinema.cli._args import positive_float, positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register_bench(targets) -> None:
@@ -34,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings = parse_settings(args.settings)
     threads = configure_threads(args.threads)
-    model = load_model("default", text_cache=Path("cache/text"))
+    model = load_model("default", text_cache=text_cache_dir())
     print(
         f"objective {args.task!r}, {args.seconds:g}-s motion, {args.seeds} seed(s), {threads} thread(s); "
         "error in cm (optimised: after noise optimisation; raw: after snapping; final: post-processed)"

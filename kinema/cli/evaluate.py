@@ -8,6 +8,7 @@ from pathlib import Path
 from kinema.cli._args import add_grounding_arguments, grounding_overrides, non_negative_float, positive_int, seed
 from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
 from kinema.cli.evaluate_sfcontrol import run_sfcontrol
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -90,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         if args.suite is not None:
             save_suite(cases, args.suite)
         print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
-    model = load_model(args.model, text_cache=Path("cache/text"))
+    model = load_model(args.model, text_cache=text_cache_dir())
     if args.phrasings:  # the probes' measures need these joints: fail now, not after the suite
         try:
             model.skeleton.require_roles(PROBE_ROLES)
@@ -104,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,
                         progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
-                        mm_samples=args.mm[1], text_cache=Path("cache/text"),
+                        mm_samples=args.mm[1], text_cache=text_cache_dir(),
                         guidance=tuple(args.guidance) if args.guidance else None, phrasings=args.phrasings)
     data = write_report(results, out, filmstrips=args.filmstrips)
     print()

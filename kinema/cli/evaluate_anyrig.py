@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from kinema.cli._args import positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     configure_threads(args.threads)
     if args.out is not None:
         check_output_path(args.out)
-    model = load_model(args.model, text_cache=Path("cache/text"))
+    model = load_model(args.model, text_cache=text_cache_dir())
     if not model.needs_rig:
         raise KinemaError(f"--model {args.model}: not an any-rig model (it drives its own skeleton)")
     shapes = training_shapes(model.loaded.train_rigs)

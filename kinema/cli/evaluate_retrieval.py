@@ -1,7 +1,7 @@
 """`kinema retrieval`: train the text-motion retrieval model and measure its retrieval accuracy.
 
     kinema retrieval train --data DIR --out DIR [--steps 1000] [--batch-size 128] [--lr 5e-4] [--seed 0]
-                           [--text-encoder minilm-l6-v2] [--cache-dir cache/text] [--half] [--threads N]
+                           [--text-encoder minilm-l6-v2] [--cache-dir DIR] [--half] [--threads N]
                            [--max-minutes M] [--eval-split test|none]
     kinema retrieval eval --data DIR [--model DIR] [--split test] [--json FILE] [--threads N]
 
@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from kinema.cli._args import positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -33,7 +34,7 @@ def register(sub) -> None:
     t.add_argument("--lr", type=float, default=5e-4, help="peak learning rate (default 5e-4)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--text-encoder", default="minilm-l6-v2", help="frozen text encoder id")
-    t.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    t.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     t.add_argument("--half", action="store_true", help="store float16 weights (half the size)")
     t.add_argument("--eval-split", default="test", help="split evaluated after training ('none' to skip)")
     t.add_argument("--max-minutes", type=float, default=None, help="safety stop after this much training time")
@@ -45,7 +46,7 @@ def register(sub) -> None:
     e.add_argument("--data", type=Path, required=True, help="dataset folder from `kinema data build`")
     e.add_argument("--model", type=Path, default=None, help="model folder (default: the shipped weights)")
     e.add_argument("--split", default="test", choices=["train", "val", "test", "all"])
-    e.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    e.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     e.add_argument("--json", type=Path, default=None, help="also write the metrics as JSON here")
     _common(e)
     e.set_defaults(func=_eval)

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from kinema.atomic_files import atomic_write_bytes
+from kinema.runtime import text_cache_dir
 
 SPARSE_ROWS = ("direct", "keyjoint-planned", "direct + noise opt")
 
@@ -151,7 +152,7 @@ def run_sfcontrol(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     out = args.out or Path("out/eval/sfcontrol")
-    model = load_model(args.model, text_cache=Path("cache/text"))
+    model = load_model(args.model, text_cache=text_cache_dir())
     report, md = {"cases": args.cases, "steps": args.steps, "objective_steps": args.objective_steps}, []
     for part, fn in (("sparse", _sparse), ("ee", _ee), ("goal", _goal), ("tasks", _tasks)):
         if part in args.parts:

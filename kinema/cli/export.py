@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from kinema.cli._args import add_grounding_arguments, grounding_overrides, non_negative_float, positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -60,7 +61,7 @@ def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
     from kinema.text import get_text_encoder
 
     captions = [c for rec in MotionDataset(data, "train").clips for c in rec["captions"]]
-    encoder = get_text_encoder(encoder_id, cache_dir=Path("cache/text"))
+    encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
     known = KnownPrompts.build(captions, encoder, manner_phrases())
     print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")
 

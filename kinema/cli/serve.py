@@ -50,7 +50,8 @@ def register(sub) -> None:
     p.add_argument("--timeout", type=positive_float, default=d.timeout_s,
                    help=f"seconds POST /v1/generate waits for its result (default {d.timeout_s:g}); 504 after")
     p.add_argument("--read-timeout", type=positive_float, default=d.read_timeout_s,
-                   help=f"seconds to wait for the next part of a request body (default {d.read_timeout_s:g}); 408 after")
+                   help=f"seconds to wait for the next part of a request body (default {d.read_timeout_s:g}); "
+                   "408 after")
     p.add_argument("--max-jobs", type=positive_int, default=d.max_jobs, help=f"jobs kept (default {d.max_jobs})")
     p.add_argument("--job-ttl", type=positive_float, default=d.job_ttl_s,
                    help=f"seconds a finished job's result is kept (default {d.job_ttl_s:g})")

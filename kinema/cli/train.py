@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from kinema.cli._args import positive_float, positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -37,7 +38,7 @@ def register(sub) -> None:
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
     p.add_argument("--text-encoder", help="text encoder id (default minilm-l6-v2)")
-    p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    p.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
     p.add_argument("--init-from", help="fine-tune: start from this model's weights (an exported model, 'default' "
                                        "for the shipped one, or a run/checkpoint folder); optimiser and step "

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from kinema.cli._args import positive_float, positive_int
+from kinema.runtime import text_cache_dir
 
 
 def register(sub) -> None:
@@ -27,7 +28,7 @@ def register(sub) -> None:
     p.add_argument("--ckpt-every", type=positive_int)
     p.add_argument("--log-every", type=positive_int)
     p.add_argument("--seed", type=int)
-    p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
+    p.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
     p.add_argument("--minutes", type=positive_float, help="stop cleanly after this many minutes (checkpoint written)")
     p.add_argument("--threads", type=positive_int, help="torch CPU threads (default chosen by kinema.runtime)")

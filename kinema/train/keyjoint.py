@@ -35,6 +35,7 @@ from kinema.representation.keyjoint import (
     keyjoints_from_features,
     sparse_mask,
 )
+from kinema.runtime import text_cache_dir
 from kinema.text import get_text_encoder
 
 MIN_FRAMES, MAX_FRAMES = 40, 100
@@ -228,7 +229,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--log-every", type=int, default=50)
     p.add_argument("--save-every", type=int, default=500)
-    p.add_argument("--text-cache", default="cache/text")
+    p.add_argument("--text-cache", default=str(text_cache_dir()))
     p.add_argument("--text-encoder", default="minilm-l6-v2", help="must be the body model's for generation")
     p.add_argument("--reset-ema", action="store_true", help="on resume, restart the EMA from the current weights")
     run(p.parse_args(argv))
