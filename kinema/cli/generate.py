@@ -13,6 +13,7 @@ from pathlib import Path
 
 from kinema.cli._args import positive_int, sample_paths
 from kinema.cli.request_args import add_request_arguments, request_from_args
+from kinema.runtime import text_cache_dir
 
 #: Defaults of the arguments a Kimodo meta.json can fill (their argparse default is None = "not given").
 DEFAULT_SECONDS = 5.0
@@ -120,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     outputs = sample_paths(args.out, request.samples)
     for path in outputs:  # before loading the model and generating: a bad --out costs nothing
         check_output_path(path)
-    model = load_model(args.model, text_cache=Path("cache/text"))
+    model = load_model(args.model, text_cache=text_cache_dir())
     if request.steps is not None and request.steps > model.max_steps:
         source = f" (from {meta_path})" if "steps" in filled else ""
         raise KinemaError(f"--steps {request.steps}{source}: at most {model.max_steps}, the model's trained "
