@@ -7,9 +7,9 @@ rotations, else identity), a source joint ``a`` animated to ``G_s(t)`` has turne
     ``G_t(t) = Q(t) R_b G0_t``
 
 where ``R_b`` is the constant world rotation taking the target's rest bone directions (from ``b`` to its
-mapped children) onto the source's: the shortest arc for one child, the best rotation for several
-(Kabsch on unit directions). So a T-pose source drives an A-pose target, and bones whose local axes
-differ (Bandai's lie along +X, Mixamo's along +Y) do not matter: only world directions are compared.
+mapped children) onto the source's: the shortest arc for the primary child (the only one, or the
+spine above the hips, the neck above the chest), then a turn about that bone that lines up the other
+children. So a T-pose source drives an A-pose target, and bones whose local axes differ (Bandai's lie along +X, Mixamo's along +Y) do not matter: only world directions are compared.
 For humanoids each bone is then turned about itself so that the body's forward and left
 directions at rest line up too (the roll: a knee keeps facing forward even when the source's rest
 pose lies along +X, as Bandai's does). A mapped joint without mapped children (a hand, a foot without toes) borrows the ``R`` of its chain
@@ -24,7 +24,6 @@ from __future__ import annotations
 import torch
 
 from kinema.geometry.rotations import (
-    matrix_to_quat,
     quat_between,
     quat_inverse,
     quat_mul,
@@ -53,16 +52,6 @@ def rest_frames(skeleton: Skeleton) -> tuple[torch.Tensor, torch.Tensor]:
     return G, P
 
 
-def _best_rotation(target_dirs: torch.Tensor, source_dirs: torch.Tensor) -> torch.Tensor:
-    """Rotation (4,) taking unit directions ``target_dirs (C, 3)`` onto ``source_dirs``."""
-    if target_dirs.shape[0] == 1:
-        return quat_between(target_dirs[0], source_dirs[0])
-    U, _, Vh = torch.linalg.svd(source_dirs.T @ target_dirs)
-    flip = torch.ones(3, dtype=torch.float64)
-    flip[2] = torch.sign(torch.linalg.det(U @ Vh))
-    return matrix_to_quat(U @ torch.diag(flip) @ Vh)
-
-
 def _roll(R1: torch.Tensor, axis: torch.Tensor, sec_t: torch.Tensor, sec_s: torch.Tensor) -> torch.Tensor:
     """``R1`` followed by the turn about ``axis`` (unit, 3) that best lines up the secondary directions
     ``sec_t`` (after ``R1``) with ``sec_s`` (both (K, 3)) seen across the axis."""
@@ -80,15 +69,14 @@ def _roll(R1: torch.Tensor, axis: torch.Tensor, sec_t: torch.Tensor, sec_s: torc
 
 def _align_one(vt: torch.Tensor, vs: torch.Tensor, frames) -> torch.Tensor:
     """Rotation taking the target's child directions ``vt (C, 3)`` onto the source's ``vs``: the exact
-    shortest arc for one child, turned about the bone to line up the body frames when given, else the
-    best rotation of the child directions and the frames together."""
+    shortest arc for the first (primary) child, then the turn about it that best lines up the other
+    children and the body frames (when given)."""
     ut, us = vt / vt.norm(dim=-1, keepdim=True), vs / vs.norm(dim=-1, keepdim=True)
-    if ut.shape[0] == 1:
-        R1 = quat_between(ut[0], us[0])
-        return R1 if frames is None else _roll(R1, us[0], frames[0], frames[1])
+    R1 = quat_between(ut[0], us[0])
+    sec_t, sec_s = ut[1:], us[1:]
     if frames is not None:
-        ut, us = torch.cat([ut, frames[0]]), torch.cat([us, frames[1]])
-    return _best_rotation(ut, us)
+        sec_t, sec_s = torch.cat([sec_t, frames[0]]), torch.cat([sec_s, frames[1]])
+    return _roll(R1, us[0], sec_t, sec_s) if sec_t.shape[0] else R1
 
 
 def bone_alignment(
@@ -97,13 +85,16 @@ def bone_alignment(
     pairs: dict[int, int],
     chain_parent: dict[int, int],
     frames: tuple[torch.Tensor, torch.Tensor] | None = None,
+    primary: dict[int, int] | None = None,
 ) -> torch.Tensor:
     """(J_t, 4) world rotations ``R_b`` of every mapped target joint (identity elsewhere).
 
     ``pairs``: target joint -> source joint; ``chain_parent``: target joint -> the mapped target joint
     whose ``R`` it borrows when it has no mapped child; ``frames``: the body's (forward, left) unit
     directions at rest, ``(2, 3)`` for the target and for the source, which fix each bone's roll
-    about itself (humanoids; without them a bone takes the shortest arc)."""
+    about itself (humanoids); ``primary``: target joint -> the mapped child whose direction is met
+    exactly (the spine above the hips, the neck above the chest), default the child with the most
+    mapped joints below it. The other children only set the roll."""
     _, P0t = rest_frames(target)
     _, P0s = rest_frames(source)
     tiny = SHORT_BONE * float(max(P0t[:, 1].max() - P0t[:, 1].min(), 1e-9))
@@ -115,6 +106,10 @@ def bone_alignment(
             p = target.parents[p]
         if p >= 0:
             kids[p].append(c)
+    below = {b: sum(1 for c in pairs if b in target.path_from_root(c)) for b in pairs}
+    for b, cs in kids.items():
+        first = (primary or {}).get(b)
+        cs.sort(key=lambda c: (c != first, -below[c], c))
     R = torch.zeros(target.num_joints, 4, dtype=torch.float64)
     R[:, 0] = 1.0
     for b in sorted(pairs):  # parents before children

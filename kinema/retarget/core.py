@@ -75,17 +75,15 @@ def _forward(G: torch.Tensor, jm: JointMap) -> torch.Tensor:
     return quat_rotate(G[:, t], local.expand(G.shape[0], 3))
 
 
-def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -> None:
-    """Legs to their (held) goals; detached feet and followers placed (in ``G`` and ``placed``)."""
+def _leg_goals(G, P, jm: JointMap, Ps, planted, s: float, fps: float) -> list[torch.Tensor]:
+    """Per leg, the (T, 3) ankle goal with the source's planted contacts held (kinema.retarget.legs)."""
     G0t, P0t = rest_frames(jm.target)
     _, P0s = rest_frames(jm.source)
-    fwd = _forward(G, jm)
     hips_t, hips_s = jm.hips
     low_t, body_s = lowest_rest_height(jm.target, target_body(jm)), source_body(jm)
     base = float(P0t[hips_t, 1]) - s * float(P0s[hips_s, 1])  # target y = base + s * source y at the hips
+    goals = []
     for leg in jm.legs:
-        seg1 = leg_ik.segment(G0t, P0t, leg.upper, leg.lower)
-        seg2 = leg_ik.segment(G0t, P0t, leg.lower, leg.foot)
         goal = P[:, leg.upper] + s * (Ps[:, leg.source_foot] - Ps[:, leg.source_upper])
         heel = planted.get(leg.source_foot, torch.zeros(goal.shape[0], dtype=torch.bool))
         lift = (float(P0t[leg.foot, 1]) - low_t) - s * standing_height(Ps, leg.source_foot, heel, body_s)
@@ -94,7 +92,24 @@ def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -
         if leg.toes is not None:
             toe_off = quat_rotate(G[:, leg.foot], leg_ik.segment(G0t, P0t, leg.foot, leg.toes).expand_as(goal))
         toe = planted.get(leg.source_toes) if leg.source_toes is not None else None
-        goal = leg_ik.planted_goals(goal, heel, toe, toe_off, fps)
+        goals.append(leg_ik.planted_goals(goal, heel, toe, toe_off, fps))
+    return goals
+
+
+def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -> torch.Tensor:
+    """Legs to their (held) goals, the hips lowered where a planted leg cannot reach; detached feet and
+    followers placed (``G`` and ``placed`` are changed in place). Returns the new positions."""
+    G0t, P0t = rest_frames(jm.target)
+    segs = [(leg_ik.segment(G0t, P0t, g.upper, g.lower), leg_ik.segment(G0t, P0t, g.lower, g.foot)) for g in jm.legs]
+    goals = _leg_goals(G, P, jm, Ps, planted, s, fps)
+    on = [planted.get(g.source_foot, torch.zeros(P.shape[0], dtype=torch.bool)) for g in jm.legs]
+    drop = leg_ik.reach_drop(P, jm.legs, segs, goals, on, fps)
+    if drop is not None:
+        placed[jm.hips[0]] = placed[jm.hips[0]] - drop[:, None] * torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype)
+        P = positions_from_globals(jm.target, G, placed)
+        goals = _leg_goals(G, P, jm, Ps, planted, s, fps)
+    fwd = _forward(G, jm)
+    for leg, (seg1, seg2), goal in zip(jm.legs, segs, goals, strict=True):
         end = leg_ik.two_bone_ik(G, P, leg, seg1, seg2, goal, fwd)
         if leg.detached:
             placed[leg.foot] = end
@@ -102,6 +117,7 @@ def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -
             rel = quat_mul(quat_inverse(G0t[leg.foot]), G0t[f])
             G[:, f] = quat_mul(G[:, leg.foot], rel.expand(G.shape[0], 4))
             placed[f] = end + quat_rotate(G[:, leg.foot], leg_ik.segment(G0t, P0t, leg.foot, f).expand_as(end))
+    return P
 
 
 def _target_contacts(jm: JointMap, planted: dict[int, torch.Tensor], T: int) -> torch.Tensor | None:
@@ -119,7 +135,7 @@ def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
     """:func:`retarget` with a ready joint map (kinema.retarget.mapping.build_joint_map)."""
     Gs, Ps = (x.double() for x in motion.global_transforms())
     s = body_scale(jm)
-    R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames)
+    R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames, dict(jm.primary))
     G = transfer_rotations(Gs, jm.target, jm.source, dict(jm.pairs), R)
     placed = placed_positions(jm, Ps, _moving_joints(motion), s)
     P = positions_from_globals(jm.target, G, placed)

@@ -9,6 +9,10 @@ is planted the toe is held instead and the ankle goal follows from the foot's ro
 are blended in and out with raised-cosine ramps (kinema.postprocess.ik.spread_corrections) over
 ``BLEND_SECONDS``, so nothing pops.
 
+Where a planted goal lies beyond the leg's reach (a character whose IK foot bone sits on the floor
+while the source's ankle is 8 cm up, or a stiff-legged rest pose), the hips are lowered just enough,
+eased in and out like the holds, so the foot stays put instead of being dragged.
+
 The IK treats ``upper -> lower`` and ``lower -> ankle`` as two rigid segments in the upper and lower
 joints' frames (an unmapped joint between them, such as a mech's ``MidLeg``, rides along), keeps the
 knee in the plane the source's knee bend gives (the hips' forward where the leg is straight) and
@@ -29,6 +33,8 @@ from kinema.postprocess.ik import spread_corrections
 from kinema.retarget.mapping import Leg
 
 BLEND_SECONDS = 0.1
+#: a planted leg is lowered to reach its goal at this fraction of its full length (never locked straight)
+REACH = 0.995
 _EPS = 1e-9
 
 
@@ -68,6 +74,25 @@ def planted_goals(
     out = goal.clone()
     out[:, [0, 2]] += field
     return out
+
+
+def reach_drop(
+    P: torch.Tensor, legs, segs, goals: list[torch.Tensor], planted: list[torch.Tensor], fps: float
+) -> torch.Tensor | None:
+    """(T,) how far to lower the hips so that every planted leg reaches its goal (eased in and out),
+    or None when every planted goal is within reach. ``segs``: (seg1, seg2) per leg."""
+    need = torch.zeros(P.shape[0], dtype=P.dtype)
+    for leg, (seg1, seg2), goal, on in zip(legs, segs, goals, planted, strict=True):
+        reach = REACH * float(seg1.norm() + seg2.norm())
+        v = goal - P[:, leg.upper]
+        flat = v[:, [0, 2]].norm(dim=-1).clamp(max=reach)
+        short = (-v[:, 1] - (reach * reach - flat * flat).sqrt()).clamp(min=0)
+        need = torch.maximum(need, torch.where(on, short, torch.zeros_like(short)))
+    frames = torch.nonzero(need > 1e-6).flatten()
+    if frames.numel() == 0:
+        return None
+    field, _ = spread_corrections(frames, need[frames, None], P.shape[0], 2 * BLEND_SECONDS * fps)
+    return torch.maximum(field[:, 0], need)
 
 
 def two_bone_ik(

@@ -65,6 +65,7 @@ class JointMap:
     followers: Mapping[int, tuple[int, ...]] = field(default_factory=dict)
     kind: str = "names"
     frames: tuple | None = None  # (target (2, 3), source (2, 3)) rest (forward, left) of humanoids
+    primary: Mapping[int, int] = field(default_factory=dict)  # joint -> child whose direction is met exactly
 
     def describe(self) -> list[str]:
         t, s = self.target.names, self.source.names
@@ -112,7 +113,11 @@ def humanoid_joint_map(src: HumanoidMap, tgt: HumanoidMap) -> JointMap:
         body_frame(h.skeleton, *(h.slots[k] for k in ("hips", "chest", "left_upper_leg", "right_upper_leg")))
         for h in (tgt, src)
     )
-    return JointMap(src.skeleton, tgt.skeleton, pairs, chain, hips, _legs(src, tgt), followers, "humanoid", frames)
+    spine_up = [k for k in ("hips", "spine", "chest", "neck", "head") if k in tgt.slots and tgt.slots[k] in pairs]
+    primary = {tgt.slots[a]: tgt.slots[b] for a, b in zip(spine_up, spine_up[1:], strict=False)}
+    return JointMap(
+        src.skeleton, tgt.skeleton, pairs, chain, hips, _legs(src, tgt), followers, "humanoid", frames, primary
+    )
 
 
 def _key(name: str) -> str:
@@ -162,7 +167,7 @@ def explicit_joint_map(source: Skeleton, target: Skeleton, mapping: Mapping[str,
     if base is not None:
         return JointMap(
             source, target, pairs, {**_chain_parents(target, pairs), **base.chain_parent},
-            base.hips, base.legs, base.followers, base.kind, base.frames,
+            base.hips, base.legs, base.followers, base.kind, base.frames, base.primary,
         )
     return JointMap(source, target, pairs, _chain_parents(target, pairs), _top(target, pairs), (), {}, "explicit")
 
