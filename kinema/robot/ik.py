@@ -38,7 +38,7 @@ class IKWeights:
     knee: float = 1.0
     floor: float = 200.0
     to_previous: float = 0.1
-    to_zero: float = 0.02
+    to_zero: float = 0.005
     damping: float = 1e-2
 
 
@@ -109,17 +109,18 @@ class HingeIK:
             rows.append(self._point_rows(ids[f"{s}_hand"], r.point(d, f"{s}_hand"), hand, w.hand))
         return rows
 
-    def _step(self, q: np.ndarray, q_prev: np.ndarray, tg: FrameTargets, t: int) -> np.ndarray:
-        """One limited DLS step (nv,) from pose ``q``."""
+    def _step(self, q: np.ndarray, q_prev: np.ndarray | None, tg: FrameTargets, t: int) -> np.ndarray:
+        """One limited DLS step (nv,) from pose ``q``; ``q_prev`` None: no pull towards a previous pose."""
         rows = self._tasks(tg, t)
         A = np.concatenate([np.reshape(np.sqrt(wt), (-1, 1)) * J for J, _, wt in rows])
         b = np.concatenate([np.sqrt(wt) * e for _, e, wt in rows])
         r, w = self.robot, self.w
-        reg = np.where(self.hinge, w.to_previous + w.to_zero, 0.0)
-        H = A.T @ A + np.diag(reg + w.damping)
+        pull = 0.0 if q_prev is None else w.to_previous
+        H = A.T @ A + np.diag(np.where(self.hinge, pull + w.to_zero, 0.0) + w.damping)
         g = A.T @ b
-        angles, prev = q[r.qpos_adr], q_prev[r.qpos_adr]
-        g[r.dof_adr] += w.to_previous * (prev - angles) - w.to_zero * angles
+        angles = q[r.qpos_adr]
+        prev = angles if q_prev is None else q_prev[r.qpos_adr]
+        g[r.dof_adr] += pull * (prev - angles) - w.to_zero * angles
         dq = np.linalg.solve(H, g)
         lo, hi = r.ranges[:, 0], r.ranges[:, 1]
         step = dq[r.dof_adr]
@@ -131,10 +132,11 @@ class HingeIK:
             dq = np.linalg.solve(H, g)
         return dq * min(1.0, _MAX_STEP / max(np.abs(dq).max(), 1e-12))
 
-    def solve(self, q: np.ndarray, tg: FrameTargets, t: int, iterations: int) -> np.ndarray:
-        """The pose (nq,) for frame ``t`` starting from ``q`` (the previous frame's pose)."""
+    def solve(self, q: np.ndarray, tg: FrameTargets, t: int, iterations: int, first: bool = False) -> np.ndarray:
+        """The pose (nq,) for frame ``t`` starting from ``q``: the previous frame's pose, which the solve is
+        pulled towards, or (``first``) a starting guess it is not."""
         r, m, d = self.robot, self.model, self.data
-        q_prev, q = q.copy(), q.copy()
+        q_prev, q = (None if first else q.copy()), q.copy()
         for _ in range(iterations):
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)

@@ -72,7 +72,7 @@ def retarget_to_robot(motion, robot: Robot | str, weights: IKWeights | None = No
     q[3:7] = _quaternion(targets.pelvis_frame[0] @ ik.rest["pelvis"])
     poses = []
     for t in range(motion.num_frames):
-        q = ik.solve(q, targets, t, FIRST_ITERATIONS if t == 0 else ITERATIONS)
+        q = ik.solve(q, targets, t, FIRST_ITERATIONS if t == 0 else ITERATIONS, first=t == 0)
         poses.append(q.copy())
     Q = np.array(poses)
     quats = _continuous(Q[:, 3:7] / np.linalg.norm(Q[:, 3:7], axis=1, keepdims=True))
