@@ -187,3 +187,14 @@ def test_commands_advertised_in_help_parse_as_written(tmp_path):
     for command in shown:
         argv = [str(tmp_path) if w.isupper() else w for w in command.split()[1:]]
         parser.parse_args(argv)  # SystemExit (usage error) fails the test
+
+
+def test_json_syntax_error_in_a_constraints_file_says_so(tmp_path, capsys):
+    bad = tmp_path / "c.json"
+    bad.write_text('[{"type": "root2d", "times": [1.0], \n')
+    out = tmp_path / "o.bvh"
+    assert main(["generate", "A person walks.", "--steps", "2", "--seconds", "1", "--no-progress",
+                 "--constraints", str(bad), "--out", str(out)]) == 2
+    err = one_line_error(capsys, "c.json", "not valid JSON: line 2, column 1")
+    assert "objectives" not in err
+    assert not out.exists()

@@ -189,8 +189,11 @@ def load_objectives(path_or_obj) -> list[Objective]:
         source = str(path_or_obj)
         try:
             data = json.loads(Path(path_or_obj).read_text(encoding="utf-8"))
+        except json.JSONDecodeError as err:  # before ValueError: a syntax error is no unreadable file
+            raise ObjectiveError(f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}",
+                                 source=source) from None
         except (OSError, ValueError) as err:
-            raise ObjectiveError(f"cannot read objectives ({err})", source=source) from None
+            raise ObjectiveError(f"cannot read the file ({err})", source=source) from None
         except RecursionError:
             raise ObjectiveError("JSON nested too deeply to read (not a constraints file)", source=source) from None
         items = data.get("objectives", []) if isinstance(data, dict) else []
