@@ -59,7 +59,7 @@ def _refuse_multirig(d: Path) -> None:
         raise DataError(
             f"{d}: a multi-rig motion cache ({meta.get('dataset', '?')}) that the current flat human trainer "
             f"cannot use: {why}; it needs one skeleton with pelvis, hips, ankles and toes "
-            "(the any-rig trainer comes in the next issue)"
+            "(train an any-rig model on it instead: kinema train-anyrig --data DIR --out RUN, docs/anyrig.md)"
         )
 
 

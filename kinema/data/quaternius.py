@@ -109,7 +109,7 @@ def build_quaternius(
         "split_rule": asm.split_rule,
         "in_place_threshold": IN_PLACE,
         "trainable": False,
-        "not_trainable_because": "creature rigs need the any-rig trainer (next issue)",
+        "not_trainable_because": "creature rigs train with the any-rig trainer (kinema train-anyrig, docs/anyrig.md)",
         "limit": limit,
         "counts": counts(asm, files),
         "messages": messages,
