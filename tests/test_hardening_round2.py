@@ -4,6 +4,7 @@ tests/hardening_fixtures.py."""
 
 from __future__ import annotations
 
+import json
 import re
 import socket
 import time
@@ -198,3 +199,14 @@ def test_json_syntax_error_in_a_constraints_file_says_so(tmp_path, capsys):
     err = one_line_error(capsys, "c.json", "not valid JSON: line 2, column 1")
     assert "objectives" not in err
     assert not out.exists()
+
+
+def test_batch_lines_that_fail_to_parse_keep_their_line_id(tmp_path):
+    from kinema.batch.runner import run_batch
+
+    jobs = tmp_path / "jobs.jsonl"
+    jobs.write_text('not json\n[1, 2]\n{"prompt": 3}\n{"id": "mine", "prompt": 3}\n')
+    summary = run_batch(jobs, tmp_path / "out", workers=1, progress=False)
+    assert summary.failed == 4
+    records = [json.loads(x) for x in (tmp_path / "out" / "manifest.jsonl").read_text().splitlines()]
+    assert [(r["line"], r["id"]) for r in records] == [(1, "000001"), (2, "000002"), (3, "000003"), (4, "mine")]

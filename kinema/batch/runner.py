@@ -49,13 +49,15 @@ def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def _raw_id(text: str) -> str | None:
-    """The ``id`` a line that failed to parse was meant to have, when it can be read at all."""
+def _raw_id(text: str, line: int) -> str:
+    """The ``id`` a line that failed to parse was meant to have: its own string ``id`` when it can be
+    read, else the default every line without one gets (its line number, as kinema.batch.spec does)."""
     try:
         raw = json.loads(text)
     except (json.JSONDecodeError, RecursionError):
-        return None
-    return raw.get("id") if isinstance(raw, dict) and isinstance(raw.get("id"), str) else None
+        raw = None
+    given = raw.get("id") if isinstance(raw, dict) else None
+    return given if isinstance(given, str) and given else f"{line:06d}"
 
 
 class ModelShas(dict):
@@ -75,7 +77,7 @@ def _plan(jobs_path: Path, manifest: Manifest, out: Path, shas: ModelShas, defau
     for line, text, task in read_jobs(jobs_path):
         summary.total += 1
         if isinstance(task, KinemaError):
-            manifest.append({"id": _raw_id(text), "line": line, "status": "failed", "input": text, "error": str(task),
+            manifest.append({"id": _raw_id(text, line), "line": line, "status": "failed", "input": text, "error": str(task),
                              "finished_at": _now()})
             summary.failed += 1
             summary.errors.append(f"line {line}: {task}")
