@@ -9,10 +9,12 @@ vectors and there are no rest rotations (as in BVH).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
 
+import kinema
 from kinema.geometry.rotations import quat_between, quat_inverse, quat_mul, quat_rotate
 from kinema.skeleton import Skeleton
 
@@ -140,3 +142,9 @@ def _skeleton(names, parents, P: torch.Tensor, axis: str | None, name: str) -> S
         [P[j] if p < 0 else quat_rotate(quat_inverse(G[p]), P[j] - P[p]) for j, p in enumerate(parents)]
     )
     return Skeleton(names, parents, offsets, local, name=name)
+
+
+@functools.lru_cache(maxsize=1)
+def source_walk():
+    """The default human model's 'A person walks forward.' (3 s, 10 steps: fast), made once per session."""
+    return kinema.load_model().generate("A person walks forward.", seconds=3, steps=10)[0]

@@ -1,9 +1,11 @@
-"""`kinema inspect FILE`: what kinema sees in a motion or rig file (.glb/.gltf, .bvh/.bvh.gz, .npz).
+"""`kinema inspect FILE`: what kinema sees in a motion or rig file (.glb/.gltf, .bvh/.bvh.gz, .fbx, .npz).
 
 Prints the joints as a tree, the semantic roles found by name (kinema.naming), the rig parts
 kinema.rig.Rig finds (root, axes, contact joints, end effectors, limb chains; ``--rig overrides.json``
-replaces them), the clips with their frames, rate and duration, and for glTF files the armature scale
-applied, the helper bones dropped, the skinned mesh and any warnings. Bad files give a one-line error and exit status 2.
+replaces them), the humanoid mapping retargeting uses (kinema.retarget: each slot's joint and how it
+was found, what could not be mapped; helper bones kept), the clips with their frames, rate and
+duration, and for glTF and FBX files the armature scale applied, the helper bones dropped, the skinned
+mesh and any warnings. Bad files give a one-line error and exit status 2.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from kinema.cli._args import positive_float
 def register(sub) -> None:
     """Add the `inspect` sub-command to the top-level parser."""
     p = sub.add_parser("inspect", help="show a motion/rig file's joints, rig parts and clips")
-    p.add_argument("file", type=Path, help=".glb, .gltf, .bvh, .bvh.gz or .npz")
+    p.add_argument("file", type=Path, help=".glb, .gltf, .bvh, .bvh.gz, .fbx or .npz")
     p.add_argument(
         "--in-scale",
         type=positive_float,
@@ -80,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
     from kinema.errors import KinemaError
     from kinema.io import load_motion
     from kinema.io.gltf import read_gltf
+    from kinema.retarget import load_character
+    from kinema.retarget.fbx import read_fbx
 
     if not args.file.is_file():
         raise KinemaError(f"{args.file}: no such file")
@@ -102,6 +106,13 @@ def run(args: argparse.Namespace) -> int:
             else f"mesh: {mesh.num_vertices} vertices, {len(mesh.faces)} triangles, {len(mesh.colors)} colours"
         )
         lines += [f"warning: {w}" for w in asset.warnings]
+    elif name.endswith(".fbx"):
+        fbx = read_fbx(args.file)
+        skeleton = fbx.skeleton
+        clips = {} if fbx.motion is None else {"first animation": fbx.motion}
+        mesh = skeleton.mesh
+        lines.append(f"{args.file}: FBX rig {skeleton.name!r}, {skeleton.num_joints} joints (metres, Y up)")
+        lines.append("mesh: none" if mesh is None else f"mesh: {mesh.num_vertices} vertices, {len(mesh.faces)} triangles")
     else:
         motion = load_motion(args.file, scale=args.in_scale)
         skeleton, clips = motion.skeleton, {args.file.name: motion}
@@ -109,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
     lines.append("joints:")
     lines += joint_tree(skeleton)
     lines += _rig_lines(skeleton, args.rig)
+    lines += load_character(args.file, overrides=args.rig).humanoid().lines()
     lines += _clip_lines(clips)
     print("\n".join(lines))
     return 0

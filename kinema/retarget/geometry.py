@@ -6,7 +6,8 @@ bones (kinema.rig.find.helpers):
 - the feet are the two lowest leaf joints on opposite sides of the body (x of opposite sign); each
   leg is the chain from just below their lowest common ancestor (the hips) down to the leaf: the
   last bone is a toe when it is more horizontal than vertical, so the chain ends ``upper_leg,
-  lower_leg, foot, toes``, else ``upper_leg, lower_leg, foot``;
+  lower_leg, foot, toes`` (a second flat bone after it is a toe end site and left out), else
+  ``upper_leg, lower_leg, foot``;
 - the hands are, among the other leaves, the two farthest from the body's centre line on opposite
   sides; each arm is the chain from just below their common ancestor (the chest): ``shoulder,
   upper_arm, lower_arm, hand`` when it has four joints or more (fingers past the fourth are left
@@ -24,7 +25,7 @@ from kinema.rig.find import FOOT_BAND, helpers, rest_positions
 from kinema.skeleton import Skeleton
 
 #: the chest (the hands' common ancestor) sits at least this fraction of the height above the hips
-CHEST_RISE = 0.2
+CHEST_RISE = 0.1
 
 
 def _chain_below(skeleton: Skeleton, top: int, leaf: int) -> list[int]:
@@ -49,11 +50,17 @@ def _pair(leaves: list[int], P, key) -> tuple[int, int] | None:
     return (left[0], right[0]) if left and right else None
 
 
+def _flat(P, a: int, b: int) -> bool:
+    bone = P[b] - P[a]
+    return float(abs(bone[1])) < float(bone[[0, 2]].norm())
+
+
 def _leg_slots(skeleton: Skeleton, chain: list[int], P, side: str) -> dict[str, int]:
+    while len(chain) > 4 and _flat(P, chain[-2], chain[-1]) and _flat(P, chain[-3], chain[-2]):
+        chain = chain[:-1]  # a toe end site after the toe
     if len(chain) < 2:
         return {}
-    bone = P[chain[-1]] - P[chain[-2]]
-    toe = len(chain) >= 4 and float(abs(bone[1])) < float(bone[[0, 2]].norm())
+    toe = len(chain) >= 4 and _flat(P, chain[-2], chain[-1])
     parts = ("upper_leg", "lower_leg", "foot", "toes") if toe else ("upper_leg", "lower_leg", "foot")
     picked = chain[-len(parts) :] if len(chain) >= len(parts) else chain
     return {f"{side}_{p}": j for p, j in zip(parts, picked, strict=False)}

@@ -1,0 +1,151 @@
+"""Retargeting the default human model's walk onto other rigs (kinema.retarget.core), measured.
+
+Source: the default model's 'A person walks forward.' (3 s, 10 steps). Targets: Mixamo-, UE5- and
+CMU-named rigs built in tests/retarget_rigs.py with other proportions, A- and T-pose rests and bones
+along +Y, +X or as plain BVH offsets; a Quaternius character whose feet are IK bones under the root;
+and a Quaternius fox clip onto the wolf (same topology, no humanoid).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+import torch
+from retarget_rigs import CMU, MIXAMO, UE5, build_rig, source_walk
+
+from kinema.io import load_motion
+from kinema.io.gltf_writer import write_glb
+from kinema.motion.core import Motion
+from kinema.retarget import build_joint_map, load_character, retarget, retarget_report, save_character_motion
+from kinema.retarget.core import retarget_with_map, source_planted
+from kinema.retarget.quality import direction_errors
+
+ROOT = Path(__file__).resolve().parents[1]
+QUATERNIUS = Path(os.environ.get("KINEMA_QUATERNIUS", ROOT.parent / "shared/datasets/quaternius"))
+needs_quaternius = pytest.mark.skipif(not QUATERNIUS.is_dir(), reason="shared Quaternius GLBs not found")
+
+
+def _rest_motion(skeleton) -> Motion:
+    rest = skeleton.rest_rotations
+    if rest is None:
+        rest = torch.zeros(skeleton.num_joints, 4, dtype=torch.float64)
+        rest[:, 0] = 1
+    return Motion(skeleton, 30, skeleton.offsets[0][None], rest[None])
+
+
+def _checks(source: Motion, out: Motion, target, direction_deg: float = 3.0) -> dict:
+    """The properties every humanoid retarget keeps; returns the report for rig-specific checks.
+    ``direction_deg``: bound on the mean bone-direction error (legs included)."""
+    jm = build_joint_map(source.skeleton, target)
+    r = retarget_report(source, out, jm)
+    assert out.skeleton.names == target.names
+    assert torch.allclose(out.skeleton.offsets, target.offsets)
+    assert r["bone_drift_mm"] < 1e-3 * max(1.0, r["scale"])  # bones keep their lengths
+    # feet on the floor, where the rest pose has them
+    assert abs(r["lowest"] - r["lowest_rest"]) < 1e-6 * max(1.0, r["scale"])
+    assert r["direction_deg_mean"] < direction_deg, r
+    assert r["skate_target_cm_s"] <= r["skate_source_cm_s"] + 0.5, r  # no added foot sliding
+    err = direction_errors(source, out, jm)
+    names = target.names
+    bones = [(p, c) for c, p in jm.chain_parent.items() if p in jm.pairs]
+    for k, (p, c) in enumerate(bones):
+        if "Arm" in names[p] or "arm" in names[p] or "Spine" in names[p] or "spine" in names[p]:
+            assert float(err[:, k].max()) < 1.0, (names[p], names[c])  # arms and spine follow exactly
+    _left_stays_left(source, out, jm)
+    return r
+
+
+def _side(P: torch.Tensor, hand_l: int, hand_r: int, leg_l: int, leg_r: int) -> torch.Tensor:
+    """(T,) how far the left hand is left of the right hand along the body's left axis."""
+    left = P[:, leg_l] - P[:, leg_r]
+    return ((P[:, hand_l] - P[:, hand_r]) * left).sum(-1) / left.norm(dim=-1)
+
+
+def _left_stays_left(source: Motion, out: Motion, jm) -> None:
+    s, t = source.skeleton.roles, jm
+    hs = _side(source.positions.double(), s["left_hand"], s["right_hand"], s["left_hip"], s["right_hip"])
+    inv = {a: b for b, a in jm.pairs.items()}
+    ht = _side(out.positions.double(), *(inv[s[k]] for k in ("left_hand", "right_hand", "left_hip", "right_hip")))
+    assert t is jm and bool(((hs > 0) == (ht > 0)).all()), "a hand crossed to the other side"
+
+
+def test_walk_onto_a_mixamo_a_pose_glb_character(tmp_path):
+    source = source_walk()
+    rig = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.2, arms=0.9, name="mixamo")
+    glb = write_glb(_rest_motion(rig), tmp_path / "mixamo.glb")
+    character = load_character(glb)
+    out = retarget(source, character.skeleton)
+    r = _checks(source, out, character.skeleton)
+    # root motion scaled by leg length: the character walks as far, relative to its size
+    travel_s = (source.root_translation[-1] - source.root_translation[0])[[0, 2]].norm()
+    hips = out.skeleton.names.index("mixamorig:Hips")
+    travel_t = (out.positions[-1, hips] - out.positions[0, hips])[[0, 2]].norm()
+    assert abs(float(travel_t / travel_s) - r["scale"]) < 0.05 * r["scale"]
+    # planted feet stay planted: the ankles barely move while the source's are planted
+    planted = source_planted(source)
+    foot = out.skeleton.names.index("mixamorig:LeftFoot")
+    on = planted[source.skeleton.names.index("Foot_L")]
+    step = (out.positions[1:, foot, [0, 2]] - out.positions[:-1, foot, [0, 2]]).norm(dim=-1) * out.fps
+    assert float(step[on[1:] & on[:-1]].max()) < 0.01  # m/s
+    assert out.foot_contacts is not None and out.foot_contacts.shape[1] == 4
+
+
+def test_walk_onto_a_ue5_rig_with_bones_along_x_and_ik_feet():
+    source = source_walk()
+    rig = build_rig(UE5, axis="x", root="root", legs=0.85, scale=1.1, name="ue")
+    out = retarget(source, rig)
+    _checks(source, out, rig)
+    P = out.positions
+    names = out.skeleton.names
+    for side in "lr":  # the IK foot helpers follow the feet they stand for
+        gap = (P[:, names.index(f"ik_foot_{side}")] - P[:, names.index(f"foot_{side}")]).norm(dim=-1)
+        assert float(gap.max()) < 1e-5
+    root = names.index("root")
+    assert float((P[:, root] - P[0, root]).abs().max()) < 1e-9  # the static root stays put
+
+
+def test_walk_onto_a_cmu_bvh_in_centimetres_keeps_names_offsets_and_units(tmp_path):
+    source = source_walk()
+    rig = build_rig(CMU, axis=None, scale=100.0, arms=1.1, name="cmu")
+    src_bvh = save_character_motion(_rest_motion(rig), tmp_path / "cmu_rest.bvh")
+    character = load_character(src_bvh)
+    out = retarget(source, character.skeleton)
+    r = _checks(source, out, character.skeleton)
+    assert 80 < r["scale"] < 130  # metres -> centimetres, absorbed by the leg-length scale
+    written = save_character_motion(out, tmp_path / "walk.bvh")
+    back = load_motion(written)
+    assert back.skeleton.names == character.skeleton.names
+    assert torch.allclose(back.skeleton.offsets[1:], character.skeleton.offsets[1:], atol=1e-4)  # root: frame 0
+    assert float((back.positions - out.positions).abs().max()) < 1e-2  # centimetres, 6 decimals written
+
+
+@needs_quaternius
+def test_walk_onto_a_quaternius_character_moves_its_ik_feet_with_the_legs():
+    source = source_walk()
+    character = load_character(QUATERNIUS / "platformer_game_pack/Character.glb")
+    out = retarget(source, character.skeleton)
+    # its IK feet sit on the floor, not at the ankle: the shin-to-foot 'bone' leans unlike the source's
+    r = _checks(source, out, character.skeleton, direction_deg=10.0)
+    assert out.skeleton.mesh is not None  # the skin comes along
+    names = out.skeleton.names
+    P = out.positions.double()
+    for side in "LR":  # Foot.X hangs from the root but stays at the lower leg's end: the mesh never tears
+        gap = (P[:, names.index(f"Foot.{side}")] - P[:, names.index(f"LowerLeg.{side}")]).norm(dim=-1)
+        assert float(gap.max() - gap.min()) < 1e-6
+    assert r["skate_target_cm_s"] < 1.0
+
+
+@needs_quaternius
+def test_a_fox_clip_onto_the_wolf_through_the_same_code():
+    fox = load_motion(QUATERNIUS / "animals_pack/Fox.glb", animation="Gallop")
+    wolf = load_character(QUATERNIUS / "animals_pack/Wolf.glb")
+    jm = build_joint_map(fox.skeleton, wolf.skeleton)
+    assert jm.kind == "names" and len(jm.pairs) >= 0.9 * wolf.skeleton.num_joints
+    out = retarget_with_map(fox, jm)
+    err = direction_errors(fox, out, jm)
+    assert float(err.mean()) < 2.0
+    r = retarget_report(fox, out, jm)
+    assert abs(r["lowest"] - r["lowest_rest"]) < 1e-6
+    assert out.skeleton.names == wolf.skeleton.names and out.skeleton.mesh is not None
