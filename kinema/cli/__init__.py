@@ -31,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         retarget,
         robot,
         serve,
+        stream,
         train,
         train_anyrig,
     )
@@ -50,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
         render,
         retarget,
         robot,
+        stream,
         evaluate,
         evaluate_anyrig,
         evaluate_retrieval,

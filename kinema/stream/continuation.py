@@ -1,0 +1,323 @@
+"""`MotionStream`: an endless motion made window by window through a pipeline's ``generate(request)``.
+
+Each window (``window_seconds`` long, ``steps`` DDIM steps, no post-processing) is generated in a local
+frame whose first root stands over the origin. Its first ``context_seconds`` are the last frames
+generated so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt,
+steering path, targets: kinema.stream.controls) constrain the rest. Its first ``blend_seconds`` after
+the context are cross-faded from the previous window's provisional frames, which hides what the
+keyframes do not (a step in joint velocity right after them).
+
+Frames are handed out in order (``next_frames(n)`` or iteration). A command (``set_prompt``, ``steer``,
+``target``, ``clear``) cuts the frames not yet handed out back to ``lookahead`` seconds after the last
+one handed out and regenerates from there: the first frame that obeys it is at most ``lookahead +
+blend_seconds / 2`` seconds of motion later, whatever the window length. Frames already handed out
+are dropped from memory (only the context is kept), so a stream's memory does not grow.
+
+The stream is not thread-safe: a face that generates on a worker thread queues commands and applies
+them between ``next_frames`` calls (kinema.server.stream does).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.motion.core import Motion
+from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
+from kinema.stream.controls import Controls, Steer, Target, WindowFrame
+from kinema.stream.frames import StreamFrames, facing, shifted, stitch
+
+#: default seconds of one window (the denoiser sees at most the model's window_seconds)
+WINDOW_SECONDS = 3.0
+#: default seconds of generated motion kept ahead of what was handed out when a command arrives
+LOOKAHEAD_SECONDS = 0.15
+#: default DDIM steps of a streamed window
+STREAM_STEPS = 10
+#: seconds of the previous motion imposed on a window's first frames
+CONTEXT_SECONDS = 0.2
+#: seconds of a window's own frames after its context that are not used (the previous window's are
+#: kept there): the denoiser's first free frames after keyframes lag them (measured: pelvis speed
+#: 2.9 -> 1.3 m/s in one frame on a walk, recovering over ~0.3 s)
+SKIP_SECONDS = 0.2
+#: seconds over which a window is cross-faded from the previous one's provisional frames
+BLEND_SECONDS = 0.25
+#: frames kept before the next context (the smoothed root is measured over them)
+HISTORY_FRAMES = 40
+#: most frames one ``next_frames`` call may ask for
+MAX_FRAMES_PER_CALL = 100_000
+
+
+@dataclass
+class CommandRecord:
+    """One command: what it was, the stream frame it arrived at, the first frame that obeys it (the
+    new window's weight past one half) and when (wall clock, ``time.perf_counter``) it arrived and
+    that frame was generated."""
+
+    kind: str
+    value: Any
+    issued_frame: int
+    effective_frame: int
+    fps: float
+    issued_wall: float
+    ready_wall: float | None = None
+
+    @property
+    def latency_seconds(self) -> float:
+        """Seconds of motion from the command to the first frame that obeys it."""
+        return (self.effective_frame - self.issued_frame) / self.fps
+
+    @property
+    def wall_seconds(self) -> float | None:
+        """Wall seconds from the command until that frame was generated (None: not yet)."""
+        return None if self.ready_wall is None else self.ready_wall - self.issued_wall
+
+    def to_json(self) -> dict:
+        wall = self.wall_seconds
+        return {"kind": self.kind, "value": self.value, "issued_frame": self.issued_frame,
+                "issued_seconds": round(self.issued_frame / self.fps, 4),
+                "effective_frame": self.effective_frame, "latency_seconds": round(self.latency_seconds, 4),
+                "wall_seconds": None if wall is None else round(wall, 4)}
+
+
+@dataclass
+class WindowStats:
+    """Timings of one window (wall seconds): the pipeline's sampling and post-processing, the rest
+    (request building, constraint encoding, stitching) as ``other``."""
+
+    first_frame: int
+    new_frames: int
+    sampling: float
+    postprocess: float
+    other: float
+
+    @property
+    def wall(self) -> float:
+        return self.sampling + self.postprocess + self.other
+
+
+@dataclass
+class StreamSettings:
+    """A stream's window geometry in frames at the model's fps, and its DDIM steps and seed."""
+
+    fps: float
+    window: int
+    context: int
+    skip: int
+    blend: int
+    lookahead: int
+    steps: int
+    seed: int = 0
+
+    @classmethod
+    def checked(cls, model, window_seconds: float, lookahead: float, steps: int | None, seed: int) -> StreamSettings:
+        fps = float(model.fps)
+        context, blend = max(2, round(CONTEXT_SECONDS * fps)), max(1, round(BLEND_SECONDS * fps))
+        skip = round(SKIP_SECONDS * fps)
+        longest = float(model.window_seconds)
+        shortest = (context + skip + blend + max(2, round(0.5 * fps))) / fps
+        if not _number(window_seconds) or not shortest <= window_seconds <= longest:
+            raise KinemaError(f"window_seconds must be in [{shortest:g}, {longest:g}] (the model's window), "
+                              f"got {window_seconds!r}")
+        window = round(window_seconds * fps)
+        if not _number(lookahead) or not 0 <= lookahead <= window_seconds:
+            raise KinemaError(f"lookahead must be in [0, {window_seconds:g}] seconds, got {lookahead!r}")
+        steps = STREAM_STEPS if steps is None else steps
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= model.max_steps:
+            raise KinemaError(f"steps must be an integer in [1, {model.max_steps}], got {steps!r}")
+        return cls(fps, window, context, skip, blend, round(lookahead * fps), steps, seed)
+
+
+def _number(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+class MotionStream:
+    """An endless motion following its controls; create it with `open_stream`."""
+
+    def __init__(self, model, request, settings: StreamSettings):
+        if getattr(model, "needs_rig", False):
+            raise KinemaError("streaming drives the human model only for now; the any-rig model's window "
+                              "constraints (kinema.anyrig) are not wired to streams yet")
+        self.model = model
+        self.request = request
+        self.settings = settings
+        base_prompt = "" if request is None else request.prompt
+        self.controls = Controls(prompt=base_prompt)
+        self.skeleton = None
+        self.commands: list[CommandRecord] = []
+        self.windows: list[WindowStats] = []
+        self._motion: Motion | None = None  # stream frames [_offset, _offset + num_frames)
+        self._offset = 0
+        self._tail = 0  # provisional frames at the end of _motion (a later window blends over them)
+        self._emitted = 0
+        self._window_index = 0
+
+    # ------------------------------------------------------------------ state
+    @property
+    def fps(self) -> float:
+        return self.settings.fps
+
+    @property
+    def frames_out(self) -> int:
+        """Frames handed out so far."""
+        return self._emitted
+
+    @property
+    def buffered_frames(self) -> int:
+        """Final frames generated and not yet handed out."""
+        return self._final_end() - self._emitted
+
+    def _final_end(self) -> int:
+        return self._offset if self._motion is None else self._offset + self._motion.num_frames - self._tail
+
+    # ------------------------------------------------------------------ commands
+    def set_prompt(self, text: str) -> CommandRecord:
+        """Switch what the character does (from ``lookahead`` seconds on)."""
+        if not isinstance(text, str) or len(text) > 2000:
+            raise KinemaError(f"prompt must be a string of at most 2000 characters, got {type(text).__name__}")
+        self.controls.prompt = text
+        return self._command("prompt", text)
+
+    def steer(self, direction_deg: float | None = None, speed: float = 1.2) -> CommandRecord:
+        """Move towards world heading ``direction_deg`` (0 = +Z, 90 = +X; None: straight on) at ``speed`` m/s."""
+        steer = Steer.checked(direction_deg, speed)
+        if steer.direction_deg is None and self.controls.steer is not None:
+            steer = Steer(self.controls.steer.direction_deg, steer.speed)
+        self.controls.steer = steer
+        return self._command("steer", {"direction_deg": direction_deg, "speed": speed})
+
+    def target(self, joint: str, position) -> CommandRecord:
+        """Put ``joint`` (a name or role, e.g. ``right_hand``) at world ``position`` (metres) and hold it."""
+        skel = self.model.skeleton
+        t = Target.checked(joint, position, skel.names, skel.roles)
+        self.controls.targets[t.joint] = t
+        return self._command("target", {"joint": t.joint, "position": list(t.position)})
+
+    def clear(self) -> CommandRecord:
+        """Drop steering and targets (the prompt stays)."""
+        self.controls.steer = None
+        self.controls.targets.clear()
+        return self._command("clear", None)
+
+    def _command(self, kind: str, value) -> CommandRecord:
+        """Cut the frames not handed out back to the lookahead and log the command."""
+        s = self.settings
+        cut = min(self._final_end(), self._emitted + s.lookahead)
+        if self._motion is not None and cut < self._offset + self._motion.num_frames:
+            keep = min(self._offset + self._motion.num_frames, cut + s.skip + s.blend) - self._offset
+            self._motion = self._motion.crop(0, keep)
+            self._tail = self._offset + keep - cut
+        effective = cut + (s.skip + s.blend // 2 if self._motion is not None else 0)
+        record = CommandRecord(kind, value, self._emitted, effective, s.fps, time.perf_counter())
+        self.commands.append(record)
+        return record
+
+    # ------------------------------------------------------------------ frames
+    def next_frames(self, n: int) -> StreamFrames:
+        """The next ``n`` frames (generating windows as needed)."""
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_FRAMES_PER_CALL:
+            raise KinemaError(f"next_frames: n must be an integer in [1, {MAX_FRAMES_PER_CALL}], got {n!r}")
+        while self._final_end() < self._emitted + n:
+            self._extend()
+        lo = self._emitted - self._offset
+        frames = StreamFrames.of(self._motion.crop(lo, lo + n), self._emitted)
+        self._emitted += n
+        self._forget()
+        return frames
+
+    def __iter__(self) -> Iterator[StreamFrames]:
+        """One frame at a time, for ever."""
+        while True:
+            yield self.next_frames(1)
+
+    def _forget(self) -> None:
+        """Drop handed-out frames that no window needs as context any more."""
+        drop = self._emitted - max(self.settings.context, HISTORY_FRAMES) - self._offset
+        if self._motion is not None and drop > 0 and drop < self._motion.num_frames - self._tail:
+            self._motion = self._motion.crop(drop)
+            self._offset += drop
+
+    def _extend(self) -> None:
+        """Generate the next window from the last final frames and stitch it on."""
+        t0 = time.perf_counter()
+        s = self.settings
+        if self._motion is None:
+            window, timings = self._generate(None, None, None)
+            self._motion, self._tail = window, s.skip + s.blend
+            self._log_window(0, window.num_frames - self._tail, timings, t0)
+            return
+        end = self._final_end() - self._offset
+        context = self._motion.crop(end - s.context, end)
+        smooth = self._smoothed_root(end)
+        frame = self._window_frame(context, smooth)
+        local = shifted(context, -frame.origin[0], -frame.origin[1])
+        window, timings = self._generate(local, smooth - torch.tensor(frame.origin), frame)
+        window = shifted(window, *frame.origin).crop(s.context - 1)
+        stitched = stitch(self._motion.crop(end - 1), window, s.skip, s.blend)
+        self._motion = self._motion.crop(0, end).concatenate(stitched.to(self._motion.dtype))
+        self._tail = s.skip + s.blend
+        self._log_window(self._offset + end, stitched.num_frames - self._tail, timings, t0)
+
+    def _smoothed_root(self, end: int) -> torch.Tensor:
+        """The smoothed root x/z ``(C, 2)`` of the context frames before buffer frame ``end``: the pelvis
+        under the representation's Gaussian, over the history kept and the provisional frames after it."""
+        pelvis = self._motion.root_translation[:, [0, 2]].float()
+        smooth = smooth_time(pelvis, DEFAULT_ROOT_SIGMA_SECONDS * self.fps)
+        return smooth[end - self.settings.context : end]
+
+    def _window_frame(self, context: Motion, smooth: torch.Tensor) -> WindowFrame:
+        """Where the window starts: the context's first smoothed root as origin, its last facing and
+        the smoothed root's speed."""
+        roles = context.skeleton.roles
+        origin = (float(smooth[0, 0]), float(smooth[0, 1]))
+        heading = float(facing(context.positions[-1:], roles["left_hip"], roles["right_hip"])[0])
+        speed = float((smooth[-1] - smooth[0]).norm()) * self.fps / max(1, context.num_frames - 1)
+        last = (float(smooth[-1, 0]) - origin[0], float(smooth[-1, 1]) - origin[1])
+        return WindowFrame(origin, last, heading, speed, self.fps)
+
+    def _generate(self, context: Motion | None, smooth: torch.Tensor | None,
+                  frame: WindowFrame | None) -> tuple[Motion, dict]:
+        """One window (local frame) and the pipeline's timings."""
+        s = self.settings
+        fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
+                                  "seed": (s.seed + self._window_index) % 2**63, "postprocess": False,
+                                  "samples": 1}
+        if context is not None:
+            fields["constraints"] = self.controls.window_constraints(frame, context, smooth, s.window)
+            fields["heading"] = frame.heading
+        self._window_index += 1
+        if self.request is None:
+            result = self.model.generate(**fields)
+        else:
+            result = self.model.generate(self.request.replace(timeline=None, **fields))
+        return result.motions[0], result.report.timings
+
+    def _log_window(self, first: int, new_frames: int, timings: dict, t0: float) -> None:
+        wall = time.perf_counter() - t0
+        sampling, post = float(timings.get("sampling", 0.0)), float(timings.get("postprocess", 0.0))
+        self.windows.append(WindowStats(first, new_frames, sampling, post, max(0.0, wall - sampling - post)))
+        done = time.perf_counter()
+        for c in self.commands:
+            if c.ready_wall is None and c.effective_frame < self._final_end():
+                c.ready_wall = done
+
+
+def open_stream(model, request=None, *, window_seconds: float = WINDOW_SECONDS,
+                lookahead: float = LOOKAHEAD_SECONDS, steps: int | None = None) -> MotionStream:
+    """A `MotionStream` of ``model`` (a loaded `MotionPipeline`); ``request`` (a `GenerationRequest`,
+    optional) gives the first prompt, seed, heading, guidance and grounding, its ``seconds``,
+    ``constraints`` and ``timeline`` are the stream's own. ``steps``: DDIM steps per window
+    (default `STREAM_STEPS`)."""
+    if request is not None and not hasattr(request, "replace"):
+        raise KinemaError(f"open_stream: request must be a GenerationRequest, got {type(request).__name__}")
+    if request is not None and request.samples != 1:
+        raise KinemaError(f"a stream makes one motion: request.samples must be 1, got {request.samples}")
+    seed = 0 if request is None else int(request.seed)
+    return MotionStream(model, request, StreamSettings.checked(model, window_seconds, lookahead, steps, seed))
+

@@ -1,0 +1,144 @@
+"""What a stream is told to do, and how that becomes one window's constraints (docs/constraints.md JSON).
+
+A window is generated in a local frame whose first context frame stands over the origin (as training
+clips start); every position below is in that frame. A window of ``W`` frames starts with ``C``
+context frames (the last generated ones, imposed as ``fullbody`` keyframes, so it continues the
+motion); the controls constrain the free frames ``[C, W)``:
+
+- steering: a dense ``root2d`` path with headings that turns from the current facing towards
+  ``direction_deg`` at most ``TURN_RATE_DEG`` per second and moves at ``speed`` m/s (reached over
+  ``SPEED_RAMP_SECONDS``), starting where the context ends;
+- a target: an ``end-effector`` position held every other frame from ``REACH_SECONDS`` after the
+  context to the window's end.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, field
+
+import torch
+
+from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_to_axis_angle
+from kinema.motion.core import Motion
+from kinema.stream.frames import wrap_angle
+
+#: fastest turn of the steering path, degrees per second
+TURN_RATE_DEG = 120.0
+#: seconds over which the path's speed goes from the current one to the steered one
+SPEED_RAMP_SECONDS = 0.5
+#: seconds after the context before a target is imposed (the reach)
+REACH_SECONDS = 0.5
+#: fastest steered speed, m/s (a sprint)
+MAX_SPEED = 6.0
+#: how far a target may be from the origin of the world, metres
+MAX_TARGET_DISTANCE = 1000.0
+
+
+@dataclass(frozen=True)
+class Steer:
+    """Move towards world heading ``direction_deg`` (0 = +Z, 90 = +X; None: the facing of the window
+    the steer starts in) at ``speed`` m/s."""
+
+    direction_deg: float | None
+    speed: float
+
+    @classmethod
+    def checked(cls, direction_deg, speed) -> Steer:
+        for name, v in (("direction_deg", direction_deg), ("speed", speed)):
+            if v is None and name == "direction_deg":
+                continue
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+                raise KinemaError(f"steer: {name} must be a finite number, got {v!r}")
+        if not 0 <= speed <= MAX_SPEED:
+            raise KinemaError(f"steer: speed must be in [0, {MAX_SPEED:g}] m/s, got {speed!r}")
+        return cls(None if direction_deg is None else float(direction_deg), float(speed))
+
+
+@dataclass(frozen=True)
+class Target:
+    """Put ``joint`` (a name or a role such as ``right_hand``) at world ``position`` (metres)."""
+
+    joint: str
+    position: tuple[float, float, float]
+
+    @classmethod
+    def checked(cls, joint, position, joint_names, roles) -> Target:
+        if not isinstance(joint, str) or not (joint in joint_names or joint in roles):
+            raise KinemaError(f"target: unknown joint {joint!r} (roles: {sorted(roles)})")
+        try:
+            xyz = tuple(float(v) for v in position)
+        except (TypeError, ValueError):
+            raise KinemaError(f"target: position must be three numbers [x, y, z], got {position!r}") from None
+        if len(xyz) != 3 or not all(math.isfinite(v) and abs(v) <= MAX_TARGET_DISTANCE for v in xyz):
+            raise KinemaError(f"target: position must be three finite numbers within {MAX_TARGET_DISTANCE:g} m, "
+                              f"got {position!r}")
+        return cls(joint, xyz)
+
+
+@dataclass
+class Controls:
+    """The current prompt, steering and targets (what the coming windows are asked to do)."""
+
+    prompt: str = ""
+    steer: Steer | None = None
+    targets: dict[str, Target] = field(default_factory=dict)
+
+    def window_constraints(self, window: WindowFrame, context: Motion, smooth_root: torch.Tensor,
+                           num_frames: int) -> list[dict]:
+        """The constraints JSON of a ``num_frames`` window whose first frames are ``context`` with its
+        smoothed root x/z ``smooth_root (C, 2)`` (local frame)."""
+        out = [context_keyframes(context, smooth_root)]
+        C = context.num_frames
+        if self.steer is not None:
+            out.append(steer_path(self.steer, window, C, num_frames))
+        reach = C + round(REACH_SECONDS * context.fps)
+        frames = list(range(min(reach, num_frames - 1), num_frames, 2))
+        for t in self.targets.values():
+            local = [t.position[0] - window.origin[0], t.position[1], t.position[2] - window.origin[1]]
+            out.append({"type": "end-effector", "joint": t.joint, "frame_indices": frames,
+                        "positions": [local] * len(frames)})
+        return out
+
+
+@dataclass(frozen=True)
+class WindowFrame:
+    """Where a window starts: ``origin`` (world x, z of its first context root, the local frame's
+    origin), the last context frame's root ground position ``root_xz`` (local), its facing ``heading``
+    (radians), its ground speed (m/s) and the model's frame rate."""
+
+    origin: tuple[float, float]
+    root_xz: tuple[float, float]
+    heading: float
+    speed: float
+    fps: float
+
+
+def context_keyframes(context: Motion, smooth_root: torch.Tensor) -> dict:
+    """``context`` (local frame) as fullbody keyframes on the window's first frames."""
+    return {"type": "fullbody", "frame_indices": list(range(context.num_frames)),
+            "local_joints_rot": quat_to_axis_angle(context.local_rotations.float()).tolist(),
+            "root_positions": context.root_translation.float().tolist(),
+            "smooth_root_2d": smooth_root.float().tolist()}
+
+
+def steer_path(steer: Steer, window: WindowFrame, first: int, num_frames: int) -> dict:
+    """A dense root path with headings over frames ``[first - 1, num_frames)``: from the context's
+    last root, turning towards the steered heading and ramping linearly to the steered speed."""
+    dt = 1.0 / window.fps
+    goal = window.heading if steer.direction_deg is None else math.radians(steer.direction_deg)
+    psi, speed = window.heading, window.speed
+    x, z = window.root_xz
+    turn = math.radians(TURN_RATE_DEG) * dt
+    ramp = abs(steer.speed - window.speed) * dt / SPEED_RAMP_SECONDS
+    points, headings = [], []
+    for _ in range(first - 1, num_frames):
+        points.append([x, z])
+        headings.append([math.cos(psi), math.sin(psi)])
+        psi += max(-turn, min(turn, wrap_angle(goal - psi)))
+        speed += max(-ramp, min(ramp, steer.speed - speed))
+        x, z = x + speed * dt * math.sin(psi), z + speed * dt * math.cos(psi)
+    return {"type": "root2d", "frame_indices": list(range(first - 1, num_frames)), "smooth_root_2d": points,
+            "global_root_heading": headings}

@@ -1,0 +1,101 @@
+"""What a stream hands out and how its windows are stitched: `StreamFrames`, the cross-fade of a new
+window into the old one's provisional frames, and the facing/ground helpers the windows are placed with.
+
+Units: metres, radians, Y up; a heading ``psi`` is measured from +Z towards +X (0 faces +Z), the
+convention of the requests and of docs/constraints.md (``global_root_heading = (cos psi, sin psi)``).
+Rotations are unit quaternions (w, x, y, z).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import torch
+
+from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
+from kinema.motion.core import Motion
+
+
+@dataclass(frozen=True)
+class StreamFrames:
+    """Frames ``[start, start + n)`` of a stream: root translation ``(n, 3)``, local rotations
+    ``(n, J, 4)`` and global joint positions ``(n, J, 3)`` on ``joint_names``, at ``fps``."""
+
+    start: int
+    fps: float
+    joint_names: tuple[str, ...]
+    root_translation: torch.Tensor
+    local_rotations: torch.Tensor
+    positions: torch.Tensor
+
+    @classmethod
+    def of(cls, motion: Motion, start: int) -> StreamFrames:
+        return cls(start, motion.fps, tuple(motion.skeleton.names), motion.root_translation.clone(),
+                   motion.local_rotations.clone(), motion.positions)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.root_translation.shape[0])
+
+    @property
+    def seconds(self) -> float:
+        """Stream time of the first frame."""
+        return self.start / self.fps
+
+    def to_json(self, decimals: int = 4) -> dict:
+        """The frames as plain JSON lists (rounded), for the WebSocket and logs."""
+        def rounded(t: torch.Tensor) -> list:
+            return torch.round(t.float(), decimals=decimals).tolist()
+
+        return {"start": self.start, "fps": self.fps, "root_translation": rounded(self.root_translation),
+                "local_rotations": rounded(self.local_rotations), "positions": rounded(self.positions)}
+
+
+def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
+    """The motion from stream frame ``s`` on, where ``old`` (the previous window's frames) and ``new``
+    (the new window's) both start at frame ``s - 1``: ``skip`` frames of ``old``, then ``blend``
+    frames cross-faded from ``old`` to ``new`` (weight of ``new`` rising as a raised cosine), then the
+    rest of ``new``. Rotations are slerped, root heights lerped; the root's ground position follows
+    the blended *velocity* from ``old``'s, and the rest of ``new`` is moved to continue from there, so a
+    window that lags or leads the previous one does not make the root jump."""
+    n = skip + blend
+    if old.num_frames < n + 1 or new.num_frames < n + 1:
+        raise ValueError(f"stitch: needs {n + 1} frames of each motion, got {old.num_frames} and {new.num_frames}")
+    w = torch.zeros(n, dtype=old.dtype)
+    w[skip:] = 0.5 - 0.5 * torch.cos(math.pi * (torch.arange(blend, dtype=old.dtype) + 1) / (blend + 1))
+    qa = quat_make_continuous(old.local_rotations[1 : n + 1], dim=0)
+    qb = new.local_rotations[1 : n + 1].to(old.dtype)
+    qb = qb * torch.where((qa * qb).sum(-1, keepdim=True) < 0, -1.0, 1.0).to(qb.dtype)
+    rots = quat_normalize(quat_slerp(qa, qb, w[:, None]))
+    ra, rb = old.root_translation[: n + 1], new.root_translation[: n + 1].to(old.dtype)
+    velocity = (1 - w[:, None]) * (ra[1:] - ra[:-1]) + w[:, None] * (rb[1:] - rb[:-1])
+    root = ra[0] + torch.cumsum(velocity, 0)
+    root[:, 1] = (1 - w) * ra[1:, 1] + w * rb[1:, 1]
+    contacts = None
+    if old.foot_contacts is not None and new.foot_contacts is not None:
+        contacts = torch.where(w[:, None] < 0.5, old.foot_contacts[1 : n + 1], new.foot_contacts[1 : n + 1].to(old.dtype))
+    out = Motion(new.skeleton, new.fps, root, rots, contacts)
+    if new.num_frames == n + 1:
+        return out
+    rest = new.crop(n + 1).to(old.dtype)
+    move = root[-1] - rb[-1]
+    return out.concatenate(shifted(rest, float(move[0]), float(move[2])))
+
+
+def shifted(motion: Motion, dx: float, dz: float) -> Motion:
+    """``motion`` moved by ``(dx, 0, dz)`` metres on the ground."""
+    move = torch.tensor([dx, 0.0, dz], dtype=motion.dtype)
+    return replace(motion, root_translation=motion.root_translation + move)
+
+
+def facing(positions: torch.Tensor, left_hip: int, right_hip: int) -> torch.Tensor:
+    """Heading ``psi`` (radians, 0 = +Z) of each frame of ``positions (T, J, 3)``, from the hips: the
+    ground direction perpendicular to left->right hip, pointing forward."""
+    across = positions[:, right_hip] - positions[:, left_hip]
+    return torch.atan2(across[:, 2], -across[:, 0])
+
+
+def wrap_angle(a: float) -> float:
+    """``a`` radians wrapped into ``(-pi, pi]``."""
+    return math.atan2(math.sin(a), math.cos(a))

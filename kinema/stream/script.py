@@ -1,0 +1,142 @@
+"""Scripted streams: a JSON-lines file of timed commands played into a `MotionStream`.
+
+One object per line, ``t`` (seconds of stream time, not decreasing) and exactly one command::
+
+    {"t": 0, "prompt": "A person walks forward."}
+    {"t": 8, "steer": {"direction_deg": 90, "speed": 1.2}}
+    {"t": 12, "target": {"joint": "right_hand", "position": [0.3, 1.5, 0.4]}}
+    {"t": 14, "clear": true}
+
+Blank lines and lines starting with ``#`` are skipped; ``comment`` keys are ignored. A command is
+issued when the stream has handed out every frame before ``t``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from kinema.errors import KinemaError
+from kinema.motion.core import Motion
+from kinema.stream.continuation import MotionStream
+from kinema.stream.measure import frames_to_motion
+
+COMMANDS = ("prompt", "steer", "target", "clear")
+#: most commands one script may hold
+MAX_COMMANDS = 10_000
+
+
+@dataclass(frozen=True)
+class ScriptCommand:
+    """``kind`` (one of `COMMANDS`) with its ``value``, issued at stream time ``t`` seconds."""
+
+    t: float
+    kind: str
+    value: Any
+
+    def apply(self, stream: MotionStream):
+        """Issue the command; returns the stream's `CommandRecord`."""
+        if self.kind == "prompt":
+            return stream.set_prompt(self.value)
+        if self.kind == "steer":
+            return stream.steer(**self.value)
+        if self.kind == "target":
+            return stream.target(self.value["joint"], self.value["position"])
+        return stream.clear()
+
+
+def parse_command(obj, where: str) -> ScriptCommand:
+    """One script line (a decoded JSON object) as a `ScriptCommand`; ``where`` names it in errors."""
+    if not isinstance(obj, dict):
+        raise KinemaError(f"{where}: expected a JSON object like {{\"t\": 0, \"prompt\": \"...\"}}")
+    t = obj.get("t")
+    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
+        raise KinemaError(f"{where}: 't' must be a number of seconds >= 0, got {t!r}")
+    keys = [k for k in obj if k not in ("t", "comment")]
+    if len(keys) != 1 or keys[0] not in COMMANDS:
+        raise KinemaError(f"{where}: expected exactly one of {', '.join(COMMANDS)} besides 't', got {keys}")
+    kind, value = keys[0], obj[keys[0]]
+    if kind == "prompt" and not isinstance(value, str):
+        raise KinemaError(f"{where}: 'prompt' must be a string")
+    if kind == "steer" and not (isinstance(value, dict) and set(value) <= {"direction_deg", "speed"}):
+        raise KinemaError(f"{where}: 'steer' must be an object with 'direction_deg' and/or 'speed'")
+    if kind == "target" and not (isinstance(value, dict) and set(value) == {"joint", "position"}):
+        raise KinemaError(f"{where}: 'target' must be an object with 'joint' and 'position'")
+    return ScriptCommand(float(t), kind, value)
+
+
+def read_script(path: str | Path) -> list[ScriptCommand]:
+    """The commands of a JSON-lines script file, in order (times must not decrease)."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise KinemaError(f"{path}: cannot read the stream script ({err})") from None
+    out: list[ScriptCommand] = []
+    for i, line in enumerate(lines, 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            obj = json.loads(line)
+        except (json.JSONDecodeError, RecursionError):
+            raise KinemaError(f"{path}:{i}: not valid JSON") from None
+        cmd = parse_command(obj, f"{path}:{i}")
+        if out and cmd.t < out[-1].t:
+            raise KinemaError(f"{path}:{i}: t = {cmd.t:g} s comes before the previous line's {out[-1].t:g} s")
+        out.append(cmd)
+        if len(out) > MAX_COMMANDS:
+            raise KinemaError(f"{path}: more than {MAX_COMMANDS} commands")
+    if not out:
+        raise KinemaError(f"{path}: the stream script has no commands")
+    return out
+
+
+@dataclass
+class ScriptRun:
+    """A played script: the whole motion, the stream (its commands and window timings) and the wall
+    seconds spent generating."""
+
+    motion: Motion
+    stream: MotionStream
+    wall_seconds: float
+
+    @property
+    def realtime_factor(self) -> float:
+        """Seconds of motion generated per wall second."""
+        return self.motion.duration / max(self.wall_seconds, 1e-9)
+
+    def log(self) -> dict:
+        """The JSON log: settings, each command's latency, each window's timings, the totals."""
+        s = self.stream.settings
+        windows = [{"first_frame": w.first_frame, "new_frames": w.new_frames, "sampling": round(w.sampling, 4),
+                    "postprocess": round(w.postprocess, 4), "other": round(w.other, 4)} for w in self.stream.windows]
+        return {"fps": s.fps, "frames": self.motion.num_frames, "seconds": round(self.motion.duration, 3),
+                "wall_seconds": round(self.wall_seconds, 3), "realtime_factor": round(self.realtime_factor, 2),
+                "window_seconds": s.window / s.fps, "steps": s.steps, "lookahead_seconds": s.lookahead / s.fps,
+                "commands": [c.to_json() for c in self.stream.commands], "windows": windows}
+
+
+def run_script(stream: MotionStream, commands: list[ScriptCommand], seconds: float,
+               chunk_seconds: float = 0.5) -> ScriptRun:
+    """Play ``commands`` into ``stream`` for ``seconds`` of motion, pulling ``chunk_seconds`` at a time."""
+    if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds > 0):
+        raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
+    fps = stream.fps
+    total = max(1, round(seconds * fps))
+    chunk = max(1, round(chunk_seconds * fps))
+    issue_at = [min(total, round(c.t * fps)) for c in commands]
+    parts, pending, wall = [], 0, 0.0
+    while stream.frames_out < total:
+        t0 = time.perf_counter()
+        while pending < len(commands) and issue_at[pending] <= stream.frames_out:
+            commands[pending].apply(stream)
+            pending += 1
+        upcoming = issue_at[pending] if pending < len(commands) else total
+        n = min(chunk, total - stream.frames_out, max(1, upcoming - stream.frames_out))
+        parts.append(stream.next_frames(n))
+        wall += time.perf_counter() - t0
+    return ScriptRun(frames_to_motion(parts, stream.model.skeleton), stream, wall)
