@@ -1,8 +1,9 @@
 """Runs inside Blender (not imported by kinema): convert a GLB written by kinema into FBX.
 
-    blender -b --factory-startup --python blender_fbx_script.py -- IN.glb OUT.fbx
+    blender -b --factory-startup --python blender_fbx_script.py -- IN.glb OUT.fbx FPS
 
-Imports the GLB with Blender's own glTF importer (armature, skinned mesh, materials, every clip as an
+Sets the scene's frame rate to FPS (so the glTF importer keys every motion frame on a frame of
+its own), imports the GLB with Blender's own glTF importer (armature, skinned mesh, materials, every clip as an
 action), then exports FBX with the armature's deform bones, the mesh and the baked animation. Debian's
 Blender 3.4 glTF importer uses ``numpy.bool``, which numpy 1.24+ removed: the script restores it.
 Exit status 3 with a one-line message on stderr when the import or export fails.
@@ -21,8 +22,11 @@ import bpy  # noqa: E402
 
 
 def main(argv: list[str]) -> None:
-    src, out = argv[0], argv[1]
+    src, out, fps = argv[0], argv[1], float(argv[2])
     bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps = max(1, round(fps))
+    scene.render.fps_base = scene.render.fps / fps
     bpy.ops.import_scene.gltf(filepath=src)
     arm = next((o for o in bpy.data.objects if o.type == "ARMATURE"), None)
     if arm is None:
@@ -34,7 +38,7 @@ def main(argv: list[str]) -> None:
             arm.animation_data_create()
         arm.animation_data.action = actions[0]
         start, end = actions[0].frame_range
-        bpy.context.scene.frame_start, bpy.context.scene.frame_end = int(start), int(round(end))
+        scene.frame_start, scene.frame_end = int(start), int(round(end))
     bpy.ops.export_scene.fbx(
         filepath=out,
         object_types={"ARMATURE", "MESH"},

@@ -39,6 +39,7 @@ def write_fbx(motion: Motion, path: str | os.PathLike, *, name: str = "motion") 
         glb = write_glb(motion, Path(tmp) / f"{name}.glb", name=name)
         out = Path(tmp) / "out.fbx"
         cmd = [blender, "-b", "--factory-startup", "--python", str(SCRIPT), "--", str(glb), str(out)]
+        cmd.append(f"{motion.fps:.9g}")
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=TIMEOUT_S)
         except (OSError, subprocess.TimeoutExpired) as err:
