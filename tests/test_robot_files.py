@@ -132,3 +132,12 @@ def test_source_motions_the_robot_cannot_take(bow):
     broken.root_translation[2, 1] = float("nan")
     with pytest.raises(KinemaError, match="NaN"):
         retarget_to_robot(broken, "g1")
+
+
+def test_render_refuses_a_csv_of_another_robot(bow, tmp_path, capsys):
+    _, rm = bow
+    path = rm.save(tmp_path / "bow.csv")
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(",".join(line.split(",")[:20]) for line in lines) + "\n")  # 12 joints, not 29
+    assert main(["render", str(path), "--out", str(tmp_path / "x.png")]) == 2
+    assert "do not match robot g1's 29 hinge joints" in capsys.readouterr().err

@@ -79,6 +79,7 @@ def _quaternions(R: np.ndarray) -> np.ndarray:
 
 def robot_motion_for_drawing(motion: RobotMotion, robot: Robot) -> Motion:
     """A kinema `Motion` (Y up) of the robot's bodies and end points, with planted soles as contacts."""
+    motion.check_joints(robot.joint_names, robot.name)
     sk = robot_skeleton(robot)
     P, R = _world_frames(robot, motion, _tips(robot))
     P = P @ AXES  # row vectors: AXES.T @ p

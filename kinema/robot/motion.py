@@ -51,6 +51,15 @@ class RobotMotion:
     def time(self) -> np.ndarray:
         return np.arange(self.num_frames) / self.fps
 
+    def check_joints(self, joint_names: tuple[str, ...], robot: str) -> None:
+        """A one-line KinemaError unless this motion's joints are ``joint_names`` (a robot's hinges), in order."""
+        if self.joint_names != tuple(joint_names):
+            wrong = next((a for a, b in zip(self.joint_names, joint_names, strict=False) if a != b), None)
+            raise KinemaError(
+                f"the motion's {len(self.joint_names)} joints do not match robot {robot}'s "
+                f"{len(joint_names)} hinge joints" + (f" (first difference: {wrong!r})" if wrong else "")
+            )
+
     def arrays(self) -> dict:
         """The arrays the files hold (kinema.robot.files)."""
         return {

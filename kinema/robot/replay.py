@@ -84,8 +84,7 @@ def _planted(motion: RobotMotion, highest: np.ndarray) -> np.ndarray:
 
 def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
     """Replay ``motion`` on ``robot`` frame by frame and measure it (see the module docstring)."""
-    if tuple(motion.joint_names) != robot.joint_names:
-        raise ValueError(f"the motion's joints do not match robot {robot.name}'s hinge joints")
+    motion.check_joints(robot.joint_names, robot.name)
     data, geoms = mujoco.MjData(robot.model), leg_geoms(robot)
     T = motion.num_frames
     centres, lowest, highest, overlap = np.zeros((T, 2, 3)), np.zeros((T, 2)), np.zeros((T, 2)), 0.0
