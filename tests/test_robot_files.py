@@ -11,7 +11,7 @@ import pytest
 import kinema
 from kinema.cli import main
 from kinema.errors import KinemaError
-from kinema.robot import BUILTIN_ROBOTS, load_robot, load_robot_motion, retarget_to_robot
+from kinema.robot import BUILTIN_ROBOTS, load_robot, load_robot_motion, replay_report, retarget_to_robot
 from kinema.robot.files import ROOT_COLUMNS
 
 
@@ -129,6 +129,7 @@ def test_source_motions_the_robot_cannot_take(bow):
     with pytest.raises(KinemaError, match="left_hand"):
         retarget_to_robot(armless, "g1")
     broken = human.crop(0, 5)
+    broken.root_translation = broken.root_translation.clone()  # crop shares memory with the fixture's motion
     broken.root_translation[2, 1] = float("nan")
     with pytest.raises(KinemaError, match="NaN"):
         retarget_to_robot(broken, "g1")
@@ -141,3 +142,15 @@ def test_render_refuses_a_csv_of_another_robot(bow, tmp_path, capsys):
     path.write_text("\n".join(",".join(line.split(",")[:20]) for line in lines) + "\n")  # 12 joints, not 29
     assert main(["render", str(path), "--out", str(tmp_path / "x.png")]) == 2
     assert "do not match robot g1's 29 hinge joints" in capsys.readouterr().err
+
+
+def test_landmarks_guessed_from_body_names(bow):
+    """The G1 read by path (not by name) goes through the name guess, and the guess works."""
+    robot = load_robot(BUILTIN_ROBOTS["g1"])
+    assert robot.points["left_knee"].body == "left_knee_link"
+    assert robot.points["left_foot"].body == "left_ankle_roll_link"  # the last ankle link: it has the sole
+    assert robot.points["right_shoulder"].body == "right_shoulder_pitch_link"
+    assert robot.points["left_hand"].body == "left_wrist_yaw_link"
+    human, _ = bow
+    rep = replay_report(retarget_to_robot(human, robot), robot)
+    assert rep.range_overshoot == 0.0 and rep.lowest_sole > -0.02 and rep.planted_slide < 0.15

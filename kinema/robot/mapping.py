@@ -58,8 +58,8 @@ G1_MAPPING: dict[str, tuple[str, tuple[float, float, float]]] = {
     "right_hand": ("right_wrist_yaw_link", (0.0, 0.0, 0.0)),
 }
 
-#: Words that identify a landmark in a body name (the last body of the chain that matches wins for limbs'
-#: ends, the first for the rest; see _guess).
+#: Words that identify a landmark in a body name (the last matching body of the chain wins for feet and
+#: hands, the first for the rest: a hip or shoulder is where its first link starts; see _guess).
 _WORDS = {
     "pelvis": ("pelvis", "base", "hips", "waist"),
     "torso": ("torso", "chest", "trunk", "upper_body", "body"),
@@ -71,7 +71,7 @@ _WORDS = {
     "elbow": ("elbow", "forearm", "lower_arm"),
     "hand": ("wrist", "hand", "palm"),
 }
-_LAST_WINS = ("foot", "hand", "hip", "shoulder")  # e.g. the ankle-roll link below the ankle-pitch link
+_LAST_WINS = ("foot", "hand")  # the last link of an ankle or a wrist carries the sole or the hand
 _FALLBACK = {"torso": "pelvis", "head": "torso"}  # a robot without a torso or head body uses the one below
 _SIDE = {
     "left": re.compile(r"(^|[_\-. ])(left|l)([_\-. ]|$)|^left", re.I),
