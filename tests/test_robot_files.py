@@ -154,3 +154,22 @@ def test_landmarks_guessed_from_body_names(bow):
     human, _ = bow
     rep = replay_report(retarget_to_robot(human, robot), robot)
     assert rep.range_overshoot == 0.0 and rep.lowest_sole > -0.02 and rep.planted_slide < 0.15
+
+
+@pytest.mark.parametrize(
+    ("xml", "message"),
+    [
+        ("<mujoco><worldbody><body name='pelvis'><geom size='0.1'/></body></worldbody></mujoco>", "freejoint"),
+        (
+            "<mujoco><worldbody><body name='pelvis'><freejoint/><geom size='0.1'/>"
+            "<body name='arm'><joint type='ball'/><geom size='0.1'/></body></body></worldbody></mujoco>",
+            "only hinge joints",
+        ),
+        ("<mujoco><worldbody><body", "not a valid MJCF robot"),
+    ],
+)
+def test_robots_kinema_cannot_use(tmp_path, xml, message):
+    path = tmp_path / "robot.xml"
+    path.write_text(xml)
+    with pytest.raises(KinemaError, match=message):
+        load_robot(path)
