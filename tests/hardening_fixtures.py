@@ -4,6 +4,8 @@ Import the fixtures into a test module by assignment: ``bvh_file = hardening_fix
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import pytest
@@ -29,21 +31,19 @@ class Stop(Exception):
 
 
 class FakeModel:
-    """Stands in for `load_model(...)`: records the generate call, generates nothing."""
+    """Stands in for `load_model(...)`: records the request of the generate call (as the keywords of
+    the old call: ``what`` is the prompt or the timeline), generates nothing."""
+
+    max_steps = 1000
+    needs_rig = False
 
     def __init__(self, calls: list):
         self.calls = calls
 
-        class _Sampler:
-            num_train_steps = 1000
-
-        class _Loaded:
-            sampler = _Sampler()
-
-        self.loaded = _Loaded()
-
-    def generate(self, what, **kwargs):
-        self.calls.append({"what": what, **kwargs})
+    def generate(self, request, **kwargs):
+        fields = {f.name: getattr(request, f.name) for f in dataclasses.fields(request)}
+        what = request.prompt if request.timeline is None else request.timeline
+        self.calls.append(fields | {"what": what})
         raise Stop
 
 
@@ -51,7 +51,7 @@ class FakeModel:
 def fake_model(monkeypatch):
     """The generate calls the CLI makes, recorded by a `FakeModel` that stands in for load_model."""
     calls: list = []
-    monkeypatch.setattr("kinema.human.pipeline.load_model", lambda *a, **k: FakeModel(calls))
+    monkeypatch.setattr("kinema.generate.load_model", lambda *a, **k: FakeModel(calls))
     return calls
 
 
@@ -62,7 +62,7 @@ def no_model(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("the model was loaded before the bad input was reported")
 
-    monkeypatch.setattr("kinema.human.pipeline.load_model", boom)
+    monkeypatch.setattr("kinema.generate.load_model", boom)
 
 
 @pytest.fixture

@@ -32,10 +32,10 @@ def test_constraints_fps_is_passed_to_the_api(tmp_path, fake_model):
         main(["generate", "walk", "--out", str(tmp_path / "o.bvh")])
     call = fake_model[-1]
     assert "constraints_fps" not in call or call["constraints_fps"] is None
-    # the effective defaults without a Kimodo meta.json
+    # the request's defaults without a Kimodo meta.json (seconds None: the model's default, 5 s for the human)
     assert (call["what"], call["seconds"], call["seed"], call["samples"], call["steps"], call["guidance"]) == (
         "walk",
-        5.0,
+        None,
         0,
         1,
         None,

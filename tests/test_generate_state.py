@@ -71,13 +71,13 @@ def _close_reports(a, b) -> bool:
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(steps=0), "steps must be an integer in \\[1, "),
-        (dict(steps=5000), "steps must be an integer in \\[1, 1000\\]"),
-        (dict(seed=2**70), "seed must be an integer"),
-        (dict(seed=-1), "seed must be an integer"),
-        (dict(guidance=(float("nan"), 1.0)), "w_text must be a finite number >= 0"),
-        (dict(guidance=(-5.0, -5.0)), "w_text must be a finite number >= 0"),
-        (dict(samples=0), "samples must be a positive integer"),
+        (dict(steps=0), "steps: expected an integer in \\[1, "),
+        (dict(steps=5000), "steps: expected an integer in \\[1, 1000\\]"),
+        (dict(seed=2**70), "seed: expected an integer in \\[0, 18446744073709551615\\]"),
+        (dict(seed=-1), "seed: expected an integer in \\[0, 18446744073709551615\\]"),
+        (dict(guidance=(float("nan"), 1.0)), "guidance: expected a finite number in \\[0, 100\\]"),
+        (dict(guidance=(-5.0, -5.0)), "guidance: expected a finite number in \\[0, 100\\]"),
+        (dict(samples=0), "samples: expected an integer in \\[1, 64\\]"),
     ],
 )
 def test_bad_arguments_are_clear_errors(model, kwargs, match):

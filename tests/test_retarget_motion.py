@@ -102,8 +102,9 @@ def test_walk_onto_a_ue5_rig_with_bones_along_x_and_ik_feet():
     for side in "lr":  # the IK foot helpers follow the feet they stand for
         gap = (P[:, names.index(f"ik_foot_{side}")] - P[:, names.index(f"foot_{side}")]).norm(dim=-1)
         assert float(gap.max()) < 1e-5
-    root = names.index("root")
-    assert float((P[:, root] - P[0, root]).abs().max()) < 1e-9  # the static root stays put
+    root, pelvis = names.index("root"), names.index("pelvis")  # the root bone carries the root motion
+    assert float((P[:, root, 1] - P[0, root, 1]).abs().max()) < 1e-9  # on the floor
+    assert torch.allclose(P[:, root, [0, 2]] - P[:, pelvis, [0, 2]], P[0, root, [0, 2]] - P[0, pelvis, [0, 2]])
 
 
 def test_walk_onto_a_cmu_bvh_in_centimetres_keeps_names_offsets_and_units(tmp_path):

@@ -22,7 +22,8 @@ CLI_UNITS = {"heading": ("degrees", math.radians)}
 
 
 def _bounded(name: str, opt: Option, bounds: RequestBounds):
-    """argparse type of a numeric field: parses and checks the field's bounds with a one-line message."""
+    """argparse type of a numeric field: parses it and checks its lower bound (the upper bounds are the
+    request's to check, with a one-line error that names them)."""
     integer = opt.kind == "int"
 
     def parse(text: str):
@@ -33,15 +34,11 @@ def _bounded(name: str, opt: Option, bounds: RequestBounds):
                                              f"got {text!r}") from None
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-        low, high = opt.low, opt.high_value(bounds)
-        if name in CLI_UNITS:
-            low = high = None  # checked in the request's unit
+        low = None if name in CLI_UNITS else opt.low  # a unit-converted value is checked by the request
         if low is not None and (value <= low if opt.open_low else value < low):
             raise argparse.ArgumentTypeError(f"expected a number {'>' if opt.open_low else '>='} {low:g}, "
                                              f"got {text!r}")
-        if high is not None and value > high:
-            raise argparse.ArgumentTypeError(f"at most {high:g}, got {text!r}")
-        return value
+        return value  # upper bounds: the request's one-line error names the bound (and the model its own)
 
     return parse
 
@@ -89,7 +86,7 @@ def request_from_args(args: argparse.Namespace, cls: type = GenerationRequest, *
             continue
         if f.name in CLI_UNITS:
             value = CLI_UNITS[f.name][1](value)
-        if opt.kind == "pair":
+        if opt.kind == "pair" and isinstance(value, list):
             value = tuple(value)
         values[f.name] = value
     return cls(**(values | extra))

@@ -30,6 +30,7 @@ from kinema.constraints.bvh_poses import poses_from_bvh
 from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
 from kinema.constraints.json_values import int_list, time_list
 from kinema.constraints.kimodo_examples import adapt_pose_form, warn_foreign
+from kinema.constraints.plausibility import check_coordinates, check_root_speeds
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -200,7 +201,7 @@ def load_constraints(
     """
     data, source, base_dirs, file_fps = read_constraints_json(path_or_obj, base_dir)
     src_fps = source_fps_for(data, file_fps=file_fps, source_fps=source_fps, source=source, model_fps=fps)
-    out, foreign = [], []
+    out, foreign, frames, renames = [], [], [], []
     for i, obj in enumerate(data):
         kind = obj.get("type") if isinstance(obj, dict) else None
         kind = kind if isinstance(kind, str) else None
@@ -213,11 +214,20 @@ def load_constraints(
                 frames_to_source_times(written, src_fps, fps), base_dirs=base_dirs, skeleton=skeleton, fps=fps
             )
             c = convert_frames(c, src_fps, fps, num_frames)
-            c.check(skeleton, fps, num_frames)
+            keyframes = c.check(skeleton, fps, num_frames)
         except ConstraintError as err:
             raise err.at(index=i, kind=kind, source=source, rename=_renames(written)) from None
         if foreign_j is None or not any(c.same_as(o) for o in out):  # Kimodo repeats a pose per hand/foot
             out.append(c)
+            frames.append(keyframes)
+            renames.append((i, _renames(written)))
+    try:
+        check_coordinates(out)
+        check_root_speeds(out, frames, fps, skeleton)
+    except ConstraintError as err:  # located by its index in ``out``: report the file's own index and key
+        where, rename = renames[err.index] if err.index is not None else (None, None)
+        raise ConstraintError(err.reason, field=(rename or {}).get(err.field, err.field), index=where,
+                              kind=err.kind, source=source) from None
     warn_foreign(foreign, source, skeleton)
     return out
 

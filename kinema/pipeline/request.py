@@ -186,17 +186,25 @@ def options(cls: type = GenerationRequest) -> list[tuple[dataclasses.Field, Opti
 
 
 # ---------------------------------------------------------------------- checks
+def _range(opt: Option, bounds: RequestBounds, integer: bool) -> str:
+    """The field's range in words: ``an integer in [1, 1000]``, ``a finite number > 0``, ..."""
+    low, high = opt.low, opt.high_value(bounds)
+    fmt = (lambda x: f"{int(x)}") if integer else (lambda x: f"{x:g}")
+    what = "an integer" if integer else "a finite number"
+    if low is not None and high is not None:
+        return f"{what} in {'(' if opt.open_low else '['}{fmt(low)}, {fmt(high)}]"
+    if low is not None:
+        return f"{what} {'>' if opt.open_low else '>='} {fmt(low)}"
+    return what if high is None else f"{what} <= {fmt(high)}"
+
+
 def _number(name: str, value: Any, opt: Option, bounds: RequestBounds, integer: bool) -> None:
     kinds = (int,) if integer else (int, float)
-    if isinstance(value, bool) or not isinstance(value, kinds):
-        raise KinemaError(f"{name}: expected {'an integer' if integer else 'a number'}, got {value!r}")
-    if not math.isfinite(value):
-        raise KinemaError(f"{name}: expected a finite number, got {value!r}")
     low, high = opt.low, opt.high_value(bounds)
-    if low is not None and (value <= low if opt.open_low else value < low):
-        raise KinemaError(f"{name}: expected a number {'>' if opt.open_low else '>='} {low:g}, got {value!r}")
-    if high is not None and value > high:
-        raise KinemaError(f"{name}: at most {high:g}, got {value!r}")
+    ok = not isinstance(value, bool) and isinstance(value, kinds) and math.isfinite(value)
+    ok = ok and (low is None or (value > low if opt.open_low else value >= low)) and (high is None or value <= high)
+    if not ok:
+        raise KinemaError(f"{name}: expected {_range(opt, bounds, integer)}, got {value!r}")
 
 
 def _check_field(name: str, value: Any, opt: Option, bounds: RequestBounds) -> None:

@@ -11,7 +11,8 @@ Steps (each in its own module):
 4. legs (kinema.retarget.legs): each ankle to the scaled source ankle, held where the source's
    contacts are planted, by two-bone IK; a foot hanging off the leg (an IK foot bone under the root)
    is put at the leg chain's end, and IK helpers that stand for the foot follow it;
-5. floor: the lowest joint where the target's rest pose puts it;
+5. floor: the lowest joint where the target's rest pose puts it; a static root above the hips carries
+   the root motion across the floor;
 6. `Motion.from_global` on the target skeleton: bone translations come out as
    ``local_translations`` wherever a joint was placed rather than hung from its parent.
 
@@ -35,6 +36,7 @@ from kinema.retarget.mapping import JointMap, build_joint_map
 from kinema.retarget.proportions import (
     body_scale,
     floor_shift,
+    ground_root,
     lowest_rest_height,
     placed_positions,
     source_body,
@@ -147,6 +149,7 @@ def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
         P = positions_from_globals(jm.target, G, placed)
     lift = floor_shift(jm, P)
     placed = {j: p + torch.tensor([0.0, lift, 0.0], dtype=p.dtype) for j, p in placed.items()}
+    placed.update(ground_root(jm, placed))
     P = positions_from_globals(jm.target, G, placed)
     contacts = _target_contacts(jm, planted, motion.num_frames)
     out = Motion.from_global(jm.target, motion.fps, P[:, 0], G, contacts, positions=P)

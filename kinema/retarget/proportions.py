@@ -7,6 +7,8 @@
 - A placed joint (the hips; for same-name maps every joint whose bone translation the source
   animates) goes to ``P0_t + s (P_s - P0_s)``: its rest position plus the source's displacement
   from rest, scaled.
+- Root motion: a static joint above the hips (an armature or ``Root`` bone at the origin) moves
+  across the floor with the hips, at its rest height, so IK/pole helpers hanging from it come along.
 - Floor: the whole motion is then shifted vertically so that its lowest joint over the clip sits
   where the target's rest pose puts its lowest joint (helper bones left out, kinema.rig.find.helpers).
 
@@ -86,6 +88,18 @@ def placed_positions(jm: JointMap, source_positions: torch.Tensor, moving: list[
     if jm.hips is not None:
         chosen[jm.hips[0]] = jm.hips[1]
     return {b: P0t[b] + s * (source_positions[:, a] - P0s[a]) for b, a in chosen.items()}
+
+
+def ground_root(jm: JointMap, placed: dict[int, torch.Tensor]) -> dict[int, torch.Tensor]:
+    """{0: (T, 3)} for a static top joint above the hips (an armature, Quaternius ``Root``, UE
+    ``root``): it carries the root motion on the floor, keeping its rest offset to the hips across the
+    ground and its rest height, so helpers hanging from it travel with the character. {} otherwise."""
+    if jm.hips is None or jm.hips[0] == 0 or 0 in jm.pairs or 0 in placed or jm.hips[0] not in placed:
+        return {}
+    _, P0 = rest_frames(jm.target)
+    root = P0[0].expand_as(placed[jm.hips[0]]).clone()
+    root[:, [0, 2]] += placed[jm.hips[0]][:, [0, 2]] - P0[jm.hips[0], [0, 2]]
+    return {0: root}
 
 
 def standing_height(positions: torch.Tensor, joint: int, planted: torch.Tensor | None, body: list[int]) -> float:

@@ -31,7 +31,7 @@ from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.stream.controls import Controls, Steer, Target, WindowFrame
-from kinema.stream.frames import StreamFrames, facing, shifted, stitch
+from kinema.stream.frames import StreamFrames, face_along, facing, shifted, stitch
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
 WINDOW_SECONDS = 3.0
@@ -49,6 +49,12 @@ SKIP_SECONDS = 0.2
 BLEND_SECONDS = 0.25
 #: frames kept before the next context (the smoothed root is measured over them)
 HISTORY_FRAMES = 40
+#: Gaussian (seconds) over which a steered window's facing error is smoothed before it is turned away
+FACING_SIGMA_SECONDS = 0.3
+#: guidance (w_text, w_constr) of the first window after a prompt switch: the context keyframes of
+#: the old behaviour outweigh the new text at the model's (2, 2) (walk -> bow, seeds 0/1, 10 steps:
+#: trunk lean 30/35 degrees; with (4, 2): 40/39, lone bows 41)
+SWITCH_GUIDANCE = (4.0, 2.0)
 #: most frames one ``next_frames`` call may ask for
 MAX_FRAMES_PER_CALL = 100_000
 
@@ -157,6 +163,8 @@ class MotionStream:
         self._tail = 0  # provisional frames at the end of _motion (a later window blends over them)
         self._emitted = 0
         self._window_index = 0
+        self._switch_windows = 0  # windows still to generate with the prompt-switch guidance
+        self._path_headings: torch.Tensor | None = None  # the steered path's heading per window frame
 
     # ------------------------------------------------------------------ state
     @property
@@ -182,6 +190,7 @@ class MotionStream:
         if not isinstance(text, str) or len(text) > 2000:
             raise KinemaError(f"prompt must be a string of at most 2000 characters, got {type(text).__name__}")
         self.controls.prompt = text
+        self._switch_windows = 1
         return self._command("prompt", text)
 
     def steer(self, direction_deg: float | None = None, speed: float = 1.2) -> CommandRecord:
@@ -258,6 +267,7 @@ class MotionStream:
         frame = self._window_frame(context, smooth)
         local = shifted(context, -frame.origin[0], -frame.origin[1])
         window, timings = self._generate(local, smooth - torch.tensor(frame.origin), frame)
+        window = self._face_path(window)
         window = shifted(window, *frame.origin).crop(s.context - 1)
         stitched = stitch(self._motion.crop(end - 1), window, s.skip, s.blend)
         self._motion = self._motion.crop(0, end).concatenate(stitched.to(self._motion.dtype))
@@ -281,6 +291,15 @@ class MotionStream:
         last = (float(smooth[-1, 0]) - origin[0], float(smooth[-1, 1]) - origin[1])
         return WindowFrame(origin, last, heading, speed, self.fps)
 
+    def _face_path(self, window: Motion) -> Motion:
+        """With steering, the window turned to face along its path (kinema.stream.frames.face_along)."""
+        path = self._path_headings
+        if path is None:
+            return window
+        roles = window.skeleton.roles
+        first = self.settings.context - 1
+        return face_along(window, path, first, roles["left_hip"], roles["right_hip"], FACING_SIGMA_SECONDS * self.fps)
+
     def _generate(self, context: Motion | None, smooth: torch.Tensor | None,
                   frame: WindowFrame | None) -> tuple[Motion, dict]:
         """One window (local frame) and the pipeline's timings."""
@@ -288,15 +307,29 @@ class MotionStream:
         fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
                                   "seed": (s.seed + self._window_index) % 2**63, "postprocess": False,
                                   "samples": 1}
+        self._path_headings = None
+        if context is not None and self._switch_windows > 0:
+            fields["guidance"] = self._switch_guidance()
+            self._switch_windows -= 1
         if context is not None:
             fields["constraints"] = self.controls.window_constraints(frame, context, smooth, s.window)
             fields["heading"] = frame.heading
+            for c in fields["constraints"]:
+                if c["type"] == "root2d":
+                    vectors = torch.tensor(c["global_root_heading"])
+                    self._path_headings = torch.atan2(vectors[:, 1], vectors[:, 0])
         self._window_index += 1
         if self.request is None:
             result = self.model.generate(**fields)
         else:
             result = self.model.generate(self.request.replace(timeline=None, **fields))
         return result.motions[0], result.report.timings
+
+    def _switch_guidance(self) -> tuple[float, float]:
+        """Guidance of the window after a prompt switch: `SWITCH_GUIDANCE`, or the request's own with
+        its text weight doubled."""
+        given = None if self.request is None else self.request.guidance
+        return SWITCH_GUIDANCE if given is None else (2.0 * given[0], given[1])
 
     def _log_window(self, first: int, new_frames: int, timings: dict, t0: float) -> None:
         wall = time.perf_counter() - t0

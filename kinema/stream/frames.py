@@ -13,8 +13,9 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
+from kinema.geometry.rotations import quat_make_continuous, quat_mul, quat_normalize, quat_slerp
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import smooth_time
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,23 @@ def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
     rest = new.crop(n + 1).to(old.dtype)
     move = root[-1] - rb[-1]
     return out.concatenate(shifted(rest, float(move[0]), float(move[2])))
+
+
+def face_along(motion: Motion, headings: torch.Tensor, start: int, left_hip: int, right_hip: int,
+               sigma_frames: float) -> Motion:
+    """``motion`` turned about its pelvis, frame by frame from ``start`` on, so that its facing (the
+    hips' heading smoothed over ``sigma_frames``, keeping the gait's sway) follows ``headings``
+    (radians, one per frame from ``start``): the denoiser moves the root along a steered path but keeps
+    the body facing the way the prompt walks, which would slide the feet sideways."""
+    psi = facing(motion.positions, left_hip, right_hip)[start:]
+    n = min(len(psi), len(headings))
+    miss = torch.atan2(torch.sin(headings[:n] - psi[:n]), torch.cos(headings[:n] - psi[:n]))
+    miss = smooth_time(miss[:, None].to(motion.dtype), sigma_frames)[:, 0]
+    half = miss / 2
+    yaw = torch.stack([half.cos(), torch.zeros_like(half), half.sin(), torch.zeros_like(half)], -1)
+    rots = motion.local_rotations.clone()
+    rots[start : start + n, 0] = quat_normalize(quat_mul(yaw, rots[start : start + n, 0]))
+    return replace(motion, local_rotations=rots)
 
 
 def shifted(motion: Motion, dx: float, dz: float) -> Motion:
