@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import kinema
 from kinema.cli import main
 from kinema.errors import KinemaError
 from kinema.io import load_motion
@@ -210,3 +211,55 @@ def test_batch_lines_that_fail_to_parse_keep_their_line_id(tmp_path):
     assert summary.failed == 4
     records = [json.loads(x) for x in (tmp_path / "out" / "manifest.jsonl").read_text().splitlines()]
     assert [(r["line"], r["id"]) for r in records] == [(1, "000001"), (2, "000002"), (3, "000003"), (4, "mine")]
+
+
+# ---------------------------------------------------------------------------- impossible root targets
+@pytest.fixture(scope="module")
+def human():
+    return kinema.load_model()
+
+
+JUMP = [{"type": "root2d", "times": [0.0, 0.5], "smooth_root_2d": [[0, 0], [50, 0]]}]
+
+
+def test_root_targets_that_force_a_teleport_are_refused(tmp_path, capsys):
+    """Issue 36: these exited 0 with a pelvis moving 100.7 m/s (and a warning claiming a 19 m miss)."""
+    path = tmp_path / "jump.json"
+    path.write_text(json.dumps(JUMP))
+    out = tmp_path / "o.bvh"
+    assert main(["generate", "A person walks.", "--steps", "2", "--seconds", "2", "--no-progress",
+                 "--constraints", str(path), "--out", str(out)]) == 2
+    one_line_error(capsys, "jump.json: constraint 0 (root2d): field 'smooth_root_2d'", "100 m/s", "at most 12 m/s")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("where", [1e6, 1e308])
+def test_targets_far_from_the_origin_are_refused(human, where):
+    from kinema.constraints.io import load_constraints
+
+    skel = human.skeleton
+    far = [{"type": "root2d", "times": [1.0], "smooth_root_2d": [[where, 0.0]]}]
+    with pytest.raises(KinemaError, match="from the origin; at most 1000 m"):
+        load_constraints(far, skel, 20.0, 60)
+    hand = [{"type": "right-hand", "times": [1.0], "positions": [[0.0, 1.0, where]]}]
+    with pytest.raises(KinemaError, match="field 'positions'.*from the origin"):
+        load_constraints(hand, skel, 20.0, 60)
+
+
+def test_root_speed_bound_keeps_real_runs_and_scales_with_the_rig(human):
+    from kinema.constraints.io import load_constraints
+    from kinema.constraints.plausibility import MAX_ROOT_SPEED, max_root_speed
+
+    skel = human.skeleton
+    assert max_root_speed(skel) == MAX_ROOT_SPEED  # a person
+    sprint = [{"type": "root2d", "times": [0.0, 1.0, 2.0], "smooth_root_2d": [[0, 0], [0, 9], [0, 18]]}]
+    assert len(load_constraints(sprint, skel, 20.0, 60)) == 1  # 9 m/s: a sprint, kept
+    keyframe = [{"type": "fullbody", "frame_indices": [10], "local_joints_rot": [[[0.0] * 3] * skel.num_joints],
+                 "root_positions": [[3.0, 0.9, 0.0]]}]
+    with pytest.raises(KinemaError, match=r"constraint 1 \(fullbody\): field 'root_positions'.*60 m/s"):
+        load_constraints(sprint[:0] + [{"type": "root2d", "times": [0.45], "smooth_root_2d": [[0, 0]]}] + keyframe,
+                         skel, 20.0, 60)  # two constraints together: 3 m in one frame
+    giant = skel.scaled(10.0)
+    assert max_root_speed(giant) > 5 * MAX_ROOT_SPEED
+    fast = [{"type": "root2d", "times": [0.0, 1.0], "smooth_root_2d": [[0, 0], [0, 50]]}]
+    assert load_constraints(fast, giant, 20.0, 60)  # 50 m/s for a rig ten times a person's size
