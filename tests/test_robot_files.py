@@ -4,6 +4,8 @@ humanoid whose body names are not recognised, retargeted through a JSON mapping.
 from __future__ import annotations
 
 import json
+import shlex
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -173,3 +175,16 @@ def test_robots_kinema_cannot_use(tmp_path, xml, message):
     path.write_text(xml)
     with pytest.raises(KinemaError, match=message):
         load_robot(path)
+
+
+def test_commands_in_robot_docs_parse():
+    """Every `kinema` command docs/robots.md shows is accepted by the real command line."""
+    from kinema.cli import build_parser
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "robots.md").read_text()
+    commands = [shlex.split(line, comments=True) for line in text.splitlines() if line.startswith("kinema ")]
+    assert len(commands) >= 4
+    parser = build_parser()
+    for words in commands:
+        args = parser.parse_args(words[1:])
+        assert args.command in ("generate", "robot", "render")
