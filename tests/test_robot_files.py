@@ -4,6 +4,7 @@ humanoid whose body names are not recognised, retargeted through a JSON mapping.
 from __future__ import annotations
 
 import json
+import re
 import shlex
 from pathlib import Path
 
@@ -182,7 +183,9 @@ def test_commands_in_robot_docs_parse():
     from kinema.cli import build_parser
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "robots.md").read_text()
-    commands = [shlex.split(line, comments=True) for line in text.splitlines() if line.startswith("kinema ")]
+    blocks = re.findall(r"^```bash\n(.*?)^```", text, flags=re.M | re.S)
+    lines = [line for block in blocks for line in block.splitlines() if line.startswith("kinema ")]
+    commands = [shlex.split(line, comments=True) for line in lines]
     assert len(commands) >= 4
     parser = build_parser()
     for words in commands:
