@@ -218,7 +218,7 @@ def test_cli_lists_rigs_and_writes_a_motion(trained, tmp_path, capsys) -> None:
     assert main([*args, "--out", str(out)]) == 0 and out.exists()
     assert main([*args, "--out", str(tmp_path / "m.txt")]) == 2
     assert main(["generate", "x", "--rig", rig_id, "--out", str(tmp_path / "h.bvh")]) == 2  # the human model
-    assert "one skeleton" in capsys.readouterr().err
+    assert "drives its own skeleton" in capsys.readouterr().err
 
 
 def test_per_rig_evaluation_rows(trained, creature_cache) -> None:

@@ -207,7 +207,7 @@ def test_each_timeline_segment_is_grounded_on_its_own(model):
     ]
     rep = model.generate(segments, steps=1, postprocess=False, grounding=0.5).report
     assert [p["grounding"]["status"] for p in rep.prompts] == ["grounded", "exact", "unknown"]
-    with pytest.raises(KinemaError, match=r"grounding weight must be in \[0, 1\]"):
+    with pytest.raises(KinemaError, match=r"grounding: expected a finite number in \[0, 1\], got 2"):
         model.generate("A person walks.", seconds=1.0, steps=1, grounding=2)
 
 
@@ -228,11 +228,13 @@ def test_cli_flag_reports_grounding_and_rejects_bad_values(tmp_path, capsys):
     assert main([*args, "--grounding", "0.5", "--grounding-top-k", "2"]) == 0
     text = capsys.readouterr().out
     assert "grounded 'Someone strolls slowly ahead.' (own weight 0.50) on 'Someone walks slowly ahead.'" in text
-    for flag, value in (("--grounding", "1.5"), ("--grounding-top-k", "0"), ("--grounding-temperature", "-1")):
+    for flag, value in (("--grounding-top-k", "0"), ("--grounding-temperature", "-1")):
         with pytest.raises(SystemExit) as exit_:
             main([*args, flag, value])
         assert exit_.value.code == 2
         assert f"argument {flag}: expected" in capsys.readouterr().err
+    assert main([*args, "--grounding", "1.5"]) == 2  # above its range: the request's one-line error
+    assert "kinema: error: grounding: expected a finite number in [0, 1], got 1.5" in capsys.readouterr().err
 
 
 def test_the_default_is_saved_with_the_model(tiny_checkpoint, tmp_path, capsys, monkeypatch):

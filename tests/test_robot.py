@@ -7,6 +7,8 @@ retargeting's own bookkeeping.
 
 from __future__ import annotations
 
+import time
+
 import mujoco
 import numpy as np
 import pytest
@@ -130,3 +132,10 @@ def test_leg_capsules_are_the_mjcf_geoms(g1):
     assert not names["left"] & names["right"]
     kinds = {int(g1.model.geom_type[g]) for g in geoms["left"]}
     assert kinds <= {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE)}
+
+
+def test_retargeting_a_walk_takes_seconds_not_minutes(walk, g1):
+    human, _ = walk
+    start = time.perf_counter()
+    retarget_to_robot(human, g1)
+    assert time.perf_counter() - start < 10.0  # about 0.3 s for 4 s at 20 fps on one free core

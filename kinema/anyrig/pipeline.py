@@ -84,8 +84,9 @@ class AnyRigPipeline(MotionPipeline):
         self.text_encoder = text_encoder
 
     @classmethod
-    def load(cls, ckpt: Path, text_encoder) -> AnyRigPipeline:
-        return cls(load_anyrig(ckpt), text_encoder)
+    def load(cls, ckpt: Path, text_encoder_for) -> AnyRigPipeline:
+        loaded = load_anyrig(ckpt)
+        return cls(loaded, text_encoder_for(loaded.text_encoder_id))
 
     @property
     def path(self) -> Path:

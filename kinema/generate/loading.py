@@ -68,8 +68,9 @@ def load_model(name_or_path: str | Path = "default", text_cache: Path | None = N
     if name not in PIPELINES:
         raise KinemaError(f"{ckpt / 'checkpoint.json'}: field 'pipeline': unknown pipeline {name!r} "
                           f"(known: {', '.join(sorted(PIPELINES))})")
-    encoder_id = str(info.get("text_encoder", ""))
-    encoder = get_text_encoder(encoder_id, cache_dir=text_cache)
-    if text_memory:
-        encoder = MemoryCachedEncoder(encoder, text_memory)
-    return PIPELINES[name].load(ckpt, encoder)
+
+    def text_encoder_for(encoder_id: str):
+        encoder = get_text_encoder(encoder_id, cache_dir=text_cache)
+        return MemoryCachedEncoder(encoder, text_memory) if text_memory else encoder
+
+    return PIPELINES[name].load(ckpt, text_encoder_for)

@@ -68,13 +68,13 @@ class HumanPipeline(MotionPipeline):
         self.grounding: Grounding = loaded.grounding
 
     @classmethod
-    def load(cls, ckpt: Path, text_encoder) -> HumanPipeline:
+    def load(cls, ckpt: Path, text_encoder_for) -> HumanPipeline:
         loaded = load_denoiser(ckpt)
         known = KnownPrompts.load(loaded.path)
         if known is not None and known.encoder_id != loaded.text_encoder_id:
             raise KinemaError(f"{ckpt}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
                               f"{loaded.text_encoder_id!r}; rebuild them (kinema export --known-prompts DATA)")
-        return cls(loaded, text_encoder, known)
+        return cls(loaded, text_encoder_for(loaded.text_encoder_id), known)
 
     @property
     def path(self) -> Path:

@@ -39,8 +39,7 @@ def request_from_keywords(what: Any = None, **keywords) -> GenerationRequest:
     if isinstance(what, str) and not what.lower().endswith(".json"):
         keywords["prompt"] = what
     elif what is not None:
-        if keywords.get("seconds") is not None and isinstance(what, str | Path):
-            keywords.pop("seconds")  # a timeline file carries its own durations (as before the request)
+        keywords.pop("seconds", None)  # a timeline's segments carry their own seconds (the keyword is ignored)
         keywords["timeline"] = what
     grounding = keywords.get("grounding")
     if grounding is not None and not isinstance(grounding, int | float) or isinstance(grounding, bool):
@@ -79,8 +78,9 @@ class MotionPipeline(ABC):
 
     @classmethod
     @abstractmethod
-    def load(cls, ckpt: Path, text_encoder) -> MotionPipeline:
-        """The pipeline of a checkpoint folder, with its text encoder."""
+    def load(cls, ckpt: Path, text_encoder_for) -> MotionPipeline:
+        """The pipeline of a checkpoint folder; ``text_encoder_for(encoder_id)`` makes the text encoder its
+        checkpoint names (called once the checkpoint has been read and checked)."""
 
     # ------------------------------------------------------------------ what faces read
     @property

@@ -1,16 +1,22 @@
 """`MotionStream`: an endless motion made window by window through a pipeline's ``generate(request)``.
 
-Each window (``window_seconds`` long, ``steps`` DDIM steps, no post-processing) is generated in a local
+Each window (``window_seconds`` long, ``steps`` DDIM steps, post-processed only while a target is
+held: the raw denoiser follows a hand target poorly after context keyframes, measured 25-30 cm off
+where a lone clip gets 15 cm; post-processing hits it exactly but costs ~1 s a window) is generated in a local
 frame whose first root stands over the origin. Its first ``context_seconds`` are the last frames
 generated so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt,
-steering path, targets: kinema.stream.controls) constrain the rest. Its first ``blend_seconds`` after
-the context are cross-faded from the previous window's provisional frames, which hides what the
-keyframes do not (a step in joint velocity right after them).
+steering path, targets: kinema.stream.controls) constrain the rest. Its first ``SKIP_SECONDS`` after
+the context are dropped (the previous window's frames are kept there: the denoiser's first free frames
+lag the keyframes) and the next ``BLEND_SECONDS`` are cross-faded from the previous window
+(kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended). While steering,
+the window is turned to face along its path; every window is lifted or lowered onto the first one's
+ground level (at most 2 cm a window).
 
 Frames are handed out in order (``next_frames(n)`` or iteration). A command (``set_prompt``, ``steer``,
 ``target``, ``clear``) cuts the frames not yet handed out back to ``lookahead`` seconds after the last
 one handed out and regenerates from there: the first frame that obeys it is at most ``lookahead +
-blend_seconds / 2`` seconds of motion later, whatever the window length. Frames already handed out
+SKIP_SECONDS + BLEND_SECONDS / 2`` seconds of motion later (0.45 s by default), whatever the window
+length. The first window after a prompt switch runs with a stronger text guidance (`SWITCH_GUIDANCE`). Frames already handed out
 are dropped from memory (only the context is kept), so a stream's memory does not grow.
 
 The stream is not thread-safe: a face that generates on a worker thread queues commands and applies
@@ -22,7 +28,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import torch
@@ -31,7 +37,7 @@ from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.stream.controls import Controls, Steer, Target, WindowFrame
-from kinema.stream.frames import StreamFrames, face_along, facing, shifted, stitch
+from kinema.stream.frames import StreamFrames, face_along, facing, ground_level, shifted, stitch
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
 WINDOW_SECONDS = 3.0
@@ -55,6 +61,8 @@ FACING_SIGMA_SECONDS = 0.3
 #: the old behaviour outweigh the new text at the model's (2, 2) (walk -> bow, seeds 0/1, 10 steps:
 #: trunk lean 30/35 degrees; with (4, 2): 40/39, lone bows 41)
 SWITCH_GUIDANCE = (4.0, 2.0)
+#: largest height correction of one window, metres (kinema.stream.frames.ground_level)
+FLOOR_STEP = 0.02
 #: most frames one ``next_frames`` call may ask for
 MAX_FRAMES_PER_CALL = 100_000
 
@@ -163,6 +171,7 @@ class MotionStream:
         self._tail = 0  # provisional frames at the end of _motion (a later window blends over them)
         self._emitted = 0
         self._window_index = 0
+        self._floor: float | None = None  # ground level of the first window, metres
         self._switch_windows = 0  # windows still to generate with the prompt-switch guidance
         self._path_headings: torch.Tensor | None = None  # the steered path's heading per window frame
 
@@ -258,6 +267,7 @@ class MotionStream:
         s = self.settings
         if self._motion is None:
             window, timings = self._generate(None, None, None)
+            self._floor = ground_level(window)
             self._motion, self._tail = window, s.skip + s.blend
             self._log_window(0, window.num_frames - self._tail, timings, t0)
             return
@@ -267,7 +277,7 @@ class MotionStream:
         frame = self._window_frame(context, smooth)
         local = shifted(context, -frame.origin[0], -frame.origin[1])
         window, timings = self._generate(local, smooth - torch.tensor(frame.origin), frame)
-        window = self._face_path(window)
+        window = self._on_floor(self._face_path(window))
         window = shifted(window, *frame.origin).crop(s.context - 1)
         stitched = stitch(self._motion.crop(end - 1), window, s.skip, s.blend)
         self._motion = self._motion.crop(0, end).concatenate(stitched.to(self._motion.dtype))
@@ -291,6 +301,15 @@ class MotionStream:
         last = (float(smooth[-1, 0]) - origin[0], float(smooth[-1, 1]) - origin[1])
         return WindowFrame(origin, last, heading, speed, self.fps)
 
+    def _on_floor(self, window: Motion) -> Motion:
+        """The window moved up or down (by at most `FLOOR_STEP` metres) so that its ground level (the
+        lowest joint in its stance frames) is the first window's: the denoiser's root height drifts by
+        about a centimetre per window, which adds up over a long stream."""
+        if self._floor is None:
+            return window
+        lift = max(-FLOOR_STEP, min(FLOOR_STEP, self._floor - ground_level(window.crop(self.settings.context))))
+        return replace(window, root_translation=window.root_translation + torch.tensor([0.0, lift, 0.0]))
+
     def _face_path(self, window: Motion) -> Motion:
         """With steering, the window turned to face along its path (kinema.stream.frames.face_along)."""
         path = self._path_headings
@@ -305,7 +324,8 @@ class MotionStream:
         """One window (local frame) and the pipeline's timings."""
         s = self.settings
         fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
-                                  "seed": (s.seed + self._window_index) % 2**63, "postprocess": False,
+                                  "seed": (s.seed + self._window_index) % 2**63,
+                                  "postprocess": bool(self.controls.targets),
                                   "samples": 1}
         self._path_headings = None
         if context is not None and self._switch_windows > 0:

@@ -101,6 +101,12 @@ def face_along(motion: Motion, headings: torch.Tensor, start: int, left_hip: int
     return replace(motion, local_rotations=rots)
 
 
+def ground_level(motion: Motion) -> float:
+    """Where ``motion`` stands: the 10th percentile over frames of the lowest joint's height, metres
+    (a stance frame's planted toe; airborne frames of a jog or a jump do not count)."""
+    return float(torch.quantile(motion.positions[..., 1].amin(-1).float(), 0.1))
+
+
 def shifted(motion: Motion, dx: float, dz: float) -> Motion:
     """``motion`` moved by ``(dx, 0, dz)`` metres on the ground."""
     move = torch.tensor([dx, 0.0, dz], dtype=motion.dtype)
