@@ -1,23 +1,24 @@
 """`MotionStream`: an endless motion made window by window through a pipeline's ``generate(request)``.
 
-Each window (``window_seconds`` long, ``steps`` DDIM steps, post-processed only while a target is
-held: the raw denoiser follows a hand target poorly after context keyframes, measured 25-30 cm off
-where a lone clip gets 15 cm; post-processing hits it exactly but costs ~1 s a window) is generated in a local
-frame whose first root stands over the origin. Its first ``context_seconds`` are the last frames
-generated so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt,
-steering path, targets: kinema.stream.controls) constrain the rest. Its first ``SKIP_SECONDS`` after
-the context are dropped (the previous window's frames are kept there: the denoiser's first free frames
-lag the keyframes) and the next ``BLEND_SECONDS`` are cross-faded from the previous window
-(kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended). While steering,
-the window is turned to face along its path; every window is lifted or lowered onto the first one's
-ground level (at most 2 cm a window).
+Each window (``window_seconds`` long, ``steps`` DDIM steps) is generated in a local frame whose first
+root stands over the origin. Its first `CONTEXT_SECONDS` are the last frames generated so far, imposed
+as ``fullbody`` keyframes, so it continues the motion; the controls (prompt, steering path, targets:
+kinema.stream.controls) constrain the rest. Its first `SKIP_SECONDS` after the context are dropped
+(the previous window's frames are kept there: the denoiser's first free frames lag the keyframes) and
+the next `BLEND_SECONDS` are cross-faded from the previous window (kinema.stream.frames.stitch:
+rotations slerped, the root's ground velocity blended). While steering, the window is turned to face
+along its path; every window is lifted or lowered onto the first one's ground level (at most
+`FLOOR_STEP` a window). Windows are not post-processed, except while a target is held: after context
+keyframes the raw denoiser leaves a hand target 25-30 cm off (a lone clip: 15 cm); post-processing
+hits it exactly but costs about 1 s a window.
 
 Frames are handed out in order (``next_frames(n)`` or iteration). A command (``set_prompt``, ``steer``,
 ``target``, ``clear``) cuts the frames not yet handed out back to ``lookahead`` seconds after the last
-one handed out and regenerates from there: the first frame that obeys it is at most ``lookahead +
-SKIP_SECONDS + BLEND_SECONDS / 2`` seconds of motion later (0.45 s by default), whatever the window
-length. The first window after a prompt switch runs with a stronger text guidance (`SWITCH_GUIDANCE`). Frames already handed out
-are dropped from memory (only the context is kept), so a stream's memory does not grow.
+one handed out and regenerates from there: the first frame that obeys it (the new window's weight
+past one half) is ``lookahead + SKIP_SECONDS + BLEND_SECONDS / 2`` seconds of motion later (0.45 s by
+default), whatever the window length. The first window after a prompt switch runs with a stronger
+text guidance (`SWITCH_GUIDANCE`). Frames already handed out are dropped from memory (the last
+`HISTORY_FRAMES` are kept for the smoothed root), so a stream's memory does not grow.
 
 The stream is not thread-safe: a face that generates on a worker thread queues commands and applies
 them between ``next_frames`` calls (kinema.server.stream does).
