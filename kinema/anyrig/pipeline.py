@@ -89,26 +89,6 @@ class AnyRigPipeline(MotionPipeline):
         return cls(loaded, text_encoder_for(loaded.text_encoder_id))
 
     @property
-    def path(self) -> Path:
-        return self.loaded.path
-
-    @property
-    def fps(self) -> float:
-        return self.loaded.fps
-
-    @property
-    def text_encoder_id(self) -> str:
-        return self.loaded.text_encoder_id
-
-    @property
-    def max_steps(self) -> int:
-        return self.loaded.sampler.num_train_steps
-
-    @property
-    def default_steps(self) -> int:
-        return self.loaded.sampler.num_inference_steps
-
-    @property
     def window_seconds(self) -> float:
         return self.loaded.config.window / self.fps
 

@@ -77,20 +77,8 @@ class HumanPipeline(MotionPipeline):
         return cls(loaded, text_encoder_for(loaded.text_encoder_id), known)
 
     @property
-    def path(self) -> Path:
-        return self.loaded.path
-
-    @property
     def skeleton(self):
         return self.loaded.skeleton
-
-    @property
-    def fps(self) -> float:
-        return self.loaded.fps
-
-    @property
-    def text_encoder_id(self) -> str:
-        return self.loaded.text_encoder_id
 
     @property
     def representation(self) -> FlatRepresentation:
@@ -105,15 +93,6 @@ class HumanPipeline(MotionPipeline):
     @property
     def window_seconds(self) -> float:
         return self.max_seconds
-
-    @property
-    def max_steps(self) -> int:
-        """The largest number of DDIM steps: the length T of the training noise schedule."""
-        return self.loaded.sampler.num_train_steps
-
-    @property
-    def default_steps(self) -> int:
-        return self.loaded.sampler.num_inference_steps
 
     def rigs(self) -> list[RigInfo]:
         skel = self.skeleton

@@ -83,27 +83,30 @@ class MotionPipeline(ABC):
         checkpoint names (called once the checkpoint has been read and checked)."""
 
     # ------------------------------------------------------------------ what faces read
+    #: the loaded checkpoint: its network and settings (``path``, ``fps``, ``text_encoder_id``, ``sampler``)
+    loaded: Any
+
     @property
-    @abstractmethod
     def path(self) -> Path:
         """The checkpoint folder."""
+        return self.loaded.path
 
     @property
-    @abstractmethod
-    def fps(self) -> float: ...
+    def fps(self) -> float:
+        return self.loaded.fps
 
     @property
-    @abstractmethod
-    def text_encoder_id(self) -> str: ...
+    def text_encoder_id(self) -> str:
+        return self.loaded.text_encoder_id
 
     @property
-    @abstractmethod
     def max_steps(self) -> int:
         """The largest number of DDIM steps (the training noise schedule's length)."""
+        return self.loaded.sampler.num_train_steps
 
     @property
-    @abstractmethod
-    def default_steps(self) -> int: ...
+    def default_steps(self) -> int:
+        return self.loaded.sampler.num_inference_steps
 
     @property
     @abstractmethod
