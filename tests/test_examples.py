@@ -27,6 +27,7 @@ EXAMPLES = REPO / "examples"
 CONSTRAINT_FILES = sorted((EXAMPLES / "constraints").glob("*.json"))
 TIMELINES = sorted((EXAMPLES / "timelines").glob("*.json"))
 OBJECTIVE_FILES = sorted((EXAMPLES / "objectives").glob("*.json"))
+STREAM_SCRIPTS = sorted((EXAMPLES / "streams").glob("*.jsonl"))  # played in tests/test_stream.py
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 
 #: a prompt that fits each constraints file (a file asking for a walk's path gets a walk, ...)
@@ -72,7 +73,7 @@ def test_every_example_file_is_tested():
     assert {p.stem for p in CONSTRAINT_FILES} == set(PROMPTS)
     assert TIMELINES and SCRIPTS
     assert OBJECTIVE_FILES
-    covered = set(CONSTRAINT_FILES) | set(TIMELINES) | set(SCRIPTS) | set(OBJECTIVE_FILES)
+    covered = set(CONSTRAINT_FILES) | set(TIMELINES) | set(SCRIPTS) | set(OBJECTIVE_FILES) | set(STREAM_SCRIPTS)
     files = {p for p in EXAMPLES.rglob("*") if p.is_file() and "__pycache__" not in p.parts}
     assert files <= covered, f"untested files in examples/: {sorted(map(str, files - covered))}"
 

@@ -12,6 +12,7 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -32,6 +33,7 @@ from kinema.stream.measure import (
 from kinema.stream.script import parse_command, read_script, run_script
 
 WALK = "A person walks forward."
+EXAMPLE_STREAMS = Path(__file__).resolve().parents[1] / "examples" / "streams"
 
 
 @pytest.fixture(scope="module")
@@ -193,3 +195,11 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path) -> None:
     assert len(r.stderr.strip().splitlines()) == 1 and "exactly one of" in r.stderr
     r = _kinema("stream", "--script", str(tmp_path / "none.jsonl"), "--seconds", "4", "--out", str(tmp_path / "a.bvh"))
     assert r.returncode == 2 and "no such stream script" in r.stderr
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLE_STREAMS.glob("*.jsonl")), ids=lambda p: p.stem)
+def test_example_stream_scripts_play(model, path) -> None:
+    commands = read_script(path)
+    played = run_script(open_stream(model), commands, 7.0)
+    assert played.motion.num_frames == 140 and played.motion.is_finite()
+    assert all(c.latency_seconds <= 0.5 for c in played.stream.commands)

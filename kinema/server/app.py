@@ -37,6 +37,7 @@ from kinema.server.schemas import (
     ValidationErrorOut,
     build_request_model,
 )
+from kinema.server.stream import add_stream_route
 
 log = logging.getLogger("kinema.server")
 JobId = Annotated[str, PathParam(pattern="^[0-9a-f]{32}$", description="the id POST /v1/jobs returned")]
@@ -89,6 +90,7 @@ def create_app(config: ServerConfig, registry: ModelRegistry) -> FastAPI:
     _add_job_routes(v1, request_model, registry, pool, store, limits)
     _add_info_route(v1, registry, limits)
     app.include_router(v1)
+    add_stream_route(app, registry, config)
 
     @app.get("/healthz", response_model=HealthOut, tags=["info"])
     async def healthz() -> dict:
