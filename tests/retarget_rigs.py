@@ -42,22 +42,61 @@ _LEFT = {
 }
 
 MIXAMO = {
-    "hips": "Hips", "spine": "Spine", "spine_mid": "Spine1", "chest": "Spine2", "neck": "Neck", "head": "Head",
-    "head_end": "HeadTop_End", "shoulder": "{S}Shoulder", "upper_arm": "{S}Arm", "lower_arm": "{S}ForeArm",
-    "hand": "{S}Hand", "finger": "{S}HandIndex1", "upper_leg": "{S}UpLeg", "lower_leg": "{S}Leg",
-    "foot": "{S}Foot", "toes": "{S}ToeBase", "toe_end": "{S}Toe_End",
+    "hips": "Hips",
+    "spine": "Spine",
+    "spine_mid": "Spine1",
+    "chest": "Spine2",
+    "neck": "Neck",
+    "head": "Head",
+    "head_end": "HeadTop_End",
+    "shoulder": "{S}Shoulder",
+    "upper_arm": "{S}Arm",
+    "lower_arm": "{S}ForeArm",
+    "hand": "{S}Hand",
+    "finger": "{S}HandIndex1",
+    "upper_leg": "{S}UpLeg",
+    "lower_leg": "{S}Leg",
+    "foot": "{S}Foot",
+    "toes": "{S}ToeBase",
+    "toe_end": "{S}Toe_End",
 }
 UE5 = {
-    "hips": "pelvis", "spine": "spine_01", "spine_mid": "spine_02", "chest": "spine_03", "neck": "neck_01",
-    "head": "head", "head_end": "head_end", "shoulder": "clavicle_{s}", "upper_arm": "upperarm_{s}",
-    "lower_arm": "lowerarm_{s}", "hand": "hand_{s}", "finger": "index_01_{s}", "upper_leg": "thigh_{s}",
-    "lower_leg": "calf_{s}", "foot": "foot_{s}", "toes": "ball_{s}", "toe_end": "ball_end_{s}",
+    "hips": "pelvis",
+    "spine": "spine_01",
+    "spine_mid": "spine_02",
+    "chest": "spine_03",
+    "neck": "neck_01",
+    "head": "head",
+    "head_end": "head_end",
+    "shoulder": "clavicle_{s}",
+    "upper_arm": "upperarm_{s}",
+    "lower_arm": "lowerarm_{s}",
+    "hand": "hand_{s}",
+    "finger": "index_01_{s}",
+    "upper_leg": "thigh_{s}",
+    "lower_leg": "calf_{s}",
+    "foot": "foot_{s}",
+    "toes": "ball_{s}",
+    "toe_end": "ball_end_{s}",
 }
 CMU = {
-    "hips": "Hips", "spine": "LowerBack", "spine_mid": "Spine", "chest": "Spine1", "neck": "Neck", "head": "Head",
-    "head_end": "Head_End", "shoulder": "{S}Shoulder", "upper_arm": "{S}Arm", "lower_arm": "{S}ForeArm",
-    "hand": "{S}Hand", "finger": "{L}Thumb", "upper_leg": "{S}UpLeg", "lower_leg": "{S}Leg", "foot": "{S}Foot",
-    "toes": "{S}ToeBase", "toe_end": "{S}Toe_End",
+    "hips": "Hips",
+    "spine": "LowerBack",
+    "spine_mid": "Spine",
+    "chest": "Spine1",
+    "neck": "Neck",
+    "head": "Head",
+    "head_end": "Head_End",
+    "shoulder": "{S}Shoulder",
+    "upper_arm": "{S}Arm",
+    "lower_arm": "{S}ForeArm",
+    "hand": "{S}Hand",
+    "finger": "{L}Thumb",
+    "upper_leg": "{S}UpLeg",
+    "lower_leg": "{S}Leg",
+    "foot": "{S}Foot",
+    "toes": "{S}ToeBase",
+    "toe_end": "{S}Toe_End",
 }
 
 
@@ -78,8 +117,11 @@ def _joints(legs: float, arms: float, a_pose: bool) -> list[tuple[str, str | Non
                 y = 0.95 - (0.95 - y) * legs
             elif slot in ("lower_arm", "hand", "finger"):
                 dx = (x - 0.17) * arms
-                x, y = (0.17 + dx * math.cos(math.radians(40)), 1.45 - dx * math.sin(math.radians(40))) if a_pose else (
-                    0.17 + dx, y)
+                x, y = (
+                    (0.17 + dx * math.cos(math.radians(40)), 1.45 - dx * math.sin(math.radians(40)))
+                    if a_pose
+                    else (0.17 + dx, y)
+                )
             out.append((slot, side, key_parent, (sign * x, y, z)))
     return out
 

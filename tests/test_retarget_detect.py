@@ -30,9 +30,13 @@ def test_mixamo_names_map_every_slot_and_leave_extras_unmapped():
     assert h.is_humanoid and not h.missing
     got = _names(h, ["hips", "chest", "left_upper_arm", "left_lower_arm", "right_upper_leg", "right_toes", "neck"])
     assert got == {
-        "hips": "mixamorig:Hips", "chest": "mixamorig:Spine2", "left_upper_arm": "mixamorig:LeftArm",
-        "left_lower_arm": "mixamorig:LeftForeArm", "right_upper_leg": "mixamorig:RightUpLeg",
-        "right_toes": "mixamorig:RightToeBase", "neck": "mixamorig:Neck",
+        "hips": "mixamorig:Hips",
+        "chest": "mixamorig:Spine2",
+        "left_upper_arm": "mixamorig:LeftArm",
+        "left_lower_arm": "mixamorig:LeftForeArm",
+        "right_upper_leg": "mixamorig:RightUpLeg",
+        "right_toes": "mixamorig:RightToeBase",
+        "neck": "mixamorig:Neck",
     }
     assert {"mixamorig:Spine1", "mixamorig:LeftHandIndex1", "mixamorig:HeadTop_End"} <= set(h.unmapped())
 
@@ -41,7 +45,10 @@ def test_ue5_names_with_ik_foot_helpers_as_followers():
     h = find_humanoid(build_rig(UE5, axis="x", root="root"))
     assert h.is_humanoid
     assert _names(h, ["hips", "left_shoulder", "left_lower_leg", "left_toes", "chest"]) == {
-        "hips": "pelvis", "left_shoulder": "clavicle_l", "left_lower_leg": "calf_l", "left_toes": "ball_l",
+        "hips": "pelvis",
+        "left_shoulder": "clavicle_l",
+        "left_lower_leg": "calf_l",
+        "left_toes": "ball_l",
         "chest": "spine_03",
     }
     names = h.skeleton.names
@@ -53,17 +60,25 @@ def test_cmu_hip_joints_are_not_upper_legs():
     h = find_humanoid(build_rig(CMU, axis=None, scale=100.0))
     assert h.is_humanoid
     assert _names(h, ["hips", "spine", "chest", "left_upper_leg", "left_hand"]) == {
-        "hips": "Hips", "spine": "LowerBack", "chest": "Spine1", "left_upper_leg": "LeftUpLeg", "left_hand": "LeftHand",
+        "hips": "Hips",
+        "spine": "LowerBack",
+        "chest": "Spine1",
+        "left_upper_leg": "LeftUpLeg",
+        "left_hand": "LeftHand",
     }
 
 
 @pytest.mark.parametrize(
     ("names", "expect"),
     [
-        (["J_Bip_C_Hips", "J_Bip_L_UpperLeg", "J_Bip_L_LowerLeg", "J_Bip_R_UpperArm"],
-         [None, "left_upper_leg", "left_lower_leg", "right_upper_arm"]),
-        (["DEF-spine", "DEF-thigh.L", "DEF-shin.L", "DEF-upper_arm.R"], [None, "left_upper_leg", "left_lower_leg",
-                                                                          "right_upper_arm"]),
+        (
+            ["J_Bip_C_Hips", "J_Bip_L_UpperLeg", "J_Bip_L_LowerLeg", "J_Bip_R_UpperArm"],
+            [None, "left_upper_leg", "left_lower_leg", "right_upper_arm"],
+        ),
+        (
+            ["DEF-spine", "DEF-thigh.L", "DEF-shin.L", "DEF-upper_arm.R"],
+            [None, "left_upper_leg", "left_lower_leg", "right_upper_arm"],
+        ),
         (["Hips", "UpperLeg.L", "LowerLeg.L", "Fist.R"], [None, "left_upper_leg", "left_lower_leg", "right_hand"]),
     ],
 )
@@ -124,9 +139,7 @@ def test_a_fox_is_no_humanoid_but_quaternius_people_are():
 
 def test_constraint_names_of_a_character_map_to_the_model_skeleton():
     model = build_rig(MIXAMO, axis=None, name="model")  # any humanoid stands in for the model here
-    bandai_like = Skeleton(
-        [n.replace("mixamorig:", "") for n in model.names], model.parents, model.offsets, name="m"
-    )
+    bandai_like = Skeleton([n.replace("mixamorig:", "") for n in model.names], model.parents, model.offsets, name="m")
     character = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True)
     table = constraint_joint_names(character, bandai_like)
     assert table["mixamorig:LeftHand"] == "LeftHand" and table["mixamorig:RightFoot"] == "RightFoot"

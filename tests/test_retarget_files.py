@@ -8,6 +8,8 @@ KINEMA_REQUIRE_GLTF_TOOLS is set (.ci/run sets it and installs Blender), as test
 from __future__ import annotations
 
 import os
+import re
+import shlex
 import shutil
 from pathlib import Path
 
@@ -16,7 +18,7 @@ import torch
 from blender_gltf import blender_bone_heads, max_head_error
 from retarget_rigs import MIXAMO, build_rig, source_walk
 
-from kinema.cli import main
+from kinema.cli import build_parser, main
 from kinema.errors import KinemaError
 from kinema.io.gltf import read_gltf
 from kinema.motion.core import Motion
@@ -56,8 +58,9 @@ def test_cli_retargets_an_npz_walk_onto_a_glb_and_a_bvh_character(tmp_path, caps
 def test_cli_errors_are_one_line(tmp_path, capsys):
     walk = source_walk().save(tmp_path / "walk.npz")
     odd = Skeleton(["a", "b"], [-1, 0], [[0, 1, 0], [0, 1, 0]], name="stick")
-    stick = save_character_motion(Motion(odd, 30, torch.zeros(1, 3), torch.tensor([[[1.0, 0, 0, 0]] * 2])),
-                                  tmp_path / "stick.bvh")
+    stick = save_character_motion(
+        Motion(odd, 30, torch.zeros(1, 3), torch.tensor([[[1.0, 0, 0, 0]] * 2])), tmp_path / "stick.bvh"
+    )
     assert main(["retarget", str(walk), "--rig", str(stick), "--out", str(tmp_path / "o.glb")]) == 2
     err = capsys.readouterr().err
     assert "shares no joint name" in err and err.count("\n") == 1
@@ -112,3 +115,15 @@ def test_blender_imports_a_walk_on_a_quaternius_character_with_its_skin(tmp_path
     assert max_head_error(report, out, frames) < 1e-4
     moved = [report["heads"][k]["LowerLeg.L"] for k in range(len(frames))]
     assert max(abs(a - b) for a, b in zip(moved[0], moved[-1], strict=True)) > 0.05  # the legs move
+
+
+def test_commands_in_retarget_docs_parse():
+    """Every `kinema` command docs/retarget.md shows is accepted by the real command line."""
+    text = (ROOT / "docs/retarget.md").read_text()
+    blocks = re.findall(r"^```bash\n(.*?)^```", text, flags=re.M | re.S)
+    lines = [line for block in blocks for line in block.splitlines() if line.startswith("kinema ")]
+    assert len(lines) >= 4
+    parser = build_parser()
+    for line in lines:
+        args = parser.parse_args(shlex.split(line, comments=True)[1:])
+        assert args.command in ("retarget", "inspect")

@@ -104,7 +104,9 @@ def test_walk_onto_a_ue5_rig_with_bones_along_x_and_ik_feet():
         assert float(gap.max()) < 1e-5
     root, pelvis = names.index("root"), names.index("pelvis")  # the root bone carries the root motion
     assert float((P[:, root, 1] - P[0, root, 1]).abs().max()) < 1e-9  # on the floor
-    assert torch.allclose(P[:, root, [0, 2]] - P[:, pelvis, [0, 2]], P[0, root, [0, 2]] - P[0, pelvis, [0, 2]], atol=1e-5)
+    assert torch.allclose(
+        P[:, root, [0, 2]] - P[:, pelvis, [0, 2]], P[0, root, [0, 2]] - P[0, pelvis, [0, 2]], atol=1e-5
+    )
 
 
 def test_walk_onto_a_cmu_bvh_in_centimetres_keeps_names_offsets_and_units(tmp_path):

@@ -112,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         clips = {} if fbx.motion is None else {"first animation": fbx.motion}
         mesh = skeleton.mesh
         lines.append(f"{args.file}: FBX rig {skeleton.name!r}, {skeleton.num_joints} joints (metres, Y up)")
-        lines.append("mesh: none" if mesh is None else f"mesh: {mesh.num_vertices} vertices, {len(mesh.faces)} triangles")
+        skin = "none" if mesh is None else f"{mesh.num_vertices} vertices, {len(mesh.faces)} triangles"
+        lines.append(f"mesh: {skin}")
     else:
         motion = load_motion(args.file, scale=args.in_scale)
         skeleton, clips = motion.skeleton, {args.file.name: motion}

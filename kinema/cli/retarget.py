@@ -27,8 +27,12 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help=".glb, .bvh, .bvh.gz, .npz or .fbx (FBX needs Blender)")
     p.add_argument("--in-scale", type=positive_float, default=1.0, help="BVH motion: lengths times this are metres")
     p.add_argument("--animation", metavar="NAME", help="glTF motion: the clip to use (default: the first)")
-    p.add_argument("--overrides", type=Path, metavar="JSON", help="rig overrides JSON for the character's odd joint names")
-    p.add_argument("--mapping", type=Path, metavar="JSON", help="{character joint: motion joint} replacing the found map")
+    p.add_argument(
+        "--overrides", type=Path, metavar="JSON", help="rig overrides JSON for the character's odd joint names"
+    )
+    p.add_argument(
+        "--mapping", type=Path, metavar="JSON", help="{character joint: motion joint} replacing the found map"
+    )
     p.set_defaults(func=run)
 
 

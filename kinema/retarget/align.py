@@ -6,15 +6,16 @@ rotations, else identity), a source joint ``a`` animated to ``G_s(t)`` has turne
 
     ``G_t(t) = Q(t) R_b G0_t``
 
-where ``R_b`` is the constant world rotation taking the target's rest bone directions (from ``b`` to its
-mapped children) onto the source's: the shortest arc for the primary child (the only one, or the
+where ``R_b`` is the constant world rotation taking the target's rest bone directions (from ``b`` to
+its mapped children) onto the source's: the shortest arc for the primary child (the only one, or the
 spine above the hips, the neck above the chest), then a turn about that bone that lines up the other
-children. So a T-pose source drives an A-pose target, and bones whose local axes differ (Bandai's lie along +X, Mixamo's along +Y) do not matter: only world directions are compared.
-For humanoids each bone is then turned about itself so that the body's forward and left
-directions at rest line up too (the roll: a knee keeps facing forward even when the source's rest
-pose lies along +X, as Bandai's does). A mapped joint without mapped children (a hand, a foot without toes) borrows the ``R`` of its chain
-parent (kinema.retarget.mapping). Unmapped joints keep their rest rotation relative to their parent
-(twist bones, fingers, extra spine joints: they follow their chain).
+children and, for humanoids, the body's forward and left directions at rest (the roll: a knee keeps
+facing forward even when the source's rest pose lies along +X, as Bandai's does). So a T-pose source
+drives an A-pose target, and bones whose local axes differ (Bandai's lie along +X, Mixamo's along +Y)
+do not matter: only world directions are compared. A mapped joint without mapped children (a hand, a
+foot without toes) borrows the ``R`` of its chain parent (kinema.retarget.mapping). Unmapped joints
+keep their rest rotation relative to their parent (twist bones, fingers, extra spine joints: they
+follow their chain).
 
 Shapes: rotations ``(..., J, 4)`` wxyz, positions ``(..., J, 3)``, float64.
 """
@@ -115,7 +116,11 @@ def bone_alignment(
     for b in sorted(pairs):  # parents before children
         a = pairs[b]
         vt = torch.stack([P0t[c] - P0t[b] for c in kids[b]]) if kids[b] else torch.zeros(0, 3, dtype=torch.float64)
-        vs = torch.stack([P0s[pairs[c]] - P0s[a] for c in kids[b]]) if kids[b] else torch.zeros(0, 3, dtype=torch.float64)
+        vs = (
+            torch.stack([P0s[pairs[c]] - P0s[a] for c in kids[b]])
+            if kids[b]
+            else torch.zeros(0, 3, dtype=torch.float64)
+        )
         ok = (vt.norm(dim=-1) > tiny) & (vs.norm(dim=-1) > tiny_s)
         if ok.any():
             R[b] = _align_one(vt[ok], vs[ok], frames)

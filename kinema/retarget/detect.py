@@ -72,9 +72,11 @@ class HumanoidMap:
     def lines(self) -> list[str]:
         """Human-readable report (``kinema inspect``): the mapping found and what is unmapped."""
         names = self.skeleton.names
-        kind = "humanoid" if self.is_humanoid else "not a humanoid (needs " + ", ".join(
-            s for s in REQUIRED if s not in self.slots
-        ) + ")"
+        kind = (
+            "humanoid"
+            if self.is_humanoid
+            else "not a humanoid (needs " + ", ".join(s for s in REQUIRED if s not in self.slots) + ")"
+        )
         out = [f"humanoid mapping: {kind}"]
         for slot in SLOTS:
             if slot in self.slots:
@@ -87,7 +89,10 @@ class HumanoidMap:
                 out.append(f"  {slot:<16} {names[self.slots[slot]]}{extra}")
         out.append("  not found: " + (", ".join(self.missing) or "none"))
         rest = self.unmapped()
-        out.append(f"  unmapped joints ({len(rest)}, keep their rest pose or follow their chain): " + (", ".join(rest) or "none"))
+        out.append(
+            f"  unmapped joints ({len(rest)}, keep their rest pose or follow their chain): "
+            + (", ".join(rest) or "none")
+        )
         return out
 
 
@@ -207,7 +212,9 @@ def find_humanoid(skeleton: Skeleton, overrides: str | Path | Mapping | None = N
     found_by.update({s: "overrides" for s in slots})
     named, followers = _named_limbs(skeleton)
     limb_slots = [f"{s}_{p}" for s in SIDES for p in LIMB_PARTS]
-    if not all(f"{s}_{p}" in slots | named for s in SIDES for p in ("upper_leg", "lower_leg", "upper_arm", "lower_arm")):
+    if not all(
+        f"{s}_{p}" in slots | named for s in SIDES for p in ("upper_leg", "lower_leg", "upper_arm", "lower_arm")
+    ):
         for slot, j in geometry.geometric_limbs(skeleton).items():
             named.setdefault(slot, j)
             found_by.setdefault(slot, "geometry")

@@ -181,8 +181,15 @@ def _skin(scene, index: dict[int, int], h: _Held) -> SkinnedMesh | None:
     V, F = np.concatenate(verts).astype(np.float32), np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     W = np.concatenate(weights)
     W = W / W.sum(axis=1, keepdims=True).clip(min=1e-12)
-    return SkinnedMesh(V, vertex_normals(V, F).astype(np.float32), F, np.concatenate(joints), W.astype(np.float32),
-                       np.asarray(parts, dtype=np.int64), np.asarray(colors, dtype=np.float32).reshape(-1, 4))
+    return SkinnedMesh(
+        V,
+        vertex_normals(V, F).astype(np.float32),
+        F,
+        np.concatenate(joints),
+        W.astype(np.float32),
+        np.asarray(parts, dtype=np.int64),
+        np.asarray(colors, dtype=np.float32).reshape(-1, 4),
+    )
 
 
 def _color(materials: list, k: int, h: _Held) -> tuple[float, float, float, float]:

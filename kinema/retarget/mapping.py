@@ -154,7 +154,9 @@ def _top(target: Skeleton, pairs: Mapping[int, int]) -> tuple[int, int]:
     return b, pairs[b]
 
 
-def explicit_joint_map(source: Skeleton, target: Skeleton, mapping: Mapping[str, str], base: JointMap | None) -> JointMap:
+def explicit_joint_map(
+    source: Skeleton, target: Skeleton, mapping: Mapping[str, str], base: JointMap | None
+) -> JointMap:
     """``base`` (or an empty map) with ``mapping`` ({target joint name: source joint name}) applied."""
     pairs = dict(base.pairs) if base is not None else {}
     for t_name, s_name in mapping.items():
@@ -166,8 +168,16 @@ def explicit_joint_map(source: Skeleton, target: Skeleton, mapping: Mapping[str,
         raise KinemaError("mapping: empty joint table")
     if base is not None:
         return JointMap(
-            source, target, pairs, {**_chain_parents(target, pairs), **base.chain_parent},
-            base.hips, base.legs, base.followers, base.kind, base.frames, base.primary,
+            source,
+            target,
+            pairs,
+            {**_chain_parents(target, pairs), **base.chain_parent},
+            base.hips,
+            base.legs,
+            base.followers,
+            base.kind,
+            base.frames,
+            base.primary,
         )
     return JointMap(source, target, pairs, _chain_parents(target, pairs), _top(target, pairs), (), {}, "explicit")
 
@@ -204,6 +214,7 @@ def model_joint_name(name: str, character: Skeleton, model: Skeleton, overrides=
     table = constraint_joint_names(character, model, overrides)
     if name not in table:
         known = ", ".join(sorted(table))
-        raise KinemaError(f"constraint joint {name!r} is no humanoid bone of {character.name or 'the character'}; "
-                          f"use one of {known}")
+        raise KinemaError(
+            f"constraint joint {name!r} is no humanoid bone of {character.name or 'the character'}; use one of {known}"
+        )
     return table[name]

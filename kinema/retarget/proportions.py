@@ -79,7 +79,9 @@ def body_scale(jm: JointMap) -> float:
     return t / s
 
 
-def placed_positions(jm: JointMap, source_positions: torch.Tensor, moving: list[int], s: float) -> dict[int, torch.Tensor]:
+def placed_positions(
+    jm: JointMap, source_positions: torch.Tensor, moving: list[int], s: float
+) -> dict[int, torch.Tensor]:
     """{target joint: (T, 3) world position} for the hips (or top joint) and the ``moving`` source
     joints' targets: rest position plus the scaled displacement of the source from its rest."""
     _, P0s = rest_frames(jm.source)
