@@ -142,16 +142,11 @@ def _named_limbs(skeleton: Skeleton) -> tuple[dict[str, int], dict[str, tuple[in
     return slots, followers
 
 
-def _lca(skeleton: Skeleton, joints: list[int]) -> int | None:
-    paths = [skeleton.path_from_root(j) for j in joints]
-    if not paths:
-        return None
-    common = None
-    for level in zip(*paths, strict=False):
-        if len(set(level)) != 1:
-            break
-        common = level[0]
-    return common
+def _between(skeleton: Skeleton, top: int, end: int) -> list[int]:
+    """Joints strictly between ``top`` and ``end`` on ``end``'s path from the root ([] when ``top`` is
+    not above ``end``)."""
+    path = skeleton.path_from_root(end)
+    return path[path.index(top) + 1 : -1] if top in path else []
 
 
 def _centre(skeleton: Skeleton, slots: dict[str, int]) -> dict[str, int]:
@@ -163,28 +158,22 @@ def _centre(skeleton: Skeleton, slots: dict[str, int]) -> dict[str, int]:
         (j for j, n in enumerate(skeleton.names) if centre_word(n) in HEAD_WORDS), key=lambda j: skeleton.depths[j]
     )
     if len(arms) == 2:
-        out["chest"] = _lca(skeleton, arms)
+        out["chest"] = geometry.common_ancestor(skeleton, arms)
     if len(legs) == 2:
-        hips = _lca(skeleton, legs + ([out["chest"]] if "chest" in out else []))
+        hips = geometry.common_ancestor(skeleton, legs + ([out["chest"]] if "chest" in out else []))
         if hips is not None and hips not in legs:
             out["hips"] = hips
     if "chest" in out and out["chest"] in arms:
         del out["chest"]
     if heads:
         out["head"] = heads[0]
-    if "hips" in out and "chest" in out:
-        path = skeleton.path_from_root(out["chest"])
-        if out["hips"] in path:
-            between = path[path.index(out["hips"]) + 1 : -1]
-            if between:
-                out["spine"] = between[0]
-    if "chest" in out and "head" in out:
-        path = skeleton.path_from_root(out["head"])
-        if out["chest"] in path:
-            between = path[path.index(out["chest"]) + 1 : -1]
-            named = [j for j in between if centre_word(skeleton.names[j]) in NECK_WORDS]
-            if named or between:
-                out["neck"] = (named or between)[0]
+    spine = _between(skeleton, out["hips"], out["chest"]) if "hips" in out and "chest" in out else []
+    if spine:
+        out["spine"] = spine[0]
+    neck = _between(skeleton, out["chest"], out["head"]) if "chest" in out and "head" in out else []
+    named = [j for j in neck if centre_word(skeleton.names[j]) in NECK_WORDS]
+    if named or neck:
+        out["neck"] = (named or neck)[0]
     return out
 
 

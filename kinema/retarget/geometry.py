@@ -33,13 +33,13 @@ def _chain_below(skeleton: Skeleton, top: int, leaf: int) -> list[int]:
     return path[path.index(top) + 1 :] if top in path else []
 
 
-def _common(skeleton: Skeleton, a: int, b: int) -> int:
-    pa, pb = skeleton.path_from_root(a), skeleton.path_from_root(b)
+def common_ancestor(skeleton: Skeleton, joints: list[int]) -> int:
+    """The deepest joint on every one of ``joints``' paths from the root (a joint may be its own)."""
     common = 0
-    for x, y in zip(pa, pb, strict=False):
-        if x != y:
+    for level in zip(*(skeleton.path_from_root(j) for j in joints), strict=False):
+        if len(set(level)) != 1:
             break
-        common = x
+        common = level[0]
     return common
 
 
@@ -85,7 +85,7 @@ def geometric_limbs(skeleton: Skeleton) -> dict[str, int]:
     feet = _pair(leaves, P, key=lambda j: float(P[j, 1]))
     if feet is None:
         return {}
-    hips = _common(skeleton, *feet)
+    hips = common_ancestor(skeleton, list(feet))
     out: dict[str, int] = {}
     for side, foot in zip(("left", "right"), feet, strict=True):
         out.update(_leg_slots(skeleton, _chain_below(skeleton, hips, foot), P, side))
@@ -93,7 +93,7 @@ def geometric_limbs(skeleton: Skeleton) -> dict[str, int]:
     hands = _pair(rest, P, key=lambda j: -abs(float(P[j, 0])))
     if hands is None:
         return out
-    chest = _common(skeleton, *hands)
+    chest = common_ancestor(skeleton, list(hands))
     if float(P[chest, 1] - P[hips, 1]) < CHEST_RISE * (top - floor):
         return out
     for side, hand in zip(("left", "right"), hands, strict=True):
