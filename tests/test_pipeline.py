@@ -165,3 +165,32 @@ def test_a_batch_line_names_the_creatures_model_and_a_rig_file(tmp_path) -> None
     clip = read_gltf(tmp_path / "out" / "fox.glb")
     assert clip.skeleton.num_joints == read_gltf(fox).skeleton.num_joints
     assert (tmp_path / "out" / "person.bvh").read_text().startswith("HIERARCHY")
+
+
+def test_a_robot_through_the_request_on_every_face(tmp_path) -> None:
+    """issue 39 through the one request: Python, the server (a built-in robot by name only) and batch."""
+    from fastapi.testclient import TestClient
+
+    from kinema.batch.runner import run_batch
+    from kinema.robot import load_robot_motion
+    from kinema.server.app import create_app
+    from kinema.server.config import ServerConfig
+    from kinema.server.models import ModelRegistry
+
+    res = load_model("default").generate(GenerationRequest(prompt="A person walks.", seconds=1.0, steps=2, robot="g1"))
+    (rm,) = res.robot_motions
+    assert rm.num_frames == res[0].num_frames and res.report.robot[0]["range_overshoot_rad"] == 0.0
+    with pytest.raises(KinemaError, match="csv is a robot's joint angles"):
+        GenerationRequest(prompt="x", format="csv")
+    client = TestClient(create_app(ServerConfig(limits=ServerLimits(max_steps=4)), ModelRegistry.load(["default"])))
+    body = {"prompt": "A person waves.", "seconds": 1.0, "steps": 2, "robot": "g1", "format": "csv"}
+    answer = client.post("/v1/generate", json=body)
+    assert answer.status_code == 200, answer.text
+    csv = answer.json()["motions"][0]["data"]
+    assert csv.startswith("time,root_x,root_y,root_z,root_qw") and len(csv.splitlines()) == 21
+    assert client.post("/v1/generate", json=body | {"robot": "../g1.xml"}).status_code == 422  # names only
+    jobs = tmp_path / "jobs.jsonl"
+    jobs.write_text(json.dumps({"id": "g1walk", "prompt": "A person walks.", "seconds": 1.0, "steps": 2,
+                                "robot": "g1", "format": "csv"}) + "\n")
+    assert run_batch(jobs, tmp_path / "out", workers=1, progress=False).done == 1
+    assert load_robot_motion(tmp_path / "out" / "g1walk.csv", "g1").num_frames == 20

@@ -15,6 +15,7 @@ import pytest
 import torch
 from retarget_rigs import CMU, MIXAMO, UE5, build_rig, source_walk
 
+import kinema
 from kinema.io import load_motion
 from kinema.io.gltf_writer import write_glb
 from kinema.motion.core import Motion
@@ -152,3 +153,17 @@ def test_a_fox_clip_onto_the_wolf_through_the_same_code():
     r = retarget_report(fox, out, jm)
     assert abs(r["lowest"] - r["lowest_rest"]) < 1e-6
     assert out.skeleton.names == wolf.skeleton.names and out.skeleton.mesh is not None
+
+
+def test_a_raised_left_hand_is_the_characters_left_hand():
+    """Issue 33's check: 'A person raises their left hand.' on a Mixamo-style A-pose character raises
+    that character's left hand (above its head and the right hand), as on the source."""
+    source = kinema.load_model().generate("A person raises their left hand.", seconds=3, steps=10)[0]
+    rig = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.2, arms=0.9)
+    out = retarget(source, rig)
+    n, P = out.skeleton.names, out.positions
+    left, right, head = (P[:, n.index(f"mixamorig:{j}"), 1] for j in ("LeftHand", "RightHand", "Head"))
+    top = int(torch.argmax(left))
+    assert float(left[top] - head[top]) > 0.1 and float(left[top] - right[top]) > 0.3
+    ns, Ps = source.skeleton.names, source.positions
+    assert top == int(torch.argmax(Ps[:, ns.index("Hand_L"), 1]))  # at the source's moment

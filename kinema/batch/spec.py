@@ -21,7 +21,7 @@ from pydantic import Field, ValidationError
 from kinema.errors import KinemaError
 from kinema.pipeline.request_json import Segment, request_model, to_request
 
-Format = Literal["bvh", "bvh.gz", "npz", "glb"]
+Format = Literal["bvh", "bvh.gz", "npz", "glb", "csv"]
 DEFAULT_SECONDS = 5.0
 
 #: One line of a jobs file (unknown keys are errors): every `GenerationRequest` field
@@ -36,7 +36,9 @@ BatchJob = request_model(
         "objectives": list[dict[str, Any]],
         "rig": Annotated[str, Field(max_length=1000, description="a GLB/BVH file (relative to the jobs file) or a "
                                                                  "training rig id")],
-        "format": (Format, Field("bvh", description="output format: bvh, bvh.gz, npz or glb")),
+        "format": (Format, Field("bvh", description="output format: bvh, bvh.gz, npz or glb; csv or npz with a robot")),
+        "robot": Annotated[str, Field(max_length=1000, description="'g1' or an MJCF file (relative to the jobs file)")],
+        "robot_mapping": dict[str, Any] | str,
     },
     extra={"id": (Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")] | None, None),
            "model": (Annotated[str, Field(max_length=1000)] | None, None)},
@@ -88,16 +90,16 @@ def _absolute_bvh(constraints, folder: Path):
     return constraints
 
 
-def _rig_file(rig: str | None, base: Path) -> tuple[str | None, str | None]:
-    """A rig that names a file (relative to the jobs file, then the current directory) as an absolute
-    path and the file's sha256 (so editing the character runs its jobs again); a rig id as it is."""
-    if rig is None:
+def _local_file(name: str | None, base: Path) -> tuple[str | None, str | None]:
+    """A rig or robot that names a file (relative to the jobs file, then the current directory) as an
+    absolute path and the file's sha256 (so editing the character runs its jobs again); an id as it is."""
+    if name is None:
         return None, None
     for folder in (base, Path.cwd()):
-        path = folder / rig
+        path = folder / name
         if path.is_file():
             return str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest()
-    return rig, None
+    return name, None
 
 
 def _resolve(job, base: Path) -> dict:
@@ -118,10 +120,14 @@ def _resolve(job, base: Path) -> dict:
         constraints = _absolute_bvh(_read_json(path, "constraints"), path.parent)
     elif constraints is not None:
         constraints = _absolute_bvh(constraints, base)
-    rig, rig_sha = _rig_file(job.rig, base)
-    request = to_request(job, skip=("prompt", "seconds", "timeline", "constraints", "rig")).replace(
-        timeline=timeline, constraints=constraints, rig=rig)
-    return {"request": request.to_json(), "model": job.model, "rig_sha256": rig_sha}
+    rig, rig_sha = _local_file(job.rig, base)
+    robot, robot_sha = _local_file(job.robot, base)
+    mapping = job.robot_mapping
+    if isinstance(mapping, str):
+        mapping = _read_json(base / mapping, "robot mapping")
+    request = to_request(job, prompt="", seconds=None, timeline=timeline, constraints=constraints, rig=rig,
+                         robot=robot, robot_mapping=mapping)
+    return {"request": request.to_json(), "model": job.model, "rig_sha256": rig_sha, "robot_sha256": robot_sha}
 
 
 def parse_line(text: str, line: int, base: Path) -> Task:

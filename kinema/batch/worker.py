@@ -57,7 +57,7 @@ class Worker:
             model, sha = self._model(payload.get("model") or self.default)
             base["model_sha256"] = sha
             result = model.generate(GenerationRequest.from_json(payload["request"]))
-            files = _encode(result, payload["outputs"])
+            files = _encode(result.robot_motions or list(result), payload["outputs"])
         except KinemaError as err:
             return base | {"error": str(err), "error_type": type(err).__name__}
         except Exception as err:  # a bug, reported per job (with its traceback) instead of killing the worker
@@ -70,11 +70,12 @@ class Worker:
         return base | {"files": files, "report": report, "elapsed_s": time.perf_counter() - t0}
 
 
-def _encode(result, names: list[str]) -> list[bytes]:
-    """Each motion as the bytes ``motion.save`` writes for its output name (format from the suffix)."""
+def _encode(motions, names: list[str]) -> list[bytes]:
+    """Each motion (or robot motion) as the bytes its ``save`` writes for its output name (format from the
+    suffix)."""
     out = []
     with tempfile.TemporaryDirectory(prefix="kinema-batch-") as tmp:
-        for motion, name in zip(result, names, strict=True):
+        for motion, name in zip(motions, names, strict=True):
             path = motion.save(Path(tmp) / name)
             out.append(path.read_bytes())
     return out

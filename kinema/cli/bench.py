@@ -17,6 +17,7 @@ from kinema.cli._args import positive_float, positive_int
 from kinema.cli.batch import register_bench as register_batch_bench
 from kinema.cli.bench_keyjoint_planning import register_bench as register_keyjoint_planning_bench
 from kinema.cli.bench_objectives import register_bench as register_objectives_bench
+from kinema.cli.bench_stream import register_bench as register_stream_bench
 from kinema.errors import DataError
 from kinema.runtime import text_cache_dir
 
@@ -34,6 +35,7 @@ def register(sub) -> None:
     register_batch_bench(targets)
     register_objectives_bench(targets)
     register_keyjoint_planning_bench(targets)
+    register_stream_bench(targets)
     _register_all(targets)
 
 

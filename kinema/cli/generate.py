@@ -85,8 +85,12 @@ def _check_inputs(args: argparse.Namespace) -> None:
             raise KinemaError("--preview sets the DDIM steps (10): give either --preview or --steps")
         args.steps = PREVIEW_STEPS
     suffix = args.out.name.lower()
-    if not suffix.endswith((".bvh", ".bvh.gz", ".npz", ".glb")):
-        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb")
+    if args.robot is not None and not suffix.endswith((".csv", ".npz")):
+        raise KinemaError(f"{args.out}: a robot's motion is written as .csv (MuJoCo qpos table) or .npz")
+    if not suffix.endswith((".bvh", ".bvh.gz", ".npz", ".glb", ".csv")):
+        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb (.csv with --robot)")
+    if suffix.endswith(".csv") and args.robot is None:
+        raise KinemaError(f"{args.out}: .csv holds a robot's joint angles; add --robot g1 (or an MJCF file)")
     if args.constraints is not None and not args.constraints.is_file():
         raise KinemaError(f"{args.constraints}: no such constraints file")
     if args.constraints is not None:
@@ -132,12 +136,18 @@ def run(args: argparse.Namespace) -> int:
             raise KinemaError(f"the any-rig model {args.model!r} needs --rig (a GLB/BVH file or a rig id listed above)")
         return 0
     result = model.generate(request, progress=not args.no_progress)
-    for motion, path in zip(result, outputs, strict=True):
-        if request.fps is not None:
-            motion = motion.resample(request.fps, keep_duration=True)
-        motion.save(path)
-        print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
-              f"{motion.num_joints} joints (lengths in metres)")
+    if result.robot_motions:
+        for robot_motion, path in zip(result.robot_motions, outputs, strict=True):
+            robot_motion.save(path)
+            print(f"wrote {path}: {robot_motion.num_frames} frames @ {robot_motion.fps:g} fps of {request.robot} "
+                  f"({len(robot_motion.joint_names)} hinge joints, radians, Z up)")
+    else:
+        for motion, path in zip(result, outputs, strict=True):
+            if request.fps is not None:
+                motion = motion.resample(request.fps, keep_duration=True)
+            motion.save(path)
+            print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
+                  f"{motion.num_joints} joints (lengths in metres)")
     print_report(result)
     return 0
 

@@ -92,4 +92,8 @@ def print_report(result) -> None:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
     if rep.residuals_deg:
         print(f"rotation target error after post-processing: max {max(rep.residuals_deg):.2f} deg")
+    for i, r in enumerate(rep.robot):
+        print(f"sample {i} on {r['robot']} (replayed in MuJoCo): range overshoot {r['range_overshoot_rad']:.3f} rad, "
+              f"lowest sole {100 * r['lowest_sole_m']:.1f} cm, planted-sole slide {r['planted_slide_m_s']:.2f} m/s, "
+              f"travel {r['travel_m']:.2f} m")
     print_warnings([*rep.left_out, *rep.warnings])

@@ -11,6 +11,7 @@ seconds=4)``), the short form for Python callers; both forms build the same `Gen
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -21,6 +22,17 @@ from kinema.errors import KinemaError
 from kinema.pipeline.progress import ProgressFn
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationResult
+
+#: the stage that puts generated motions on a robot (kinema.robot.stage), imported by name when a request
+#: names a robot: MuJoCo takes most of a second to import, and no other generation needs it
+ROBOT_STAGE = "kinema.robot.stage:robot_motions"
+
+
+def _stage(spec: str):
+    """The function a ``"module:function"`` stage names (imported on first use; kinema.robot never imports
+    kinema.pipeline, so this adds no cycle)."""
+    module, name = spec.split(":")
+    return getattr(importlib.import_module(module), name)
 
 
 @dataclass(frozen=True)
@@ -134,7 +146,11 @@ class MotionPipeline(ABC):
                 request = request.replace(**keywords)
         else:
             request = request_from_keywords(request, **keywords)
-        return self.run(request, progress=progress)
+        result = self.run(request, progress=progress)
+        if request.robot is not None:
+            stage = _stage(ROBOT_STAGE)
+            result.robot_motions, result.report.robot = stage(result.motions, request.robot, request.robot_mapping)
+        return result
 
     @abstractmethod
     def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:

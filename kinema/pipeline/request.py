@@ -119,9 +119,15 @@ class GenerationRequest:
                                              "('default' or a keyjoint model folder; docs/constraints.md)")
     rig: Any = option(None, kind="json", metavar="RIG",
                       help="the character: a GLB/BVH file, a training rig id, or inline {format, data}")
+    robot: str | None = option(None, metavar="ROBOT",
+                               help="also give the motion on a humanoid robot: 'g1' or an MJCF file (docs/robots.md); "
+                                    "the output is the robot's joint angles (.csv or .npz)")
+    robot_mapping: Any = option(None, kind="json", file=True, metavar="FILE",
+                                help="which robot body is which human joint, for an MJCF whose names kinema does not "
+                                     "know (docs/robots.md)")
     fps: float | None = option(None, kind="float", low=0, open_low=True, high="max_fps",
                                help="resample the output to this frame rate (default: the model's)")
-    format: str | None = option(None, choices=("bvh", "bvh.gz", "npz", "glb", "json"), cli=False,
+    format: str | None = option(None, choices=("bvh", "bvh.gz", "npz", "glb", "json", "csv"), cli=False,
                                 cli_note="the suffix of --out",
                                 help="output format (default bvh)")
 
@@ -240,6 +246,10 @@ def check(request: GenerationRequest, bounds: RequestBounds = REQUEST_BOUNDS) ->
         raise KinemaError("seconds: it is for a prompt; timeline segments carry their own seconds")
     if request.timeline is not None and request.prompt:
         raise KinemaError("give either a prompt or a timeline, not both")
+    if request.format == "csv" and request.robot is None:
+        raise KinemaError("format: csv is a robot's joint angles; name a robot (robot) or choose bvh, npz or glb")
+    if request.robot_mapping is not None and request.robot is None:
+        raise KinemaError("robot_mapping: it names a robot's bodies; give the robot too")
     if isinstance(request.timeline, list | tuple):
         total = request.total_seconds()
         if total > bounds.max_seconds + 1e-9:

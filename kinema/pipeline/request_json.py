@@ -93,10 +93,11 @@ def _is_field_info(value: Any) -> bool:
     return type(value).__name__ == "FieldInfo"
 
 
-def to_request(body: BaseModel, *, cls: type = GenerationRequest, skip: tuple[str, ...] = ()) -> GenerationRequest:
-    """The request a validated body holds (keys the client left out keep the request's defaults)."""
+def to_request(body: BaseModel, *, cls: type = GenerationRequest, **given) -> GenerationRequest:
+    """The request a validated body holds (keys the client left out keep the request's defaults); ``given``
+    fields replace the body's (a face's own reading of them: files read, a prompt as a timeline)."""
     names = {f.name for f, _ in options(cls)}
-    values = {k: v for k, v in body.model_dump(exclude_unset=True).items() if k in names and k not in skip}
+    values = {k: v for k, v in body.model_dump(exclude_unset=True).items() if k in names}
     if isinstance(values.get("guidance"), list):
         values["guidance"] = tuple(values["guidance"])
-    return cls(**values)
+    return cls(**(values | given))

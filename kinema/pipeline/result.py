@@ -38,6 +38,9 @@ class GenerationReport:
     the root height, of putting the motion on the floor and of settling the body onto its legs (rig sizes:
     ``height_smoothed``, ``grounded``, ``settled``) and ``reached_by_translation`` (joint targets met by
     translating a bone: name -> largest shift, rig sizes).
+
+    A request that names a robot: ``robot`` holds per sample the replay measurements of its robot motion
+    (kinema.robot.stage: range overshoot, lowest sole, planted-sole slide, travel, leg overlap).
     """
 
     seconds: float = 0.0
@@ -61,6 +64,7 @@ class GenerationReport:
     height_smoothed: float = 0.0
     settled: float = 0.0
     reached_by_translation: dict[str, float] = field(default_factory=dict)
+    robot: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """The report as strict JSON values (what the server answers and batch manifests record)."""
@@ -68,10 +72,12 @@ class GenerationReport:
 
 
 class GenerationResult(Sequence):
-    """The motions of one call (indexable like a list) and that call's own report."""
+    """The motions of one call (indexable like a list) and that call's own report; ``robot_motions``:
+    the same motions on the robot the request named (kinema.robot.RobotMotion), else empty."""
 
-    def __init__(self, motions: list[Motion], report: GenerationReport) -> None:
+    def __init__(self, motions: list[Motion], report: GenerationReport, robot_motions: list | None = None) -> None:
         self.motions, self.report = list(motions), report
+        self.robot_motions = list(robot_motions or [])
 
     def __getitem__(self, index):
         return self.motions[index]

@@ -18,7 +18,7 @@ from kinema.motion.core import Motion
 from kinema.pipeline.result import json_safe
 
 #: File suffix per output format.
-SUFFIX = {"bvh": ".bvh", "npz": ".npz", "glb": ".glb", "json": ".json"}
+SUFFIX = {"bvh": ".bvh", "npz": ".npz", "glb": ".glb", "json": ".json", "csv": ".csv"}
 #: Decimals kept in the JSON format (0.001 mm and 1e-6 of a quaternion: far below what matters).
 JSON_DECIMALS = 6
 
@@ -45,7 +45,8 @@ def motion_arrays(motion: Motion) -> dict:
 
 
 def encode_motion(motion: Motion, fmt: str, index: int, tmp: Path) -> dict:
-    """One motion as a ``MotionOut`` dict; ``tmp`` is a private scratch folder for the writers."""
+    """One motion (or a robot's motion, kinema.robot.RobotMotion: csv or npz) as a ``MotionOut`` dict;
+    ``tmp`` is a private scratch folder for the writers."""
     filename = f"motion_{index:02d}{SUFFIX[fmt]}"
     head = {"index": index, "format": fmt, "filename": filename, "frames": motion.num_frames, "fps": motion.fps}
     if fmt == "json":
@@ -53,7 +54,7 @@ def encode_motion(motion: Motion, fmt: str, index: int, tmp: Path) -> dict:
     path = motion.save(Path(tmp) / filename)
     data = path.read_bytes()
     path.unlink()
-    if fmt == "bvh":
+    if fmt in ("bvh", "csv"):
         return head | {"encoding": "text", "data": data.decode("utf-8")}
     return head | {"encoding": "base64", "data": base64.b64encode(data).decode("ascii")}
 

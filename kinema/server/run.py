@@ -83,7 +83,8 @@ def execute(prep: Prepared) -> dict:
             request = prep.request.replace(constraints=_inline_bvh(prep.request.constraints, folder),
                                            rig=_inline_rig(prep.rig, folder))
             result = model.generate(request)
-            motions = [encode_motion(m, fmt, i, folder) for i, m in enumerate(result)]
+            outputs = result.robot_motions or list(result)
+            motions = [encode_motion(m, fmt, i, folder) for i, m in enumerate(outputs)]
         except KinemaError as err:
             raise from_kinema(err, hide=tmp) from None
     report = json_safe(result.report.to_dict())

@@ -18,6 +18,7 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import BaseModel, Field, StrictBool, StrictInt, field_validator, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
+from kinema.errors import KinemaError
 from kinema.pipeline.request import GenerationRequest, RequestBounds
 from kinema.pipeline.request_json import Segment, Strict, request_model, to_request
 from kinema.server.config import ServerLimits
@@ -29,7 +30,7 @@ Mat = list[list[Finite]]
 Cube = list[list[list[Finite]]]
 ConstraintType = Literal["fullbody", "end-effector", "left-hand", "right-hand", "left-foot", "right-foot", "root2d",
                          "foot-contact"]
-Format = Literal["bvh", "npz", "glb", "json"]
+Format = Literal["bvh", "npz", "glb", "json", "csv"]
 #: Output formats named in requests that kinema cannot write yet (a clear 422 instead of a bare enum error).
 NOT_YET_FORMATS = {"gltf": "glTF (text) export is not implemented in kinema; choose glb, bvh, npz or json"}
 
@@ -123,8 +124,10 @@ class GenerateRequestBase(Strict):
         timeline = ([{"prompt": s.prompt, "seconds": s.seconds} for s in self.timeline] if self.timeline is not None
                     else [{"prompt": self.prompt, "seconds": self.total_seconds()}])
         constraints = [c.to_kinema() for c in self.constraints] if self.constraints else None
-        return to_request(self, skip=("prompt", "seconds", "timeline", "constraints", "rig", "format")).replace(
-            timeline=timeline, constraints=constraints, format=self.format)
+        if self.robot is not None and self.format not in ("csv", "npz"):
+            raise KinemaError("format: a robot's motion is csv or npz")
+        return to_request(self, prompt="", seconds=None, timeline=timeline, constraints=constraints, rig=None,
+                          format=self.format)
 
 
 def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> type[GenerateRequestBase]:
@@ -155,7 +158,11 @@ def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> 
                                                                               "hands and feet first")),
         "rig": (Annotated[str, Field(max_length=200)] | InlineRig | None,
                 Field(None, description="a rig id from GET /v1/models, or a character inline {format, data}")),
-        "format": (Format, Field("bvh", description="bvh (text), npz or glb (base64) or json (arrays)")),
+        "format": (Format, Field("bvh", description="bvh (text), npz or glb (base64), json (arrays); with a robot "
+                                                   "csv (text) or npz")),
+        "robot": (Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]{1,40}$")] | None,
+                  Field(None, description="a built-in robot by name ('g1'); the server reads no MJCF files")),
+        "robot_mapping": (dict[str, Any] | None, Field(None, description="the robot's bodies as human joints, inline")),
     }
     extra = {"model": (str | None, Field(None, max_length=200, description="a name from GET /v1/models "
                                                                           "(default: the first)"))}

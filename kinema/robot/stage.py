@@ -1,0 +1,29 @@
+"""The robot stage of a generation: a request that names a robot (``GenerationRequest.robot``) gets its
+motions as the robot's joint angles too, each replayed in MuJoCo and measured for the report.
+
+kinema.pipeline.base imports this module by name only when a request names a robot, since MuJoCo takes
+most of a second to import and nothing else needs it.
+"""
+
+from __future__ import annotations
+
+from kinema.robot.description import load_robot
+from kinema.robot.motion import RobotMotion
+from kinema.robot.replay import replay_report
+from kinema.robot.retarget import retarget_to_robot
+
+
+def robot_motions(motions, robot: str, mapping=None) -> tuple[list[RobotMotion], list[dict]]:
+    """Each motion on the robot (``"g1"`` or an MJCF path; ``mapping``: a JSON file or dict naming its
+    bodies) and the replay measurements of each: range overshoot (rad), lowest sole and planted-sole
+    slide (m, m/s), travel (m), leg overlap (m)."""
+    description = load_robot(robot, mapping=mapping)
+    out, measured = [], []
+    for motion in motions:
+        robot_motion = retarget_to_robot(motion, description)
+        rep = replay_report(robot_motion, description)
+        out.append(robot_motion)
+        measured.append({"robot": description.name, "range_overshoot_rad": rep.range_overshoot,
+                         "lowest_sole_m": rep.lowest_sole, "planted_slide_m_s": rep.planted_slide,
+                         "travel_m": rep.travel, "leg_overlap_m": rep.leg_overlap})
+    return out, measured
