@@ -19,6 +19,7 @@ the foot slot itself, *detached*: retargeting puts it at the leg chain's end.
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +40,8 @@ from kinema.rig import overrides as ov
 from kinema.skeleton import Skeleton
 
 _LEG = ("upper_leg", "lower_leg", "foot", "toes")
+#: unmapped joints named in a report before '... and N more'
+LISTED = 24
 _ARM = ("shoulder", "upper_arm", "lower_arm", "hand")
 
 
@@ -87,12 +90,12 @@ class HumanoidMap:
                 if follow:
                     extra += ", followed by " + ", ".join(names[j] for j in follow)
                 out.append(f"  {slot:<16} {names[self.slots[slot]]}{extra}")
-        out.append("  not found: " + (", ".join(self.missing) or "none"))
+        missing = ", ".join(self.missing) or "none"
+        out += textwrap.wrap(missing, width=100, initial_indent="  not found: ", subsequent_indent="    ")
         rest = self.unmapped()
-        out.append(
-            f"  unmapped joints ({len(rest)}, keep their rest pose or follow their chain): "
-            + (", ".join(rest) or "none")
-        )
+        shown = ", ".join(rest[:LISTED]) + (f", ... and {len(rest) - LISTED} more" if len(rest) > LISTED else "")
+        out.append(f"  unmapped joints ({len(rest)}, keep their rest pose or follow their chain):")
+        out += textwrap.wrap(shown or "none", width=100, initial_indent="    ", subsequent_indent="    ")
         return out
 
 
