@@ -5,7 +5,6 @@ Import the fixtures into a test module by assignment: ``bvh_file = hardening_fix
 from __future__ import annotations
 
 import dataclasses
-
 from pathlib import Path
 
 import pytest

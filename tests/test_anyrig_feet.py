@@ -9,10 +9,10 @@ import pytest
 import torch
 
 import kinema
-from kinema.anyrig.constraints import JointTarget
 from kinema.anyrig.feet import REACH, descendants, lock_translated_feet, translated_feet
 from kinema.anyrig.ground import ground_motion, ground_offsets, leg_ends, settle_offsets, steady_height
 from kinema.anyrig.post import dejitter, reach_by_translation
+from kinema.constraints.character import JointTarget
 from kinema.evaluate.metrics import position_jerk
 from kinema.io.gltf import read_gltf
 from kinema.motion.core import Motion

@@ -7,11 +7,11 @@ import pytest
 import torch
 from rig_fixtures import hexapod, quadruped, snake2, walking
 
-from kinema.anyrig.constraints import encode_constraints, post_targets
 from kinema.anyrig.feet import lock_translated_feet, translated_feet
 from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
 from kinema.anyrig.post import pin_root, root_pins, unmet_warnings
 from kinema.anyrig.sampling import FeatureTargets, sample_features, window_starts, window_weights
+from kinema.anyrig.targets import post_targets
 from kinema.errors import KinemaError
 from kinema.model.anyrig.config import get_anyrig_config
 from kinema.model.anyrig.loading import is_anyrig_checkpoint, load_anyrig
@@ -88,7 +88,7 @@ def test_constraint_imputation_meets_targets(trained) -> None:
     rep = JointRepresentation(rig, 20.0)
     head = rig.skeleton.index("HeadA")
     target = JointTarget(joint="HeadA", frame=5, position=(0.0, 0.35, 0.5))
-    feats = encode_constraints([target], rep, 1.0, 12)
+    feats = rep.encode([target], 1.0, 12)
     assert feats.mask[5, head, 0:3].eq(1).all() and int(feats.mask.sum()) == 3
     codes = batch_codes([skeleton_codes(rig, model.loaded.config)], max_hops=8)
     out = sample_features(
@@ -162,7 +162,7 @@ def test_bones_under_a_floor_armature_take_predicted_translations_and_feet_lock(
 def test_keyframes_keep_the_bone_translations_of_their_pose() -> None:
     m = _armature_motion()
     rep = JointRepresentation(Rig.from_skeleton(m.skeleton), 20.0)
-    targets = encode_constraints([Keyframe(frame=2, pose=m, pose_frame=7)], rep, 1.0, 5)
+    targets = rep.encode([Keyframe(frame=2, pose=m, pose_frame=7)], 1.0, 5)
     want = rep.from_motion(m)[7]
     body = [j for j in range(m.num_joints) if j != rep.rig.root]
     assert targets.mask[2, body, 0:9].eq(1).all()

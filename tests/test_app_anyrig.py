@@ -13,7 +13,6 @@ import torch
 pytest.importorskip("viser", reason="pip install 'kinema[app]'")
 
 import kinema  # noqa: E402
-from kinema.anyrig.constraints import JointTarget, Keyframe, RootPath  # noqa: E402
 from kinema.app import edits  # noqa: E402
 from kinema.app.constraint_panel import ConstraintPanel  # noqa: E402
 from kinema.app.document import Document, check_timeline  # noqa: E402
@@ -21,6 +20,7 @@ from kinema.app.generation import outcome  # noqa: E402
 from kinema.app.rig_constraints import planned_root, to_anyrig  # noqa: E402
 from kinema.app.rigs import load_rig  # noqa: E402
 from kinema.app.views import rest_motion  # noqa: E402
+from kinema.constraints.character import JointTarget, Keyframe, RootPath  # noqa: E402
 from kinema.rig import Rig  # noqa: E402
 from tests.app_rig_data import NAMES, synthetic_rig_glb  # noqa: E402
 

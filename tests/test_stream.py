@@ -27,8 +27,8 @@ from kinema.stream.measure import (
     frames_to_motion,
     headings_deg,
     join_report,
-    trunk_lean_deg,
     travel_speed,
+    trunk_lean_deg,
 )
 from kinema.stream.script import parse_command, read_script, run_script
 

@@ -21,15 +21,6 @@ from pathlib import Path
 
 import torch
 
-from kinema.anyrig.constraints import (
-    Constraint,
-    JointTarget,
-    Keyframe,
-    RootMotion,
-    RootPath,
-    encode_constraints,
-)
-from kinema.anyrig.constraints import post_targets as make_post_targets
 from kinema.anyrig.feet import (
     descendants,
     floor_height,
@@ -50,8 +41,16 @@ from kinema.anyrig.post import (
     unmet_warnings,
 )
 from kinema.anyrig.sampling import sample_features
+from kinema.anyrig.targets import post_targets as make_post_targets
 from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.anyrig.world import generate_world, load_constraints_file
+from kinema.constraints.character import (
+    Constraint,
+    JointTarget,
+    Keyframe,
+    RootMotion,
+    RootPath,
+)
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.io.gltf import read_gltf
@@ -131,7 +130,7 @@ class AnyRigPipeline(MotionPipeline):
 
     # ------------------------------------------------------------------ generation
     def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:
-        """The request on its rig: any-rig constraint objects or lists (kinema.anyrig.constraints,
+        """The request on its rig: character-frame constraint objects or lists (kinema.constraints.character,
         character frame) are sampled directly; docs/constraints.md constraints (world frame) go through
         kinema.anyrig.world, whose notes of what the model cannot take open the warnings."""
         r = request
@@ -173,7 +172,7 @@ class AnyRigPipeline(MotionPipeline):
         postprocess: bool = True,
         progress: ProgressFn | None = None,
     ) -> GenerationResult:
-        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.anyrig.constraints;
+        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.constraints.character;
         frames at the model's fps, counted over the whole motion).
 
         ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline (kinema.pipeline.timeline)
@@ -191,7 +190,7 @@ class AnyRigPipeline(MotionPipeline):
         rep_n, scale = self._normalised(rig_m)
         rig_n = rep_n.rig
         constraints = list(constraints)
-        targets = encode_constraints(constraints, rep_n, scale, T) if constraints else None
+        targets = rep_n.encode(constraints, scale, T) if constraints else None
         feats = sample_features(
             self.loaded.denoiser,
             batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),

@@ -17,7 +17,6 @@ regular classifier-free guidance otherwise. Shapes: ``(S, T, J, C)``; S = sample
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import torch
 
@@ -26,17 +25,7 @@ from kinema.diffusion.guidance import Guidance, combine, split_branches
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.skeleton_codes import CodeBatch
-
-
-@dataclass(frozen=True)
-class FeatureTargets:
-    """Un-normalised targets and their {0, 1} mask, both ``(T, J, C)``."""
-
-    x_tgt: torch.Tensor
-    mask: torch.Tensor
-
-    def any(self) -> bool:
-        return bool(self.mask.any())
+from kinema.representation.joint import FeatureTargets
 
 
 class WindowDenoiser:

@@ -1,7 +1,7 @@
 """World-frame constraints (docs/constraints.md, the human model's file format) for any-rig models.
 
 The human model's constraints are in the world frame; the any-rig model's joint targets are in the
-*character frame* (kinema.anyrig.constraints). This module bridges them, for ``kinema generate
+*character frame* (kinema.constraints.character). This module bridges them, for ``kinema generate
 --model creatures --constraints FILE`` and the app (kinema.app.rig_constraints re-exports it):
 
 - `json_form`: constraints read and checked by kinema.constraints.load_constraints against the rig's
@@ -31,8 +31,11 @@ from pathlib import Path
 
 import torch
 
-from kinema.anyrig.constraints import (
-    ANYRIG_TYPES,
+from kinema.anyrig.feet import floor_root_children
+from kinema.constraints import Constraint as FileConstraint
+from kinema.constraints import EndEffectorConstraint, constraint_to_json, load_constraints
+from kinema.constraints.character import (
+    CHARACTER_TYPES,
     Constraint,
     JointTarget,
     Keyframe,
@@ -41,9 +44,6 @@ from kinema.anyrig.constraints import (
     check_constraints,
     parse_constraints,
 )
-from kinema.anyrig.feet import floor_root_children
-from kinema.constraints import Constraint as FileConstraint
-from kinema.constraints import EndEffectorConstraint, constraint_to_json, load_constraints
 from kinema.constraints.types import resolve_joint
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import axis_angle_to_quat, quat_rotate
@@ -200,7 +200,7 @@ def load_constraints_file(
 ) -> tuple[list[Constraint], list[dict]]:
     """Constraints (a file path, or parsed JSON) for an any-rig model on ``skeleton`` and a motion of
     ``frames`` frames: either the any-rig list (``type`` ``joint`` / ``root_path`` / ``keyframe``:
-    kinema.anyrig.constraints.read_constraints), returned first, or a docs/constraints.md file or list
+    kinema.constraints.character.read_constraints), returned first, or a docs/constraints.md file or list
     (world frame), checked against the rig by kinema.constraints.load_constraints and returned second in
     `json_form`. Errors name the file."""
     if isinstance(source, str | Path):
@@ -214,7 +214,7 @@ def load_constraints_file(
         where, base = str(path), path.parent
     else:
         data, where, base, path = source, "constraints", Path("."), source
-    if isinstance(data, list) and any(isinstance(o, dict) and o.get("type") in ANYRIG_TYPES for o in data):
+    if isinstance(data, list) and any(isinstance(o, dict) and o.get("type") in CHARACTER_TYPES for o in data):
         if source_fps is not None:
             raise KinemaError(
                 f"{where}: the any-rig list's frames are at the model's fps; a constraints fps "

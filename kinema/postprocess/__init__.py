@@ -21,7 +21,14 @@ from kinema.motion.contacts import foot_contacts as estimate_contacts
 from kinema.motion.core import Motion
 from kinema.postprocess.exact import hit_constraints
 from kinema.postprocess.footlock import foot_lock as lock_feet
-from kinema.postprocess.guard import DEFAULT_BOUNDS, GuardBounds, Plausibility, plausibility, violations
+from kinema.postprocess.guard import (
+    DEFAULT_BOUNDS,
+    GuardBounds,
+    Plausibility,
+    floor_note,
+    plausibility,
+    violations,
+)
 from kinema.postprocess.residuals import unmet_targets
 from kinema.postprocess.smooth import DEFAULT_ROT_SIGMA_SECONDS, DEFAULT_SIGMA_SECONDS, smooth_motion
 from kinema.postprocess.targets import PostTargets
@@ -96,6 +103,10 @@ class _Guard:
         measured, problems = checked if checked is not None else self.check(new, extra)
         stage_report["added_pelvis_speed_m_s"] = round(measured.added_speed(self.before), 3)
         if not problems:
+            note = floor_note(self.raw, measured, new.skeleton.names, self.bounds)
+            if note is not None and floor_note(self.raw, self.before, new.skeleton.names, self.bounds) is None:
+                stage_report["below_floor"] = note
+                self.report["warnings"].append(f"post-processing: {stage} kept, but {note}")
             self.before = measured
             return new
         stage_report["undone"] = problems

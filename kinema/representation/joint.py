@@ -19,11 +19,14 @@ a round trip reproduces joint positions up to float precision. Shapes: ``(..., T
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import torch
 
+from kinema.constraints.character import JointTarget, Keyframe, RootMotion, RootPath
+from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate, quat_to_sixd, sixd_to_quat
 from kinema.kinematics import forward_kinematics
 from kinema.motion.contacts import foot_contacts
@@ -40,6 +43,19 @@ POSE = slice(POS.start, ROT.stop)
 ROOT_LATERAL, ROOT_HEIGHT, ROOT_FORWARD = 0, 1, 2
 ROOT_HEADING_COS, ROOT_HEADING_SIN = 9, 10
 ROOT_HEADING = slice(ROOT_HEADING_COS, ROOT_HEADING_SIN + 1)
+#: the root row's channels that place the body: ground velocity, height, rotation, heading
+ROOT_PLACEMENT = list(range(ROOT_HEADING_SIN + 1))
+
+
+@dataclass(frozen=True)
+class FeatureTargets:
+    """Un-normalised targets and their {0, 1} mask, both ``(T, J, C)`` (`JointRepresentation.encode`)."""
+
+    x_tgt: torch.Tensor
+    mask: torch.Tensor
+
+    def any(self) -> bool:
+        return bool(self.mask.any())
 
 
 def yaw_quat(psi: torch.Tensor) -> torch.Tensor:
@@ -181,5 +197,88 @@ class JointRepresentation:
     def denormalize(self, x: torch.Tensor) -> torch.Tensor:
         return x if self.stats is None else self.stats.denormalize(x)
 
+    def encode(self, constraints, scale: float, frames: int) -> FeatureTargets:
+        """Feature targets ``(T, J, C)`` (rig units: ``scale`` per metre) and their mask for character-frame
+        ``constraints`` (kinema.constraints.character) on a motion of ``frames`` frames."""
+        J = self.num_joints
+        x = torch.zeros(frames, J, NUM_CHANNELS)
+        m = torch.zeros(frames, J, NUM_CHANNELS)
+        root = self.rig.root
+        for c in constraints:
+            if isinstance(c, JointTarget):
+                j, f = self.joint_index(c.joint), _frame(c.frame, frames, "joint target")
+                if j == root and c.position is not None:
+                    raise KinemaError("a joint position target on the root joint: use RootPath for where the root goes")
+                if c.position is not None:
+                    x[f, j, POS] = torch.as_tensor(c.position, dtype=torch.float32) * scale
+                    m[f, j, POS] = 1.0
+                if c.rotation is not None:
+                    x[f, j, ROT] = quat_to_sixd(c.unit_rotation()).to(x.dtype)
+                    m[f, j, ROT] = 1.0
+            elif isinstance(c, Keyframe):
+                f = _frame(c.frame, frames, "keyframe")
+                if c.pose.num_joints != J:
+                    raise KinemaError(f"keyframe pose has {c.pose.num_joints} joints, the rig has {J}")
+                feats = self.from_motion(self._scaled(c.pose, scale).crop(c.pose_frame, c.pose_frame + 1))[0]
+                x[f], m[f, :, POSE] = feats, 1.0
+                m[f, root] = 0.0
+                m[f, root, ROOT_HEIGHT] = 1.0  # the root row: height only (its rotation is the root joint's)
+                m[f, root, ROT] = 1.0
+            elif isinstance(c, RootPath):
+                _root_path(c, x, m, root, scale, frames, self.fps)
+            elif isinstance(c, RootMotion):
+                n = min(c.until, frames, c.motion.num_frames)
+                lt = None if c.motion.local_translations is None else c.motion.local_translations * scale
+                moved = Motion(
+                    self.rig.skeleton, self.fps, c.motion.root_translation * scale, c.motion.local_rotations, None, lt
+                )
+                rows = ROOT_PLACEMENT
+                x[:n, root, rows] = self.from_motion(moved.crop(0, n)).to(x.dtype)[:, root, rows]
+                m[:n, root, rows] = 1.0
+            else:
+                raise KinemaError(
+                    f"unknown constraint {type(c).__name__}; expected JointTarget, Keyframe, RootPath or RootMotion"
+                )
+        return FeatureTargets(x, m)
+
+    def joint_index(self, joint: str | int) -> int:
+        """A constraint's joint (a name of the rig, or an index) as an index; one-line errors otherwise."""
+        skel = self.rig.skeleton
+        if isinstance(joint, str):
+            if joint not in skel.names:
+                raise KinemaError(f"constraint joint {joint!r} is not in rig {skel.name or ''} ({skel.num_joints} joints)")
+            return skel.index(joint)
+        if not 0 <= int(joint) < skel.num_joints:
+            raise KinemaError(f"constraint joint {joint} outside 0..{skel.num_joints - 1}")
+        return int(joint)
+
+    def _scaled(self, m: Motion, scale: float) -> Motion:
+        """``m`` (metres) on this representation's skeleton in its units, bone translations included (the
+        Quaternius rigs move the body and IK feet by translation)."""
+        lt = None if m.local_translations is None else m.local_translations * scale
+        return Motion(self.rig.skeleton, self.fps, m.root_translation * scale, m.local_rotations, None, lt)
+
     def __repr__(self) -> str:
         return f"JointRepresentation({self.rig.skeleton!r}, {self.num_joints} x {NUM_CHANNELS}, {self.fps:g} fps)"
+
+
+def _frame(f: int, T: int, what: str) -> int:
+    if isinstance(f, bool) or not isinstance(f, int) or not 0 <= f < T:
+        raise KinemaError(f"{what}: frame {f!r} outside 0..{T - 1}")
+    return f
+
+
+def _root_path(c: RootPath, x, m, root: int, scale: float, T: int, fps: float) -> None:
+    frames = [0, *(_frame(f, T, "root waypoint") for f in c.frames)]
+    pts = [(0.0, 0.0), *((float(a), float(b)) for a, b in c.xz)]
+    if len(frames) != len(pts) or any(b <= a for a, b in zip(frames, frames[1:], strict=False)):
+        raise KinemaError("root path: one (x, z) per frame, frames increasing after 0")
+    for (fa, pa), (fb, pb) in zip(zip(frames, pts, strict=True), zip(frames[1:], pts[1:], strict=True), strict=False):
+        dx, dz = pb[0] - pa[0], pb[1] - pa[1]
+        speed = math.hypot(dx, dz) * fps / (fb - fa) * scale
+        psi = math.atan2(dx, dz)
+        span = slice(fa, fb)
+        x[span, root, ROOT_LATERAL], x[span, root, ROOT_FORWARD] = 0.0, speed
+        x[span, root, ROOT_HEADING_COS], x[span, root, ROOT_HEADING_SIN] = math.cos(psi), math.sin(psi)
+        for channel in (ROOT_LATERAL, ROOT_FORWARD, ROOT_HEADING_COS, ROOT_HEADING_SIN):
+            m[span, root, channel] = 1.0

@@ -68,7 +68,7 @@ def _moving_joints(motion: Motion) -> list[int]:
     return [j for j in range(1, motion.num_joints) if bool(moved[j])]
 
 
-def _forward(G: torch.Tensor, jm: JointMap) -> torch.Tensor:
+def body_forward(G: torch.Tensor, jm: JointMap) -> torch.Tensor:
     """(T, 3) the target hips' forward (the source hips' forward turned like the hips)."""
     t, _ = jm.hips if jm.hips is not None else (0, 0)
     G0t, _ = rest_frames(jm.target)
@@ -110,9 +110,9 @@ def _solve_legs(G, P, placed, jm: JointMap, Ps, planted, s: float, fps: float) -
         placed[jm.hips[0]] = placed[jm.hips[0]] - drop[:, None] * torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype)
         P = positions_from_globals(jm.target, G, placed)
         goals = _leg_goals(G, P, jm, Ps, planted, s, fps)
-    fwd = _forward(G, jm)
+    fwd = body_forward(G, jm)
     for leg, (seg1, seg2), goal in zip(jm.legs, segs, goals, strict=True):
-        end = leg_ik.two_bone_ik(G, P, leg, seg1, seg2, goal, fwd)
+        end = leg_ik.two_bone_ik(G, P, (leg.upper, leg.lower), seg1, seg2, goal, fwd)
         if leg.detached:
             placed[leg.foot] = end
         for f in jm.followers.get(leg.foot, ()):

@@ -77,7 +77,7 @@ def planted_goals(
 
 
 def reach_drop(
-    P: torch.Tensor, legs, segs, goals: list[torch.Tensor], planted: list[torch.Tensor], fps: float
+    P: torch.Tensor, legs: tuple[Leg, ...], segs, goals: list[torch.Tensor], planted: list[torch.Tensor], fps: float
 ) -> torch.Tensor | None:
     """(T,) how far to lower the hips so that every planted leg reaches its goal (eased in and out),
     or None when every planted goal is within reach. ``segs``: (seg1, seg2) per leg."""
@@ -98,18 +98,18 @@ def reach_drop(
 def two_bone_ik(
     G: torch.Tensor,
     P: torch.Tensor,
-    leg: Leg,
+    chain: tuple[int, int],
     seg1: torch.Tensor,
     seg2: torch.Tensor,
     goal: torch.Tensor,
     forward: torch.Tensor,
 ) -> torch.Tensor:
-    """Turn the world rotations of ``leg.upper`` and ``leg.lower`` in ``G`` (in place) so the chain's
-    end reaches ``goal (T, 3)`` (as near as the leg's length allows); returns the reached end (T, 3).
+    """Turn the world rotations of ``chain = (upper, lower)`` in ``G`` (in place) so the chain's end
+    reaches ``goal (T, 3)`` (as near as the limb's length allows); returns the reached end (T, 3).
 
     ``seg1``/``seg2``: rigid segments (kinema.retarget.legs.segment); ``forward (T, 3)``: the bend
-    direction used where the leg is straight."""
-    u, lo = leg.upper, leg.lower
+    direction used where the limb is straight (forward for knees, backward for elbows)."""
+    u, lo = chain
     H = P[:, u]
     K = H + quat_rotate(G[:, u], seg1.expand_as(H))
     l1, l2 = float(seg1.norm()), float(seg2.norm())

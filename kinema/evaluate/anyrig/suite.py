@@ -35,8 +35,8 @@ from pathlib import Path
 
 import torch
 
-from kinema.anyrig.constraints import post_targets
 from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_root_children
+from kinema.anyrig.targets import post_targets
 from kinema.data.multirig import MultiRigData
 from kinema.evaluate.anyrig.groups import RigShape, classify, rig_shape
 from kinema.evaluate.distribution import coverage_novelty_auc
@@ -113,7 +113,7 @@ def keyframe_error(model: AnyRigModel, rig: Rig, ref: Motion, caption: str, *, s
     """Largest joint error (x 100: cm at 1-m scale) at a full-body keyframe after post-processing: the
     pose of ``ref``'s frame at a third of its length, asked for at that frame of a motion as long as
     ``ref`` (at least two windows). Compared with the pose as the rig can take it, placed at the motion's
-    root and heading there (kinema.anyrig.constraints.post_targets: bones at their rest lengths
+    root and heading there (kinema.anyrig.targets.post_targets: bones at their rest lengths
     except those moved by translation, a floor-level armature left on the floor) -- the clips stretch
     bones by translation, which a rotation can never match (the platformer character's armature: 72 cm)."""
     seconds = max(ref.duration, 2 * WINDOW / model.fps)
