@@ -16,10 +16,18 @@ import torch
 from retarget_rigs import CMU, MIXAMO, UE5, build_rig, source_walk
 
 import kinema
+from kinema.errors import KinemaError
 from kinema.io import load_motion
 from kinema.io.gltf_writer import write_glb
 from kinema.motion.core import Motion
-from kinema.retarget import build_joint_map, load_character, retarget, retarget_report, save_character_motion
+from kinema.retarget import (
+    build_joint_map,
+    load_character,
+    meet_targets,
+    retarget,
+    retarget_report,
+    save_character_motion,
+)
 from kinema.retarget.core import retarget_with_map, source_planted
 from kinema.retarget.quality import direction_errors
 
@@ -167,3 +175,19 @@ def test_a_raised_left_hand_is_the_characters_left_hand():
     assert float(left[top] - head[top]) > 0.1 and float(left[top] - right[top]) > 0.3
     ns, Ps = source.skeleton.names, source.positions
     assert top == int(torch.argmax(Ps[:, ns.index("Hand_L"), 1]))  # at the source's moment
+
+
+def test_a_hand_target_on_the_character_is_met_and_blended():
+    """A constraint on the character's own joint (UE ``hand_l`` at a point on frame 30) is met after
+    retargeting; frames far from it are untouched and the hand keeps its world rotation."""
+    out = retarget(source_walk(), build_rig(UE5, axis="x", root="root", legs=0.85, scale=1.1))
+    names, P = out.skeleton.names, out.positions
+    hand = names.index("hand_l")
+    want = P[30, hand] + torch.tensor([0.1, 0.25, 0.1])
+    met = meet_targets(out, {"hand_l": {30: want.tolist()}})
+    assert float((met.positions[30, hand] - want).norm()) < 1e-4
+    assert float((met.positions[:20] - P[:20]).abs().max()) < 1e-5  # 0.15 s blends: frame 20 is untouched
+    assert float((met.positions[:, names.index("hand_r")] - P[:, names.index("hand_r")]).abs().max()) < 1e-5
+    assert torch.allclose(met.global_rotations[:, hand], out.global_rotations[:, hand], atol=1e-5)
+    with pytest.raises(KinemaError, match="no hand or foot"):
+        meet_targets(out, {"neck_01": {0: [0.0, 1.0, 0.0]}})

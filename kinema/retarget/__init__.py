@@ -10,6 +10,7 @@
 - kinema.retarget.proportions: body scale by leg length, placement, the floor;
 - kinema.retarget.legs: planted contacts held, two-bone leg IK, IK feet that hang off the leg;
 - kinema.retarget.core: `retarget(motion, target) -> Motion`;
+- kinema.retarget.targets: `meet_targets`, hand/foot world targets of constraints met on the character;
 - kinema.retarget.quality: direction error, skate, lowest joint, bone-length drift;
 - kinema.retarget.character / fbx / fbx_writer: characters from GLB, BVH, FBX (ufbx) and npz, and
   writing the result as GLB, BVH, npz or FBX (through Blender).
@@ -22,6 +23,7 @@ from kinema.retarget.core import retarget
 from kinema.retarget.detect import HumanoidMap, find_humanoid, is_humanoid
 from kinema.retarget.mapping import JointMap, build_joint_map, constraint_joint_names, model_joint_name
 from kinema.retarget.quality import retarget_report
+from kinema.retarget.targets import meet_targets
 
 __all__ = [
     "Character",
@@ -32,6 +34,7 @@ __all__ = [
     "find_humanoid",
     "is_humanoid",
     "load_character",
+    "meet_targets",
     "model_joint_name",
     "retarget",
     "retarget_report",

@@ -59,7 +59,7 @@ def source_planted(motion: Motion) -> dict[int, torch.Tensor]:
     return {j: c[:, k] > 0.5 for k, j in enumerate(joints)}
 
 
-def _moving_joints(motion: Motion) -> list[int]:
+def moving_joints(motion: Motion) -> list[int]:
     """Source joints whose bone translation the motion animates."""
     if motion.local_translations is None:
         return []
@@ -139,7 +139,7 @@ def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
     s = body_scale(jm)
     R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames, dict(jm.primary))
     G = transfer_rotations(Gs, jm.target, jm.source, dict(jm.pairs), R)
-    placed = placed_positions(jm, Ps, _moving_joints(motion), s)
+    placed = placed_positions(jm, Ps, moving_joints(motion), s)
     P = positions_from_globals(jm.target, G, placed)
     planted = source_planted(motion)
     if jm.legs:
