@@ -159,7 +159,7 @@ def test_reach_objects_can_be_passed_directly() -> None:
 
 def test_bench_settings_and_objective_table() -> None:
     from kinema.bench.objectives import parse_settings
-    from kinema.cli.objective_table import objective_table
+    from kinema.cli.report import objective_table
     from kinema.errors import KinemaError
 
     assert parse_settings(["3x4", "5X12"]) == [(3, 4), (5, 12)]
