@@ -122,12 +122,12 @@ def main() -> None:
         results[name] = retarget_with_map(source, jm)
         print(_row(name, retarget_report(source, results[name], jm)))
     fox = load_motion(q / "animals_pack/Fox.glb", animation="Gallop")
-    for animal in ("Wolf", "Husky"):
-        jm = build_joint_map(fox.skeleton, load_character(q / f"animals_pack/{animal}.glb").skeleton)
+    trex = load_motion(q / "dinosaurs_pack/Trex.glb", animation="TRex_Attack")
+    creatures = [(fox, "Fox Gallop", "animals_pack", a) for a in ("Wolf", "Husky")]
+    for clip, what, pack, animal in [*creatures, (trex, "Trex Attack", "dinosaurs_pack", "Parasaurolophus")]:
+        jm = build_joint_map(clip.skeleton, load_character(q / f"{pack}/{animal}.glb").skeleton)
         print(
-            _row(
-                f"Quaternius Fox Gallop -> {animal} (same names)", retarget_report(fox, retarget_with_map(fox, jm), jm)
-            )
+            _row(f"Quaternius {what} -> {animal} (same names)", retarget_report(clip, retarget_with_map(clip, jm), jm))
         )
     with tempfile.TemporaryDirectory() as tmp:
         pair = [
