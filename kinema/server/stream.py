@@ -7,9 +7,10 @@ Protocol (JSON text messages). The client opens ``/v1/stream`` (with the API key
      "window_seconds": 3, "lookahead": 0.15, "seconds": 60, "chunk_frames": 10, "realtime": true}
 
 (every field but ``type`` optional). The server answers ``{"type": "ready", "fps", "joints", "parents",
-"offsets", "seconds"}`` (the skeleton: joint names, parent indices, bone offsets in metres) and then sends ``{"type": "frames", "start", "fps", "root_translation", "local_rotations",
-"positions"}`` (quaternions w, x, y, z; metres), paced at the playback rate with ``REALTIME_AHEAD_SECONDS``
-sent ahead when ``realtime`` (else as fast as they are made). While it streams, the client sends
+"offsets", "seconds"}`` (the skeleton: joint names, parent indices, bone offsets in metres) and then
+sends ``{"type": "frames", "start", "fps", "root_translation", "local_rotations", "positions"}``
+(quaternions w, x, y, z; metres), paced at the playback rate with ``REALTIME_AHEAD_SECONDS`` sent ahead
+when ``realtime`` (else as fast as they are made). While it streams, the client sends
 ``{"type": "prompt", "text"}``, ``{"type": "steer", "direction_deg", "speed"}``, ``{"type": "target",
 "joint", "position"}``, ``{"type": "clear"}`` or ``{"type": "stop"}``; each command is answered by
 ``{"type": "command", ...}`` (kinema.stream.CommandRecord: the frame it arrived at, the first frame that
@@ -66,11 +67,14 @@ class StreamLimits:
         seconds = os.environ.get("KINEMA_STREAM_MAX_SECONDS")
         streams = os.environ.get("KINEMA_STREAM_MAX_STREAMS")
         try:
-            return cls(max_seconds=float(seconds) if seconds else cls.max_seconds,
-                       max_streams=int(streams) if streams else cls.max_streams)
+            limits = cls(max_seconds=float(seconds) if seconds else cls.max_seconds,
+                         max_streams=int(streams) if streams else cls.max_streams)
         except ValueError:
-            raise KinemaError("KINEMA_STREAM_MAX_SECONDS must be a number and KINEMA_STREAM_MAX_STREAMS an "
-                              "integer") from None
+            limits = None
+        if limits is None or not (0 < limits.max_seconds < math.inf and limits.max_streams > 0):
+            raise KinemaError("KINEMA_STREAM_MAX_SECONDS must be a positive number and KINEMA_STREAM_MAX_STREAMS "
+                              "a positive integer")
+        return limits
 
 
 class StreamClosed(Exception):

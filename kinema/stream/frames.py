@@ -75,7 +75,8 @@ def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
     root[:, 1] = (1 - w) * ra[1:, 1] + w * rb[1:, 1]
     contacts = None
     if old.foot_contacts is not None and new.foot_contacts is not None:
-        contacts = torch.where(w[:, None] < 0.5, old.foot_contacts[1 : n + 1], new.foot_contacts[1 : n + 1].to(old.dtype))
+        later = new.foot_contacts[1 : n + 1].to(old.dtype)
+        contacts = torch.where(w[:, None] < 0.5, old.foot_contacts[1 : n + 1], later)
     out = Motion(new.skeleton, new.fps, root, rots, contacts)
     if new.num_frames == n + 1:
         return out
