@@ -143,6 +143,11 @@ def test_bad_commands_are_one_line_errors(model) -> None:
         open_stream(model, GenerationRequest(prompt=WALK, samples=2))
 
 
+def test_the_any_rig_model_is_refused_in_one_line() -> None:
+    with pytest.raises(KinemaError, match="human model only"):
+        open_stream(load_model("creatures"))
+
+
 def test_script_lines_are_checked(tmp_path) -> None:
     assert parse_command({"t": 1, "steer": {"direction_deg": 90, "speed": 1}}, "x").kind == "steer"
     for bad, match in [({"prompt": "x"}, "'t'"), ({"t": -1, "prompt": "x"}, "'t'"),

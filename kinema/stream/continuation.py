@@ -156,9 +156,6 @@ class MotionStream:
     """An endless motion following its controls; create it with `open_stream`."""
 
     def __init__(self, model, request, settings: StreamSettings):
-        if getattr(model, "needs_rig", False):
-            raise KinemaError("streaming drives the human model only for now; the any-rig model's window "
-                              "constraints (kinema.anyrig) are not wired to streams yet")
         self.model = model
         self.request = request
         self.settings = settings
@@ -368,6 +365,9 @@ def open_stream(model, request=None, *, window_seconds: float = WINDOW_SECONDS,
     optional) gives the first prompt, seed, heading, guidance and grounding, its ``seconds``,
     ``constraints`` and ``timeline`` are the stream's own. ``steps``: DDIM steps per window
     (default `STREAM_STEPS`)."""
+    if getattr(model, "needs_rig", False):
+        raise KinemaError("streams drive the human model only for now: the any-rig model's constraints "
+                          "(kinema.anyrig) are not wired to stream windows yet")
     if request is not None and not hasattr(request, "replace"):
         raise KinemaError(f"open_stream: request must be a GenerationRequest, got {type(request).__name__}")
     if request is not None and request.samples != 1:
