@@ -191,3 +191,13 @@ def test_a_hand_target_on_the_character_is_met_and_blended():
     assert torch.allclose(met.global_rotations[:, hand], out.global_rotations[:, hand], atol=1e-5)
     with pytest.raises(KinemaError, match="no hand or foot"):
         meet_targets(out, {"neck_01": {0: [0.0, 1.0, 0.0]}})
+
+
+def test_a_motion_onto_its_own_skeleton_is_unchanged(tmp_path):
+    """Retargeting is the identity between identical rigs: a walk on a Mixamo-named character,
+    retargeted onto that same character again, keeps every joint where it was (the second source is
+    a standing rest pose, unlike the Bandai one; its contacts are estimated from the clip)."""
+    rig = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.1)
+    once = retarget(source_walk(), rig)
+    twice = retarget(once, rig)
+    assert float((twice.positions - once.positions).norm(dim=-1).max()) < 2e-3

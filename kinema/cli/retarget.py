@@ -1,13 +1,14 @@
 """`kinema retarget MOTION --rig CHARACTER --out OUT`: a motion onto a user's character.
 
-MOTION is a kinema ``.npz``, a ``.bvh``/``.bvh.gz`` (lengths times ``--in-scale`` must be metres: 0.01
-for centimetre files) or a ``.glb`` clip (``--animation``); CHARACTER a ``.glb``/``.gltf``, ``.bvh``,
-``.fbx`` or ``.npz`` rig. OUT is written in the character's own terms by its suffix: ``.glb`` (with
-the character's skin and materials), ``.bvh`` (its joint names, offsets and units), ``.npz`` or
-``.fbx`` (through Blender). Humanoids map by slot, other rigs by joint name (docs/retarget.md);
-``--overrides`` is a rig overrides JSON for odd joint names, ``--mapping`` a JSON object
-{character joint: motion joint} that replaces parts of the correspondence. Prints the mapping kind,
-the body scale and how well the result follows the source (direction error, skate, floor).
+MOTION is a kinema ``.npz``, a ``.bvh``/``.bvh.gz`` (lengths times ``--in-scale`` must be metres:
+0.01 for centimetre files), a ``.glb`` clip (``--animation``) or an ``.fbx`` (its first animation,
+read in metres); CHARACTER a ``.glb``/``.gltf``, ``.bvh``, ``.fbx`` or ``.npz`` rig. OUT is written in
+the character's own terms by its suffix: ``.glb`` (with the character's skin and materials), ``.bvh``
+(its joint names, offsets and units), ``.npz`` or ``.fbx`` (through Blender). Humanoids map by slot,
+other rigs by joint name (docs/retarget.md); ``--overrides`` is a rig overrides JSON for odd joint
+names, ``--mapping`` a JSON object {character joint: motion joint} that replaces parts of the
+correspondence. Prints the mapping kind, the body scale and how well the result follows the source
+(direction error, skate, floor).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from kinema.cli._args import positive_float
 def register(sub) -> None:
     """Add the `retarget` sub-command to the top-level parser."""
     p = sub.add_parser("retarget", help="put a motion (npz, BVH, GLB clip) onto a character rig (GLB, BVH, FBX)")
-    p.add_argument("motion", type=Path, help=".npz, .bvh, .bvh.gz or .glb")
+    p.add_argument("motion", type=Path, help=".npz, .bvh, .bvh.gz, .glb or .fbx")
     p.add_argument("--rig", type=Path, required=True, metavar="CHARACTER", help=".glb, .gltf, .bvh, .fbx or .npz")
     p.add_argument("--out", type=Path, required=True, help=".glb, .bvh, .bvh.gz, .npz or .fbx (FBX needs Blender)")
     p.add_argument("--in-scale", type=positive_float, default=1.0, help="BVH motion: lengths times this are metres")
@@ -55,10 +56,16 @@ def _mapping(path: Path | None) -> dict | None:
 def _load_source(args):
     from kinema.errors import KinemaError
     from kinema.io import load_motion
+    from kinema.retarget.fbx import read_fbx
 
     if not args.motion.is_file():
         raise KinemaError(f"{args.motion}: no such file")
     name = args.motion.name.lower()
+    if name.endswith(".fbx"):
+        motion = read_fbx(args.motion).motion
+        if motion is None:
+            raise KinemaError(f"{args.motion}: has no animation")
+        return motion
     if name.endswith((".bvh", ".bvh.gz")):
         return load_motion(args.motion, scale=args.in_scale)
     if args.animation is not None:

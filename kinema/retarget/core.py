@@ -39,12 +39,14 @@ from kinema.retarget.proportions import (
     ground_root,
     lowest_rest_height,
     placed_positions,
-    source_body,
-    standing_height,
+    source_foot_height,
     target_body,
 )
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
+
+#: a bone translation that moves less than this fraction of the skeleton's summed bone length is static
+MOVING = 1e-4
 
 
 def source_planted(motion: Motion) -> dict[int, torch.Tensor]:
@@ -60,11 +62,13 @@ def source_planted(motion: Motion) -> dict[int, torch.Tensor]:
 
 
 def moving_joints(motion: Motion) -> list[int]:
-    """Source joints whose bone translation the motion animates."""
+    """Joints whose bone translation the motion animates by more than ``MOVING`` of the skeleton's
+    size (float noise of a file read back, 1e-6 to 1e-5 m from FBX, is no animation)."""
     if motion.local_translations is None:
         return []
     off = motion.skeleton.offsets.to(motion.local_translations)
-    moved = (motion.local_translations - off).abs().amax(dim=(0, 2)) > 1e-6
+    size = float(motion.skeleton.offsets.norm(dim=-1).sum())
+    moved = (motion.local_translations - off).abs().amax(dim=(0, 2)) > MOVING * size
     return [j for j in range(1, motion.num_joints) if bool(moved[j])]
 
 
@@ -82,13 +86,13 @@ def _leg_goals(G, P, jm: JointMap, Ps, planted, s: float, fps: float) -> list[to
     G0t, P0t = rest_frames(jm.target)
     _, P0s = rest_frames(jm.source)
     hips_t, hips_s = jm.hips
-    low_t, body_s = lowest_rest_height(jm.target, target_body(jm)), source_body(jm)
+    low_t = lowest_rest_height(jm.target, target_body(jm))
     base = float(P0t[hips_t, 1]) - s * float(P0s[hips_s, 1])  # target y = base + s * source y at the hips
     goals = []
     for leg in jm.legs:
         goal = P[:, leg.upper] + s * (Ps[:, leg.source_foot] - Ps[:, leg.source_upper])
         heel = planted.get(leg.source_foot, torch.zeros(goal.shape[0], dtype=torch.bool))
-        lift = (float(P0t[leg.foot, 1]) - low_t) - s * standing_height(Ps, leg.source_foot, heel, body_s)
+        lift = (float(P0t[leg.foot, 1]) - low_t) - s * source_foot_height(jm, leg, Ps, heel)
         goal[:, 1] = base + s * Ps[:, leg.source_foot, 1] + lift
         toe_off = None
         if leg.toes is not None:

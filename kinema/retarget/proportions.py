@@ -5,8 +5,8 @@
   scaled by leg length and the character walks as far, relative to its size, as the source. Units
   follow: a centimetre BVH character gets ``s`` near 100 for a metre source.
 - A placed joint (the hips; for same-name maps every joint whose bone translation the source
-  animates) goes to ``P0_t + s (P_s - P0_s)``: its rest position plus the source's displacement
-  from rest, scaled.
+  animates; humanoid feet are placed by the leg IK, kinema.retarget.legs) goes to
+  ``P0_t + s (P_s - P0_s)``: its rest position plus the source's displacement from rest, scaled.
 - Root motion: a static joint above the hips (an armature or ``Root`` bone at the origin) moves
   across the floor with the hips, at its rest height, so IK/pole helpers hanging from it come along.
 - Floor: the whole motion is then shifted vertically so that its lowest joint over the clip sits
@@ -21,7 +21,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.retarget.align import rest_frames
-from kinema.retarget.mapping import JointMap
+from kinema.retarget.mapping import JointMap, Leg
 from kinema.rig.find import helpers
 from kinema.skeleton import Skeleton
 
@@ -82,11 +82,12 @@ def body_scale(jm: JointMap) -> float:
 def placed_positions(
     jm: JointMap, source_positions: torch.Tensor, moving: list[int], s: float
 ) -> dict[int, torch.Tensor]:
-    """{target joint: (T, 3) world position} for the hips (or top joint) and the ``moving`` source
-    joints' targets: rest position plus the scaled displacement of the source from its rest."""
+    """{target joint: (T, 3) world position} for the hips (or top joint) and, for maps by name, the
+    targets of the ``moving`` source joints (humanoid feet are placed by the leg IK instead): rest
+    position plus the scaled displacement of the source from its rest."""
     _, P0s = rest_frames(jm.source)
     _, P0t = rest_frames(jm.target)
-    chosen = {b: a for b, a in jm.pairs.items() if a in moving}
+    chosen = {} if jm.kind == "humanoid" else {b: a for b, a in jm.pairs.items() if a in moving}
     if jm.hips is not None:
         chosen[jm.hips[0]] = jm.hips[1]
     return {b: P0t[b] + s * (source_positions[:, a] - P0s[a]) for b, a in chosen.items()}
@@ -112,6 +113,18 @@ def standing_height(positions: torch.Tensor, joint: int, planted: torch.Tensor |
     if planted is not None and bool(planted.any()):
         return float(y[planted].median()) - floor
     return float(y.min()) - floor
+
+
+def source_foot_height(jm: JointMap, leg: Leg, positions: torch.Tensor, heel: torch.Tensor) -> float:
+    """How high the source's foot joint sits above its floor when standing: from its rest pose when
+    that pose stands (hips above the foot by more than half the leg), else from the clip
+    (:func:`standing_height`; Bandai's rest pose lies along +X)."""
+    _, P0 = rest_frames(jm.source)
+    body = source_body(jm)
+    leg_length = _chain_length(jm.source, [leg.source_upper, leg.source_lower, leg.source_foot])
+    if float(P0[jm.hips[1], 1] - P0[leg.source_foot, 1]) > 0.5 * leg_length:
+        return float(P0[leg.source_foot, 1]) - lowest_rest_height(jm.source, body)
+    return standing_height(positions, leg.source_foot, heel, body)
 
 
 def floor_shift(jm: JointMap, positions: torch.Tensor) -> float:
