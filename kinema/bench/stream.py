@@ -105,7 +105,7 @@ def _row(stream: MotionStream, threads: int, seconds: float, wall: float, cpu: f
          grounds: dict, memory: list[float]) -> StreamBenchRow:
     windows = stream.windows[1:]  # the first window starts from nothing
     motion = frames_to_motion(kept, stream.model.skeleton)
-    joins = join_report(motion, [w.first_frame for w in windows if w.first_frame < motion.num_frames - 3])
+    joins = join_report(motion, [(lo, hi) for lo, hi in stream.seams() if hi + 3 < motion.num_frames])
     latencies = [c.latency_seconds for c in stream.commands]
     walls = [c.wall_seconds for c in stream.commands if c.wall_seconds is not None]
     per_minute = [statistics.median(v) for _, v in sorted(grounds.items())]

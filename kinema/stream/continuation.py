@@ -1,16 +1,18 @@
 """`MotionStream`: an endless motion made window by window through a pipeline's ``generate(request)``.
 
 Each window (``window_seconds`` long, ``steps`` DDIM steps) is generated in a local frame whose first
-root stands over the origin. Its first `CONTEXT_SECONDS` are the last frames generated so far, imposed
-as ``fullbody`` keyframes, so it continues the motion; the controls (prompt, steering path, targets:
-kinema.stream.controls) constrain the rest. Its first `SKIP_SECONDS` after the context are dropped
-(the previous window's frames are kept there: the denoiser's first free frames lag the keyframes) and
-the next `BLEND_SECONDS` are cross-faded from the previous window (kinema.stream.frames.stitch:
-rotations slerped, the root's ground velocity blended). While steering, the window is turned to face
-along its path; every window is lifted or lowered onto the first one's ground level (at most
-`FLOOR_STEP` a window). Windows are not post-processed, except while a target is held: after context
-keyframes the raw denoiser leaves a hand target 25-30 cm off (a lone clip: 15 cm); post-processing
-hits it exactly but costs about 1 s a window.
+root stands over the origin, turned so that the context's last frame faces +Z (a walk turned to +X and
+then told to bow stayed bent over 45-57 deg for 10 s in a frame that was not turned; turned, it bows
+and stands up again like an unturned one). Its first `CONTEXT_SECONDS` are the last frames generated
+so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt, steering
+path, targets: kinema.stream.controls) constrain the rest. Its first `SKIP_SECONDS` after the context
+are dropped (the previous window's frames are kept there: the denoiser's first free frames lag the
+keyframes) and the next `BLEND_SECONDS` are cross-faded from the previous window
+(kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended). While steering,
+the window is turned to face along its path; every window is lifted or lowered onto the first one's
+ground level (at most `FLOOR_STEP` a window). Windows are not post-processed, except while a target
+is held: after context keyframes the raw denoiser leaves a hand target 25-30 cm off (a lone clip:
+15 cm); post-processing hits it exactly but costs about 1 s a window.
 
 Frames are handed out in order (``next_frames(n)`` or iteration). A command (``set_prompt``, ``steer``,
 ``target``, ``clear``) cuts the frames not yet handed out back to ``lookahead`` seconds after the last
@@ -38,7 +40,16 @@ from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.stream.controls import Controls, Steer, Target, WindowFrame
-from kinema.stream.frames import StreamFrames, face_along, facing, ground_level, shifted, stitch
+from kinema.stream.frames import (
+    StreamFrames,
+    face_along,
+    facing,
+    ground_level,
+    shifted,
+    stitch,
+    turn_xz,
+    turned,
+)
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
 WINDOW_SECONDS = 3.0
@@ -188,6 +199,12 @@ class MotionStream:
         """Final frames generated and not yet handed out."""
         return self._final_end() - self._emitted
 
+    def seams(self) -> list[tuple[int, int]]:
+        """Stream frames ``[lo, hi)`` where each window was cross-faded into the previous one (the first
+        `SKIP_SECONDS` after a window's context are the previous window's own frames)."""
+        s = self.settings
+        return [(w.first_frame + s.skip, w.first_frame + s.skip + s.blend) for w in self.windows[1:]]
+
     def _final_end(self) -> int:
         return self._offset if self._motion is None else self._offset + self._motion.num_frames - self._tail
 
@@ -273,10 +290,11 @@ class MotionStream:
         context = self._motion.crop(end - s.context, end)
         smooth = self._smoothed_root(end)
         frame = self._window_frame(context, smooth)
-        local = shifted(context, -frame.origin[0], -frame.origin[1])
-        window, timings = self._generate(local, smooth - torch.tensor(frame.origin), frame)
+        local = turned(shifted(context, -frame.origin[0], -frame.origin[1]), -frame.yaw)
+        local_smooth = turn_xz(smooth - torch.tensor(frame.origin), -frame.yaw)
+        window, timings = self._generate(local, local_smooth, frame)
         window = self._on_floor(self._face_path(window))
-        window = shifted(window, *frame.origin).crop(s.context - 1)
+        window = shifted(turned(window, frame.yaw), *frame.origin).crop(s.context - 1)
         stitched = stitch(self._motion.crop(end - 1), window, s.skip, s.blend)
         self._motion = self._motion.crop(0, end).concatenate(stitched.to(self._motion.dtype))
         self._tail = s.skip + s.blend
@@ -290,14 +308,15 @@ class MotionStream:
         return smooth[end - self.settings.context : end]
 
     def _window_frame(self, context: Motion, smooth: torch.Tensor) -> WindowFrame:
-        """Where the window starts: the context's first smoothed root as origin, its last facing and
-        the smoothed root's speed."""
+        """Where the window starts: the context's first smoothed root as origin, turned so that its last
+        frame faces +Z (the model then always starts as most training clips do), and the smoothed
+        root's speed."""
         roles = context.skeleton.roles
         origin = (float(smooth[0, 0]), float(smooth[0, 1]))
-        heading = float(facing(context.positions[-1:], roles["left_hip"], roles["right_hip"])[0])
+        yaw = float(facing(context.positions[-1:], roles["left_hip"], roles["right_hip"])[0])
         speed = float((smooth[-1] - smooth[0]).norm()) * self.fps / max(1, context.num_frames - 1)
-        last = (float(smooth[-1, 0]) - origin[0], float(smooth[-1, 1]) - origin[1])
-        return WindowFrame(origin, last, heading, speed, self.fps)
+        frame = WindowFrame(origin, yaw, (0.0, 0.0), 0.0, speed, self.fps)
+        return replace(frame, root_xz=frame.local_xz(float(smooth[-1, 0]), float(smooth[-1, 1])))
 
     def _on_floor(self, window: Motion) -> Motion:
         """The window moved up or down (by at most `FLOOR_STEP` metres) so that its ground level (the

@@ -1,9 +1,9 @@
 """What a stream is told to do, and how that becomes one window's constraints (docs/constraints.md JSON).
 
-A window is generated in a local frame whose first context frame stands over the origin (as training
-clips start); every position below is in that frame. A window of ``W`` frames starts with ``C``
-context frames (the last generated ones, imposed as ``fullbody`` keyframes, so it continues the
-motion); the controls constrain the free frames ``[C, W)``:
+A window is generated in a local frame whose first context root stands over the origin (as training
+clips start), turned so that the context's last frame faces +Z; every position below is in that frame.
+A window of ``W`` frames starts with ``C`` context frames (the last generated ones, imposed as
+``fullbody`` keyframes, so it continues the motion); the controls constrain the free frames ``[C, W)``:
 
 - steering: a dense ``root2d`` path with headings that turns from the current facing towards
   ``direction_deg`` at most ``TURN_RATE_DEG`` per second and moves at ``speed`` m/s (reached over
@@ -97,7 +97,8 @@ class Controls:
         reach = C + round(REACH_SECONDS * context.fps)
         frames = list(range(min(reach, num_frames - 1), num_frames, 2))
         for t in self.targets.values():
-            local = [t.position[0] - window.origin[0], t.position[1], t.position[2] - window.origin[1]]
+            x, z = window.local_xz(t.position[0], t.position[2])
+            local = [x, t.position[1], z]
             out.append({"type": "end-effector", "joint": t.joint, "frame_indices": frames,
                         "positions": [local] * len(frames)})
         return out
@@ -105,15 +106,23 @@ class Controls:
 
 @dataclass(frozen=True)
 class WindowFrame:
-    """Where a window starts: ``origin`` (world x, z of its first context root, the local frame's
-    origin), the last context frame's root ground position ``root_xz`` (local), its facing ``heading``
-    (radians), its ground speed (m/s) and the model's frame rate."""
+    """Where a window starts: its local frame (``origin``: the world x, z of its first context root;
+    ``yaw``: the world heading, radians, of the local +Z), the last context frame's root ground
+    position ``root_xz`` and facing ``heading`` in that frame, its ground speed (m/s) and the model's
+    frame rate."""
 
     origin: tuple[float, float]
+    yaw: float
     root_xz: tuple[float, float]
     heading: float
     speed: float
     fps: float
+
+    def local_xz(self, x: float, z: float) -> tuple[float, float]:
+        """World ground point (x, z) in the window's frame."""
+        dx, dz = x - self.origin[0], z - self.origin[1]
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return dx * c - dz * s, dx * s + dz * c
 
 
 def context_keyframes(context: Motion, smooth_root: torch.Tensor) -> dict:
@@ -128,7 +137,7 @@ def steer_path(steer: Steer, window: WindowFrame, first: int, num_frames: int) -
     """A dense root path with headings over frames ``[first - 1, num_frames)``: from the context's
     last root, turning towards the steered heading and ramping linearly to the steered speed."""
     dt = 1.0 / window.fps
-    goal = window.heading if steer.direction_deg is None else math.radians(steer.direction_deg)
+    goal = window.heading if steer.direction_deg is None else math.radians(steer.direction_deg) - window.yaw
     psi, speed = window.heading, window.speed
     x, z = window.root_xz
     turn = math.radians(TURN_RATE_DEG) * dt

@@ -108,6 +108,25 @@ def ground_level(motion: Motion) -> float:
     return float(torch.quantile(motion.positions[..., 1].amin(-1).float(), 0.1))
 
 
+def turn_xz(xz: torch.Tensor, angle: float) -> torch.Tensor:
+    """Ground points ``(..., 2)`` (x, z) turned about the origin by ``angle`` radians about +Y (positive
+    turns +Z towards +X, as headings do)."""
+    c, s = math.cos(angle), math.sin(angle)
+    x, z = xz[..., 0], xz[..., 1]
+    return torch.stack([x * c + z * s, -x * s + z * c], -1)
+
+
+def turned(motion: Motion, angle: float) -> Motion:
+    """``motion`` turned about the world's vertical axis through the origin by ``angle`` radians."""
+    root = motion.root_translation.clone()
+    root[:, [0, 2]] = turn_xz(root[:, [0, 2]], angle)
+    half = torch.tensor(angle / 2, dtype=motion.dtype)
+    yaw = torch.stack([half.cos(), half * 0, half.sin(), half * 0]).expand(motion.num_frames, 4)
+    rots = motion.local_rotations.clone()
+    rots[:, 0] = quat_normalize(quat_mul(yaw, rots[:, 0]))
+    return replace(motion, root_translation=root, local_rotations=rots)
+
+
 def shifted(motion: Motion, dx: float, dz: float) -> Motion:
     """``motion`` moved by ``(dx, 0, dz)`` metres on the ground."""
     move = torch.tensor([dx, 0.0, dz], dtype=motion.dtype)

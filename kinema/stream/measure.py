@@ -43,7 +43,7 @@ def joint_acceleration(motion: Motion) -> torch.Tensor:
 @dataclass(frozen=True)
 class JoinReport:
     """Pops at window joins against the windows' own motion: the largest pelvis speed change (m/s per
-    second) and joint acceleration (m/s^2) within `JOIN_RADIUS` frames of any join, and the largest and
+    second) and joint acceleration (m/s^2) within `JOIN_RADIUS` frames of any seam, and the largest and
     the 99th percentile of the same quantities over the frames away from joins. ``ok``: no join goes
     beyond what the windows themselves contain."""
 
@@ -64,21 +64,21 @@ class JoinReport:
         return {k: round(v, 3) if isinstance(v, float) else v for k, v in self.__dict__.items()} | {"ok": self.ok}
 
 
-def join_report(motion: Motion, join_frames: list[int]) -> JoinReport:
-    """Compare the motion around ``join_frames`` (stream frames where a window's own frames begin)
-    with the rest of it."""
+def join_report(motion: Motion, seams: list[tuple[int, int]]) -> JoinReport:
+    """Compare the motion around ``seams`` (frame ranges ``[lo, hi)`` where one window is stitched to
+    the next: `MotionStream.seams`) with the rest of it."""
     speed = pelvis_speed(motion)
     dspeed = (speed[1:] - speed[:-1]).abs() * motion.fps  # index i: around frame i + 1
     acc = joint_acceleration(motion)  # index i: frame i + 1
     near = torch.zeros(motion.num_frames, dtype=torch.bool)
-    for f in join_frames:
-        near[max(0, f - JOIN_RADIUS) : f + JOIN_RADIUS + 1] = True
+    for lo, hi in seams:
+        near[max(0, lo - JOIN_RADIUS) : hi + JOIN_RADIUS] = True
     inner = near[1:-1]
     away = ~inner
     if not bool(inner.any()) or not bool(away.any()):
-        return JoinReport(len(join_frames), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return JoinReport(len(seams), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     ds, da = dspeed[away], acc[away]
-    return JoinReport(len(join_frames), float(dspeed[inner].max()), float(ds.max()),
+    return JoinReport(len(seams), float(dspeed[inner].max()), float(ds.max()),
                       float(torch.quantile(ds, 0.99)), float(acc[inner].max()), float(da.max()),
                       float(torch.quantile(da, 0.99)))
 
