@@ -1,8 +1,8 @@
 """Everything in examples/ runs as shipped, on the shipped default model, and gives plausible motion.
 
 * every constraints file (examples/constraints/*.json) with a prompt that fits it, post-processing on:
-  finite, the pelvis never faster than 10 m/s, no warnings, every target met (the post-processing
-  report's residuals after it);
+  finite, the pelvis never faster than 10 m/s, no warnings (but the guard's floor note), every target
+  met (the post-processing report's residuals after it);
 * every timeline (examples/timelines/*.json): its length, finite, plausible;
 * every numbered script (examples/NN_*.py) run as ``__main__`` in a scratch folder: it writes what it
   says it wrote, and prints no warning.
@@ -111,7 +111,11 @@ def check_constraints_result(result, label: str, frames: int) -> None:
     exact = result.report.residuals[0]["exact"]
     print(label, json.dumps({"before": exact["before"], "after": exact["after"]}), result.report.warnings)
     check_plausible(motion, label)
-    assert result.report.warnings == []
+    # the only warning allowed: the guard saying the exact pass put a foot below the floor (issue 36;
+    # hands.json: Toes_R 3.1 cm, kept because the hand targets need the pass), and never more than 5 cm
+    others = [w for w in result.report.warnings if "below the floor" not in w]
+    assert others == []
+    assert float(motion.positions[..., 1].min()) > -0.05, label
     assert exact["unmet"] == []
     assert exact["after"], f"{label}: no residuals measured"
     for name, res in exact["after"].items():

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 import kinema
 from kinema.cli import main
@@ -21,6 +22,7 @@ from tests import hardening_fixtures as fixtures
 from tests.hardening_fixtures import one_line_error
 
 bvh_file = fixtures.bvh_file
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "constraints"
 
 
 # ---------------------------------------------------------------------------- npz inputs
@@ -263,3 +265,52 @@ def test_root_speed_bound_keeps_real_runs_and_scales_with_the_rig(human):
     assert max_root_speed(giant) > 5 * MAX_ROOT_SPEED
     fast = [{"type": "root2d", "times": [0.0, 1.0], "smooth_root_2d": [[0, 0], [0, 50]]}]
     assert load_constraints(fast, giant, 20.0, 60)  # 50 m/s for a rig ten times a person's size
+
+
+# ---------------------------------------------------------------------------- post-processing vs raw
+def _pelvis(motion):
+    p = motion.positions.double()[:, 0]
+    speed = (p[1:] - p[:-1]).norm(dim=-1) * motion.fps
+    accel = (p[2:] - 2 * p[1:-1] + p[:-2]).norm(dim=-1) * motion.fps**2
+    return float(speed.max()), float(accel.max())
+
+
+def test_post_processing_adds_no_pelvis_pop(human):
+    """Issue 36: foot locking's pelvis reach made a 1-2 frame pop (raw 1.85 -> 4.40 m/s at frame 30,
+    pelvis acceleration 65 m/s^2); the post-processed walk is now about as fast and as smooth as the raw one."""
+    kw = {"seconds": 5, "seed": 0}
+    raw = human.generate("A tired person walks slowly.", postprocess=False, **kw)[0]
+    post = human.generate("A tired person walks slowly.", **kw)[0]
+    (raw_speed, raw_accel), (speed, accel) = _pelvis(raw), _pelvis(post)
+    assert speed <= raw_speed + 0.3, (raw_speed, speed)  # the pop was +2.5 m/s
+    assert accel <= raw_accel + 5.0, (raw_accel, accel)
+
+
+def test_guard_measures_a_pelvis_pop_and_a_foot_below_the_floor(human):
+    from kinema.motion.core import Motion
+    from kinema.postprocess.guard import floor_note, plausibility, violations
+
+    raw = human.generate("A person walks forward.", seconds=3, steps=5, postprocess=False)[0]
+    root = raw.root_translation.clone()
+    root[30] += torch.tensor([0.15, 0.0, 0.0])  # one frame 15 cm off: 3 m/s there and back
+    popped = Motion(raw.skeleton, raw.fps, root, raw.local_rotations, raw.foot_contacts)
+    base, pop = plausibility(raw), plausibility(popped)
+    problems = violations(base, base, pop)
+    assert any("pelvis pop at frame 30" in p for p in problems), problems
+    sunk = Motion(raw.skeleton, raw.fps, raw.root_translation - torch.tensor([0.0, 0.1, 0.0]),
+                  raw.local_rotations, raw.foot_contacts)
+    note = floor_note(base, plausibility(sunk), raw.skeleton.names)
+    assert note is not None and "below the floor" in note
+    assert floor_note(base, base, raw.skeleton.names) is None
+
+
+def test_post_processing_says_when_it_pushes_a_toe_below_the_floor(human):
+    """hands.json + a raised hand: the exact pass put a toe 3-7 cm below the floor (raw stays 4 cm above)
+    without a word; it is kept (the hand targets need it) and said."""
+    res = human.generate("A person raises their right hand.", seconds=5,
+                         constraints=str(EXAMPLES / "hands.json"))
+    lowest = float(res[0].positions[..., 1].min())
+    floor_warnings = [w for w in res.report.warnings if "below the floor" in w]
+    assert lowest >= -0.01 or floor_warnings, (lowest, res.report.warnings)
+    if floor_warnings:
+        assert f"{-lowest * 100:.1f} cm below the floor" in floor_warnings[0]

@@ -6,7 +6,8 @@ tests/reference_cases.py: text only, full-body keyframes, end effectors with foo
 and a two-prompt timeline, each with and without post-processing, 5 DDIM steps, fixed seeds. The two
 timeline cases were re-recorded on purpose (``--only timeline``) by issue 18's new joins and again
 when timelines became segments sampled on their own prompts; all cases with the grounded default
-model.
+model. Issue 36 re-recorded the post-processed cases whose foot locking moves the pelvis (text,
+keyframes, waypoints, timeline): the reach shift is smoothed so it makes no pelvis pop.
 
 What is compared, and why these bounds (issue 36). float32 rounding differs between CPUs (vector
 width, FMA, MKL / oneDNN kernels, thread count), and the sampler amplifies it: an Intel Xeon gave

@@ -20,14 +20,14 @@ are blended in and out over ``blend_seconds`` with raised-cosine ramps (kinema.p
 Where a leg cannot reach its lock (the model's body travels faster than its planted feet allow) the
 pelvis is moved horizontally by the mean ankle shortfall of the planted legs, spread smoothly over
 twice the blend radius and Gaussian-smoothed over the blend radius, and the locks are solved again
-(``REACH_PASSES`` times, each pass only while some shortfall exceeds ``REACH_TOLERANCE``). The
-smoothing is issue 36's: the shortfall jumps from one contact to the next, and the unsmoothed shift
-made one- or two-frame pelvis pops (a slow walk 1.7 -> 4.4 m/s for a frame, pelvis acceleration 65
-m/s^2); smoothed, six passes (three before) keep skate and IK misses near the unsmoothed ones (6
+(``REACH_PASSES`` times, each pass only while some shortfall exceeds ``REACH_TOLERANCE``). Measured
+on the same 8 prompts (three passes, before the smoothing): skate 6.2 -> 3.2 cm/s, largest IK miss
+33 -> 3 cm, pelvis moved by up to 0.5 m (walks, dances), 0.1 s per 5-s motion. Not in the paper.
+The smoothing is issue 36's: the shortfall jumps from one contact to the next, and the unsmoothed
+shift made one- or two-frame pelvis pops (a slow walk 1.7 -> 4.4 m/s for a frame, pelvis
+acceleration 65 m/s^2). Smoothed, six passes keep skate and IK misses near the unsmoothed three (6
 walks and timelines: skate 1.5-5.9 vs 1.2-5.4 cm/s, largest IK miss 4.3 vs 3.3 cm) and the pelvis'
-peak acceleration at the de-jittered input's (8-15 m/s^2 instead of 37-73). Measured on the same 8 prompts: skate 6.2 -> 3.2 cm/s,
-largest IK miss 33 -> 3 cm, pelvis moved by up to 0.5 m (walks, dances), 0.1 s per 5-s motion. Not in
-the paper.
+peak acceleration at the de-jittered input's (8-15 m/s^2 instead of 37-73).
 
 Any rig: the contact joints and legs come from a `kinema.rig.Rig` (human: [L heel, L toe, R heel, R toe]
 on the left and right legs). Each leg (a rig limb holding contact joints) locks its last two contacts
