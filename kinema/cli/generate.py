@@ -29,11 +29,13 @@ def register(sub) -> None:
     add_request_arguments(p)  # every GenerationRequest field (kinema.cli.request_args)
     p.add_argument("--preview", action="store_true", help=f"fast draft: {PREVIEW_STEPS} DDIM steps (about 0.2 s "
                    "per 5-s clip of sampling; quality vs steps in docs/speed.md); not with --steps")
-    p.add_argument("--model", default="default", help="'default' (shipped), 'creatures' (any rig; shipped) or a "
-                                                      "run/checkpoint folder")
+    p.add_argument("--model", help="'default' (the human model, shipped), 'creatures' (any rig; shipped) or a "
+                                   "run/checkpoint folder; without it: 'default', or 'creatures' for a --rig that "
+                                   "is no humanoid (a humanoid character gets the human model, retargeted)")
     p.add_argument("--out", type=Path, default=Path("out/motion.bvh"),
-                   help=".bvh, .bvh.gz, .npz or .glb (a rig's GLB keeps its skinned mesh); default out/motion.bvh; "
-                        "with --samples N > 1: OUT_00.bvh, OUT_01.bvh, ...")
+                   help=".bvh, .bvh.gz, .npz or .glb (a rig's GLB keeps its skinned mesh), .fbx for a character "
+                        "(through Blender), .csv with --robot; default out/motion.bvh; with --samples N > 1: "
+                        "OUT_00.bvh, OUT_01.bvh, ...")
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
@@ -87,8 +89,11 @@ def _check_inputs(args: argparse.Namespace) -> None:
     suffix = args.out.name.lower()
     if args.robot is not None and not suffix.endswith((".csv", ".npz")):
         raise KinemaError(f"{args.out}: a robot's motion is written as .csv (MuJoCo qpos table) or .npz")
-    if not suffix.endswith((".bvh", ".bvh.gz", ".npz", ".glb", ".csv")):
-        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb (.csv with --robot)")
+    if not suffix.endswith((".bvh", ".bvh.gz", ".npz", ".glb", ".csv", ".fbx")):
+        raise KinemaError(f"{args.out}: output must end in .bvh, .bvh.gz, .npz or .glb (.fbx with a --rig character, "
+                          ".csv with --robot)")
+    if suffix.endswith(".fbx") and args.rig is None:
+        raise KinemaError(f"{args.out}: FBX output is for a character: give --rig CHARACTER (GLB, BVH or FBX)")
     if suffix.endswith(".csv") and args.robot is None:
         raise KinemaError(f"{args.out}: .csv holds a robot's joint angles; add --robot g1 (or an MJCF file)")
     if args.constraints is not None and not args.constraints.is_file():
@@ -110,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     from kinema.cli.report import print_report, use_plain_warnings
     from kinema.errors import KinemaError
     from kinema.generate import load_model
+    from kinema.retarget import save_character_motion
     from kinema.runtime import configure_threads
 
     use_plain_warnings()
@@ -125,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     outputs = sample_paths(args.out, request.samples)
     for path in outputs:  # before loading the model and generating: a bad --out costs nothing
         check_output_path(path)
-    model = load_model(args.model, text_cache=text_cache_dir())
+    model = load_model(_model_name(args), text_cache=text_cache_dir())
     if request.steps is not None and request.steps > model.max_steps:
         source = f" (from {meta_path})" if "steps" in filled else ""
         raise KinemaError(f"--steps {request.steps}{source}: at most {model.max_steps}, the model's trained "
@@ -133,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
     if request.rig is None and model.needs_rig:
         print(list_rigs(model))
         if request.prompt or request.timeline is not None:
-            raise KinemaError(f"the any-rig model {args.model!r} needs --rig (a GLB/BVH file or a rig id listed above)")
+            raise KinemaError(f"the any-rig model {model.path.name!r} needs --rig (a GLB/BVH file or a rig id listed "
+                              "above)")
         return 0
     result = model.generate(request, progress=not args.no_progress)
     if result.robot_motions:
@@ -145,11 +152,28 @@ def run(args: argparse.Namespace) -> int:
         for motion, path in zip(result, outputs, strict=True):
             if request.fps is not None:
                 motion = motion.resample(request.fps, keep_duration=True)
-            motion.save(path)
+            save_character_motion(motion, path)  # GLB, BVH, npz as Motion.save; FBX through Blender
             print(f"wrote {path}: {motion.duration:.2f} s, {motion.num_frames} frames @ {motion.fps:g} fps, "
                   f"{motion.num_joints} joints (lengths in metres)")
     print_report(result)
     return 0
+
+
+def _model_name(args: argparse.Namespace) -> str:
+    """``--model``, else the human model, or the model for any rig when ``--rig`` is a file that is no
+    humanoid (said in one line)."""
+    from kinema.retarget import load_character
+
+    if args.model is not None:
+        return args.model
+    if args.rig is None or not Path(args.rig).is_file():
+        return "default"
+    character = load_character(args.rig)
+    if character.is_humanoid:
+        print(f"{args.rig}: a humanoid: generating with the human model and retargeting onto it")
+        return "default"
+    print(f"{args.rig}: not a humanoid: generating with the model for any rig ('creatures')")
+    return "creatures"
 
 
 def list_rigs(model) -> str:

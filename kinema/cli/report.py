@@ -125,6 +125,11 @@ def print_report(result) -> None:
         print(f"constraint error after post-processing: max {max(rep.residuals_cm):.2f} cm")
     if rep.residuals_deg:
         print(f"rotation target error after post-processing: max {max(rep.residuals_deg):.2f} deg")
+    for i, c in enumerate(rep.character):
+        print(f"sample {i} on {c['character']}: size x{c['scale']:.2f}, limb directions within "
+              f"{c['direction_deg_mean']:.1f} deg on average ({c['direction_deg_max']:.1f} at most), lowest joint "
+              f"{100 * c['lowest']:.1f} cm (rest {100 * c['lowest_rest']:.1f} cm)"
+              + "".join(f", target on {name} {err:.2f} cm" for name, err in c["targets_cm"].items()))
     for i, r in enumerate(rep.robot):
         print(f"sample {i} on {r['robot']} (replayed in MuJoCo): range overshoot {r['range_overshoot_rad']:.3f} rad, "
               f"lowest sole {100 * r['lowest_sole_m']:.1f} cm, planted-sole slide {r['planted_slide_m_s']:.2f} m/s, "

@@ -11,7 +11,6 @@ seconds=4)``), the short form for Python callers; both forms build the same `Gen
 
 from __future__ import annotations
 
-import importlib
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -19,20 +18,11 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from kinema.errors import KinemaError
+from kinema.pipeline import stages
 from kinema.pipeline.progress import ProgressFn
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationResult
-
-#: the stage that puts generated motions on a robot (kinema.robot.stage), imported by name when a request
-#: names a robot: MuJoCo takes most of a second to import, and no other generation needs it
-ROBOT_STAGE = "kinema.robot.stage:robot_motions"
-
-
-def _stage(spec: str):
-    """The function a ``"module:function"`` stage names (imported on first use; kinema.robot never imports
-    kinema.pipeline, so this adds no cycle)."""
-    module, name = spec.split(":")
-    return getattr(importlib.import_module(module), name)
+from kinema.pipeline.stages import load_stage
 
 
 @dataclass(frozen=True)
@@ -146,11 +136,31 @@ class MotionPipeline(ABC):
                 request = request.replace(**keywords)
         else:
             request = request_from_keywords(request, **keywords)
-        result = self.run(request, progress=progress)
+        character = self._character(request)
+        if character is None:
+            result = self.run(request, progress=progress)
+        else:
+            model_request = request.replace(rig=None, constraints=character.model_constraints(request.constraints))
+            result = self.run(model_request, progress=progress)
+        model_motions = result.motions
+        if character is not None:
+            result.motions, result.report.character, unmet = character.finish(model_motions, request.constraints,
+                                                                              self.fps)
+            result.report.warnings += unmet
         if request.robot is not None:
-            stage = _stage(ROBOT_STAGE)
-            result.robot_motions, result.report.robot = stage(result.motions, request.robot, request.robot_mapping)
+            to_robot = load_stage(stages.ROBOT)
+            result.robot_motions, result.report.robot = to_robot(model_motions, request.robot, request.robot_mapping)
         return result
+
+    def _character(self, request: GenerationRequest):
+        """The character stage (kinema.retarget.stage) when the request's rig is a character this model
+        does not drive itself: a humanoid file for a model with a skeleton of its own; else None."""
+        rig = request.rig
+        if rig is None or self.needs_rig or not isinstance(rig, str | Path):
+            return None
+        if str(rig) in {r.name for r in self.rigs()}:
+            return None
+        return load_stage(stages.CHARACTER).open(rig, self.resolve_rig(None).skeleton)
 
     @abstractmethod
     def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:

@@ -11,11 +11,13 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from kinema.motion.core import Motion
+from kinema.pipeline import stages
+from kinema.pipeline.stages import load_stage
 
 
 @dataclass
@@ -39,7 +41,11 @@ class GenerationReport:
     ``height_smoothed``, ``grounded``, ``settled``) and ``reached_by_translation`` (joint targets met by
     translating a bone: name -> largest shift, rig sizes).
 
-    A request that names a robot: ``robot`` holds per sample the replay measurements of its robot motion
+    A request whose rig is the user's character (for a model with a skeleton of its own): ``character``
+    holds per sample the retargeting measurements (kinema.retarget.quality: scale, direction error, bone
+    drift, lowest joint vs rest, foot skate of source and character) and ``targets_cm``, the character's
+    own end-effector targets measured on the final output; ``residuals`` stay the model's own, before
+    retargeting. A request that names a robot: ``robot`` holds per sample the replay measurements of its robot motion
     (kinema.robot.stage: range overshoot, lowest sole, planted-sole slide, travel, leg overlap).
     """
 
@@ -65,6 +71,7 @@ class GenerationReport:
     settled: float = 0.0
     reached_by_translation: dict[str, float] = field(default_factory=dict)
     robot: list[dict] = field(default_factory=list)
+    character: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """The report as strict JSON values (what the server answers and batch manifests record)."""
@@ -87,6 +94,14 @@ class GenerationResult(Sequence):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({len(self.motions)} motion(s), {self.report.seconds:.2f} s)"
+
+    def retarget(self, character) -> GenerationResult:
+        """The motions on a humanoid ``character`` (a GLB, BVH, FBX or npz file; kinema.retarget), with
+        the retargeting measurements in ``report.character``; this result is left as it is."""
+        stage = load_stage(stages.CHARACTER).open(character, self.motions[0].skeleton)
+        motions, measured, warnings = stage.finish(self.motions, None, self.motions[0].fps)
+        report = replace(self.report, character=measured, warnings=[*self.report.warnings, *warnings])
+        return GenerationResult(motions, report, self.robot_motions)
 
 
 def json_safe(value):
