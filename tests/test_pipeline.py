@@ -22,9 +22,18 @@ from kinema.pipeline.request import option
 from kinema.pipeline.request_json import request_model
 from kinema.server.config import ServerLimits
 from kinema.server.schemas import build_request_model
+from tests.retarget_rigs import MIXAMO, build_rig
 from tests.rig_fixtures import quadruped, walking
 
 SHARED_FOX = Path(__file__).resolve().parents[1].parent / "shared/datasets/quaternius/animals_pack/Fox.glb"
+
+
+def kinema_motion_file(skeleton, path: Path) -> Path:
+    """A one-frame rest-pose motion of ``skeleton`` saved to ``path`` (a character file)."""
+    from kinema.motion.core import Motion
+
+    rest = torch.tensor([1.0, 0, 0, 0]).repeat(1, skeleton.num_joints, 1)
+    return Motion(skeleton, 20.0, torch.zeros(1, 3), rest).save(path)
 
 
 def _fox(tmp_path: Path) -> Path:
@@ -144,9 +153,16 @@ def test_server_serves_both_models_with_an_inline_rig_and_glb_out(tmp_path) -> N
     human = client.post("/v1/generate", json={"prompt": "A person waves.", "seconds": 1.0, "steps": 2})
     assert human.status_code == 200 and human.json()["model"] == "default"
     bad = client.post("/v1/generate", json={"model": "default", "prompt": "x", "rig": rig})
-    assert bad.status_code == 422 and "own skeleton" in bad.text
+    assert bad.status_code == 422 and "not a humanoid" in bad.text
     broken = client.post("/v1/generate", json=body | {"rig": {"format": "bvh", "data": "HIERARCHY\nnonsense"}})
     assert broken.status_code == 422 and "kinema-serve-" not in broken.text  # no server temp path leaks
+    person = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.2, arms=0.9)
+    glb = kinema_motion_file(person, tmp_path / "person.glb")
+    inline = {"format": "glb", "data": base64.b64encode(glb.read_bytes()).decode()}
+    answer = client.post("/v1/generate", json={"prompt": "A person waves.", "seconds": 1.0, "steps": 2, "rig": inline,
+                                               "format": "glb"})
+    assert answer.status_code == 200 and answer.json()["model"] == "default", answer.text  # humanoid: retargeted
+    assert answer.json()["report"]["character"][0]["bone_drift_mm"] < 0.1
 
 
 def test_a_batch_line_names_the_creatures_model_and_a_rig_file(tmp_path) -> None:

@@ -65,13 +65,15 @@ class ServedModel:
             "limits": limits | {"max_steps": self.max_steps(limits["max_steps"])},
         }
 
-    def drives(self, rig) -> bool:
-        """Whether a request's ``rig`` (None, a rig id, or an inline character) can go to this model."""
+    def drives(self, rig, humanoid: bool = False) -> bool:
+        """Whether a request's ``rig`` (None, a rig id, or an inline character; ``humanoid``: that character
+        is one) can go to this model: a model for any rig takes any character, a model with a skeleton of
+        its own a humanoid one (retargeted onto it, kinema.retarget)."""
         if rig is None:
             return not self.model.needs_rig
         if isinstance(rig, str):
             return rig in self.rig_names
-        return bool(self.model.needs_rig)
+        return bool(self.model.needs_rig) or humanoid
 
 
 class ModelRegistry:
@@ -100,21 +102,25 @@ class ModelRegistry:
     def names(self) -> list[str]:
         return list(self.models)
 
-    def resolve(self, name: str | None, rig) -> ServedModel:
-        """The model a request asks for: by name, else the first that drives its rig (a rig id, an inline
-        character: a model for any rig; none: a model with its own skeleton)."""
+    def resolve(self, name: str | None, rig, humanoid: bool = False) -> ServedModel:
+        """The model a request asks for: by name, else the first that drives its rig (a rig id; an inline
+        humanoid character: a model with a skeleton of its own first, retargeted; any other character: a
+        model for any rig; none: a model with its own skeleton)."""
         if name is not None:
             served = self.models.get(name)
             if served is None:
                 raise RequestError.at(["body", "model"], f"unknown model; this server has {self.names}")
-            if not served.drives(rig):
+            if not served.drives(rig, humanoid=True):
                 what = "needs a rig: name one from GET /v1/models or send one inline" if rig is None else (
                     f"does not drive rig {rig!r}; its rigs: {served.rig_names}" if isinstance(rig, str)
                     else f"drives its own skeleton {served.rig!r}, not an inline character")
                 raise RequestError.at(["body", "rig"], f"model {name!r} {what}")
             return served
-        for served in self.models.values():
-            if served.drives(rig):
+        order = list(self.models.values())
+        if humanoid:  # a humanoid character: a model with a skeleton of its own (retargeted) comes first
+            order.sort(key=lambda s: bool(s.model.needs_rig))
+        for served in order:
+            if served.drives(rig, humanoid):
                 return served
         rigs = sorted({r for s in self.models.values() for r in s.rig_names})
         raise RequestError.at(["body", "rig"], f"no model here drives this rig; rigs: {rigs}")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from kinema.errors import KinemaError
 from kinema.pipeline.request import GenerationRequest
+from kinema.retarget import load_character
 from kinema.server.encode import encode_motion, json_safe
 from kinema.server.errors import RequestError, from_kinema
 from kinema.server.models import ModelRegistry, ServedModel
@@ -35,7 +36,7 @@ class Prepared:
 
 def prepare(req, registry: ModelRegistry, max_steps: int) -> Prepared:
     """Resolve the model and check what needs it; raises `RequestError` (a 422) otherwise."""
-    served = registry.resolve(req.model, req.rig)
+    served = registry.resolve(req.model, req.rig, humanoid=_is_humanoid(req.rig))
     limit = served.max_steps(max_steps)
     if req.steps is not None and req.steps > limit:
         raise RequestError.at(["body", "steps"], f"at most {limit} for model {served.name!r}")
@@ -44,6 +45,17 @@ def prepare(req, registry: ModelRegistry, max_steps: int) -> Prepared:
     except KinemaError as err:
         raise from_kinema(err) from None
     return Prepared(served, request, req.rig)
+
+
+def _is_humanoid(rig) -> bool:
+    """Whether an inline character is a humanoid (kinema.retarget.detect); False for anything else."""
+    if not isinstance(rig, InlineRig):
+        return False
+    with tempfile.TemporaryDirectory(prefix="kinema-serve-") as tmp:
+        try:
+            return load_character(_inline_rig(rig, Path(tmp))).is_humanoid
+        except KinemaError as err:
+            raise from_kinema(err, hide=tmp) from None
 
 
 def _inline_bvh(constraints, folder: Path):

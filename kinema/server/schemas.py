@@ -219,6 +219,8 @@ class ReportOut(BaseModel):
     prompts: list[dict[str, Any]] = []
     timings: dict[str, float] = {}
     left_out: list[str] = []
+    character: list[dict[str, Any]] = []
+    robot: list[dict[str, Any]] = []
     windows: int = 1
     joints: int = 0
     residuals_cm: list[float] = []
