@@ -18,6 +18,7 @@ import kinema
 from kinema.cli import main
 from kinema.errors import KinemaError
 from kinema.io import load_motion
+from kinema.motion.core import Motion
 from tests import hardening_fixtures as fixtures
 from tests.hardening_fixtures import one_line_error
 
@@ -287,7 +288,6 @@ def test_post_processing_adds_no_pelvis_pop(human):
 
 
 def test_guard_measures_a_pelvis_pop_and_a_foot_below_the_floor(human):
-    from kinema.motion.core import Motion
     from kinema.postprocess.guard import floor_note, plausibility, violations
 
     raw = human.generate("A person walks forward.", seconds=3, steps=5, postprocess=False)[0]
@@ -314,3 +314,23 @@ def test_post_processing_says_when_it_pushes_a_toe_below_the_floor(human):
     assert lowest >= -0.01 or floor_warnings, (lowest, res.report.warnings)
     if floor_warnings:
         assert f"{-lowest * 100:.1f} cm below the floor" in floor_warnings[0]
+
+
+def test_huge_rotations_are_refused_and_a_nan_stage_says_so(human):
+    from kinema.constraints.io import load_constraints
+    from kinema.postprocess.guard import plausibility, violations
+
+    J = human.skeleton.num_joints
+    pose = [{"type": "fullbody", "frame_indices": [10], "local_joints_rot": [[[1e300, 0, 0]] * J],
+             "root_positions": [[0, 0.9, 0]]}]  # was a LinAlgError traceback
+    with pytest.raises(KinemaError, match=r"field 'local_joints_rot': an axis-angle rotation of 1e\+300 rad"):
+        load_constraints(pose, human.skeleton, human.fps, 60)
+    hand = [{"type": "right-hand", "times": [1.0], "rotations": [[1e300, 0, 0]]}]  # was NaN in the exact pass
+    with pytest.raises(KinemaError, match="field 'rotations'"):
+        load_constraints(hand, human.skeleton, human.fps, 60)
+    raw = human.generate("A person walks.", seconds=1, steps=2, postprocess=False)[0]
+    root = raw.root_translation.clone()
+    root[5] = float("nan")
+    broken = plausibility(Motion(raw.skeleton, raw.fps, root, raw.local_rotations))
+    assert violations(plausibility(raw), plausibility(raw), broken) == [
+        "it produced NaN or infinite joint positions (a degenerate target it could not solve)"]

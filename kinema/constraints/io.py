@@ -30,7 +30,7 @@ from kinema.constraints.bvh_poses import poses_from_bvh
 from kinema.constraints.fps import convert_frames, frames_to_source_times, read_constraints_json, source_fps_for
 from kinema.constraints.json_values import int_list, time_list
 from kinema.constraints.kimodo_examples import adapt_pose_form, warn_foreign
-from kinema.constraints.plausibility import check_coordinates, check_root_speeds
+from kinema.constraints.plausibility import check_coordinates, check_root_speeds, check_rotations
 from kinema.constraints.types import (
     CONSTRAINT_TYPES,
     EFFECTOR_SHORTHANDS,
@@ -223,6 +223,7 @@ def load_constraints(
             renames.append((i, _renames(written)))
     try:
         check_coordinates(out)
+        check_rotations(out)
         check_root_speeds(out, frames, fps, skeleton)
     except ConstraintError as err:  # located by its index in ``out``: report the file's own index and key
         where, rename = renames[err.index] if err.index is not None else (None, None)

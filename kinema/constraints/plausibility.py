@@ -1,6 +1,6 @@
 """Constraints no character can meet are refused before sampling (issue 36).
 
-Two bounds, both in metres and seconds:
+Three bounds, in metres, seconds and radians:
 
 - ``MAX_COORDINATE`` (1000 m): every target position (root, waypoints, end effectors). float32 has
   6 cm steps at 1e6 m, so a waypoint there moved the whole motion 1e6 m with bones wobbling by
@@ -10,6 +10,10 @@ Two bounds, both in metres and seconds:
   for rigs larger than a person (by the rig's root-to-farthest-joint reach over ``HUMAN_REACH``).
   Targets 50 m apart half a second apart were met by a pelvis moving 100 m/s, a teleport, with a
   warning that claimed a 19 m miss.
+
+- ``MAX_ROTATION`` (100 rad, 16 turns): each component of every axis-angle rotation (full-body
+  ``local_joints_rot``, end-effector ``rotations``). Angles are periodic, but 1e300 rad turned into NaN
+  in the exact pass (full-body: a LinAlgError traceback).
 
 The check runs on the validated constraints (frames at the model fps) in
 kinema.constraints.io.load_constraints, so every face (CLI, Python, server, batch, app) refuses the
@@ -33,6 +37,7 @@ from kinema.constraints.types import (
 from kinema.skeleton import Skeleton
 
 MAX_COORDINATE = 1000.0
+MAX_ROTATION = 100.0
 MAX_ROOT_SPEED = 12.0
 #: root-to-farthest-joint length of an adult human rig (metres): rigs this size or smaller get MAX_ROOT_SPEED
 HUMAN_REACH = 1.0
@@ -81,6 +86,18 @@ def check_coordinates(constraints: Sequence[Constraint]) -> None:
                 raise ConstraintError(f"a target lies {big:.4g} m from the origin; at most {MAX_COORDINATE:g} m "
                                       "(float32 loses precision far out: move the scene's origin near the character)",
                                       field=name, index=i, kind=c.kind)
+
+
+def check_rotations(constraints: Sequence[Constraint]) -> None:
+    for i, c in enumerate(constraints):
+        for name in ("local_rotations", "rotations"):
+            values = getattr(c, name, None)
+            if values is None or not values.numel():
+                continue
+            big = float(values.double().abs().max())  # a component: the norm of 1e300s overflows
+            if big > MAX_ROTATION:
+                raise ConstraintError(f"an axis-angle rotation of {big:.4g} rad; at most {MAX_ROTATION:g} (radians: "
+                                      "the vector's length is the angle)", field=name, index=i, kind=c.kind)
 
 
 def check_root_speeds(constraints: Sequence[Constraint], frames: Sequence[Sequence[int]], fps: float,

@@ -169,7 +169,7 @@ def _guarded_exact(motion: Motion, targets: PostTargets, guard: _Guard, report: 
     outside = rep["max_change_outside_blend_cm"]
     extra = (
         []
-        if outside <= guard.bounds.outside_change_cm
+        if outside <= guard.bounds.outside_change_cm or outside != outside  # NaN: the guard says so
         else [f"joints moved {outside:.1f} cm on frames no constraint may touch"]
     )
     kept = guard.accept("the exact constraint pass", motion, new, rep, extra)

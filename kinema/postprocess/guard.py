@@ -44,6 +44,7 @@ pelvis at up to 2.7 m/s; the failures this guards against added 14 m/s (a foot t
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -116,7 +117,9 @@ def violations(
     raw: Plausibility, before: Plausibility, new: Plausibility, bounds: GuardBounds = DEFAULT_BOUNDS,
 ) -> list[str]:
     """Why ``new`` (a stage's output; ``before`` its input) is less plausible than ``raw`` beyond
-    ``bounds`` (empty when it is within them)."""
+    ``bounds`` (empty when it is within them). A stage whose output is not finite gets that one reason."""
+    if not (math.isfinite(new.pelvis_speed) and math.isfinite(new.joint_accel) and math.isfinite(new.lowest)):
+        return ["it produced NaN or infinite joint positions (a degenerate target it could not solve)"]
     out = []
     added = new.added_speed(before)
     if not added <= bounds.added_pelvis_speed:
