@@ -334,3 +334,14 @@ def test_huge_rotations_are_refused_and_a_nan_stage_says_so(human):
     broken = plausibility(Motion(raw.skeleton, raw.fps, root, raw.local_rotations))
     assert violations(plausibility(raw), plausibility(raw), broken) == [
         "it produced NaN or infinite joint positions (a degenerate target it could not solve)"]
+
+
+def test_a_nan_sample_is_a_one_line_error_naming_the_frame(human):
+    from kinema.postprocess.guard import require_finite
+
+    raw = human.generate("A person walks.", seconds=1, steps=2, postprocess=False)[0]
+    require_finite([raw], "sampling")  # a finite motion passes
+    rots = raw.local_rotations.clone()
+    rots[7, 3] = float("nan")
+    with pytest.raises(KinemaError, match=r"sample 1: sampling produced NaN or infinite values \(first at frame 7\)"):
+        require_finite([raw, Motion(raw.skeleton, raw.fps, raw.root_translation, rots)], "sampling")

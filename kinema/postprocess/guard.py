@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import torch
 
+from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 
 
@@ -147,3 +148,15 @@ def floor_note(raw: Plausibility, new: Plausibility, names, bounds: GuardBounds 
     frame, joint = new.lowest_at
     return (f"{names[joint]} goes {-new.lowest * 100:.1f} cm below the floor at frame {frame} (the raw motion's "
             f"lowest point is {raw.lowest * 100:+.1f} cm)")
+
+
+def require_finite(motions, stage: str) -> None:
+    """A one-line `KinemaError` naming the sample and first frame when ``stage`` (e.g. "sampling") gave
+    a motion with NaN or infinite values, instead of a NaN motion that fails later, at save time,
+    without a cause (issue 36)."""
+    for i, motion in enumerate(motions):
+        bad = ~torch.isfinite(motion.root_translation).all(-1) | ~torch.isfinite(motion.local_rotations).all(-1).all(-1)
+        if bool(bad.any()):
+            frame = int(torch.nonzero(bad)[0])
+            raise KinemaError(f"sample {i}: {stage} produced NaN or infinite values (first at frame {frame}); an "
+                              "input far outside what the model can take (a huge target, heading or weight?)")
