@@ -35,6 +35,7 @@ from kinema.pipeline.progress import ProgressFn, StepProgress, split_progress
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.pipeline.timeline import Segment, parse_timeline, splice, split_long
+from kinema.postprocess.guard import require_finite
 from kinema.representation.flat import FlatRepresentation
 from kinema.rig import Rig
 from kinema.text import TextEncoder
@@ -149,6 +150,7 @@ class HumanPipeline(MotionPipeline):
             raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner, texts)
             plans = [plan] * samples
         t_sampled = time.perf_counter()
+        require_finite(raw, "sampling")
         motions, residuals = [], []
         for motion, sample_plan in zip(raw, plans, strict=True):
             motion, report = sample_plan.postprocess(motion) if r.postprocess else (motion, {})
