@@ -345,3 +345,16 @@ def test_a_nan_sample_is_a_one_line_error_naming_the_frame(human):
     rots[7, 3] = float("nan")
     with pytest.raises(KinemaError, match=r"sample 1: sampling produced NaN or infinite values \(first at frame 7\)"):
         require_finite([raw, Motion(raw.skeleton, raw.fps, raw.root_translation, rots)], "sampling")
+
+
+# ---------------------------------------------------------------------------- timeline files
+def test_timeline_file_bounds_and_types(tmp_path, capsys):
+    """A timeline *file* with a 1e9-s segment hung in prompt matching (the request's bound only saw
+    inline lists); a segment lasting `true` seconds became a 1-s motion."""
+    for name, seconds, words in (("long.json", 1e9, "at most 600 s"), ("bool.json", True, "got True")):
+        path = tmp_path / name
+        path.write_text(json.dumps([{"prompt": "A person walks.", "seconds": seconds}]))
+        t0 = time.perf_counter()
+        assert main(["generate", "--timeline", str(path), "--no-progress", "--out", str(tmp_path / "o.bvh")]) == 2
+        assert time.perf_counter() - t0 < 30
+        one_line_error(capsys, name, words)
