@@ -16,9 +16,8 @@ Reading and inspecting a rig has no joint limit (the tree walks are iterative; `
 
 from __future__ import annotations
 
-import os
-
 from kinema.errors import KinemaError
+from kinema.runtime import positive_from_env
 
 MAX_RIG_JOINTS = 256
 RIG_JOINTS_ENV = "KINEMA_MAX_RIG_JOINTS"
@@ -26,16 +25,7 @@ RIG_JOINTS_ENV = "KINEMA_MAX_RIG_JOINTS"
 
 def max_rig_joints() -> int:
     """`MAX_RIG_JOINTS`, or the positive integer in ``$KINEMA_MAX_RIG_JOINTS``."""
-    text = os.environ.get(RIG_JOINTS_ENV, "").strip()
-    if not text:
-        return MAX_RIG_JOINTS
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise KinemaError(f"{RIG_JOINTS_ENV}: expected a positive integer, got {text!r}")
-    return value
+    return int(positive_from_env(RIG_JOINTS_ENV, MAX_RIG_JOINTS, integer=True))
 
 
 def check_rig_joints(num_joints: int, where: str, max_joints: int | None = None) -> None:

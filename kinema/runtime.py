@@ -14,6 +14,7 @@ see docs/speed.md). One function, :func:`configure_threads`, decides the thread 
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -43,6 +44,21 @@ def user_cache_dir(*parts: str) -> Path:
 def text_cache_dir() -> Path:
     """Where the CLI keeps text embeddings between processes (``user_cache_dir("text")``)."""
     return user_cache_dir("text")
+
+
+def positive_from_env(name: str, default: float, integer: bool = False) -> float:
+    """The positive number (an integer when ``integer``) in environment variable ``name``, ``default``
+    when it is unset or blank; anything else is a one-line `KinemaError` naming the variable."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return default
+    try:
+        value = int(text) if integer else float(text)
+    except ValueError:
+        value = -1
+    if not (value > 0 and math.isfinite(value)):
+        raise KinemaError(f"{name}: expected a positive {'integer' if integer else 'number'}, got {text!r}")
+    return value
 
 
 def _check_count(value, source: str) -> int:

@@ -10,11 +10,11 @@ error. ``KINEMA_RAY_TIMEOUT`` (seconds) overrides `CONNECT_TIMEOUT`.
 
 from __future__ import annotations
 
-import os
 import socket
 import threading
 
 from kinema.errors import KinemaError
+from kinema.runtime import positive_from_env
 
 PROBE_TIMEOUT = 5.0
 CONNECT_TIMEOUT = 60.0
@@ -47,16 +47,7 @@ def probe(address: str, timeout: float = PROBE_TIMEOUT) -> None:
 
 
 def connect_timeout() -> float:
-    text = os.environ.get(TIMEOUT_ENV, "").strip()
-    if not text:
-        return CONNECT_TIMEOUT
-    try:
-        value = float(text)
-    except ValueError:
-        value = -1.0
-    if not value > 0:
-        raise KinemaError(f"{TIMEOUT_ENV}: expected a positive number of seconds, got {text!r}")
-    return value
+    return positive_from_env(TIMEOUT_ENV, CONNECT_TIMEOUT)
 
 
 def init_bounded(ray, address: str, **kwargs) -> None:
