@@ -308,6 +308,10 @@ def test_malformed_json_is_400_as_documented(server):
         assert resp.status_code == 400, resp.text
         assert "not valid JSON" in resp.json()["detail"] and where in resp.json()["detail"]
     assert post(url, "/v1/generate", {"prompt": 3}).status_code == 422  # valid JSON, wrong field: still 422
+    for body in (TINY | {"seconds": True}, {"timeline": [{"prompt": "A person walks.", "seconds": True}], "steps": 2},
+                 TINY | {"postprocess": "no"}):  # issue 36: true was taken as 1 s
+        resp = post(url, "/v1/generate", body)
+        assert resp.status_code == 422 and ("boolean" in resp.text or "bool" in resp.text), resp.text
 
 
 def test_a_broken_inline_bvh_names_no_server_path(server):
