@@ -15,12 +15,12 @@ from __future__ import annotations
 
 from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import BaseModel, Field, StrictBool, StrictInt, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, Field, StrictBool, StrictInt, field_validator, model_validator
 from pydantic.json_schema import SkipJsonSchema
 
 from kinema.errors import KinemaError
 from kinema.pipeline.request import GenerationRequest, RequestBounds
-from kinema.pipeline.request_json import Segment, Strict, request_model, to_request
+from kinema.pipeline.request_json import Segment, Strict, _no_bool, request_model, to_request
 from kinema.server.config import ServerLimits
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -136,7 +136,7 @@ def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> 
     bounds = RequestBounds(max_seconds=limits.max_seconds, max_samples=limits.max_samples,
                            max_steps=limits.max_steps, max_prompt_chars=limits.max_prompt_chars)
     prompt_t = Annotated[str, Field(max_length=limits.max_prompt_chars)]
-    seconds_t = Annotated[float, Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
+    seconds_t = Annotated[float, BeforeValidator(_no_bool), Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
     these_limits = limits  # a class body cannot read an enclosing name it also assigns
 
     class LimitedSegment(Segment):
