@@ -158,8 +158,8 @@ class MotionPipeline(ABC):
         rig = request.rig
         if rig is None or self.needs_rig or not isinstance(rig, str | Path):
             return None
-        if str(rig) in {r.name for r in self.rigs()}:
-            return None
+        if str(rig) in {r.name for r in self.rigs()} or not Path(rig).is_file():
+            return None  # its own rig, or no character file: the pipeline says what it drives
         return load_stage(stages.CHARACTER).open(rig, self.resolve_rig(None).skeleton)
 
     @abstractmethod
