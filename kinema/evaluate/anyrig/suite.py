@@ -44,7 +44,7 @@ from kinema.evaluate.metrics import position_jerk
 from kinema.geometry.rotations import sixd_to_quat
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
-from kinema.representation.joint import POS, JointRepresentation
+from kinema.representation.joint import POS, ROOT_FORWARD, ROOT_HEIGHT, ROOT_LATERAL, ROT, JointRepresentation
 from kinema.rig import Rig
 
 WINDOW = 10
@@ -105,7 +105,7 @@ def _target(rig: Rig, ref: Motion, rep: JointRepresentation, frames: int) -> Joi
         return None
     f = min(frames, ref.num_frames) // 2
     feats = rep.from_motion(ref.to(torch.float64))[f, j]
-    pos, rot = feats[0:3], sixd_to_quat(feats[3:9])
+    pos, rot = feats[POS], sixd_to_quat(feats[ROT])
     return JointTarget(joint=j, frame=f, position=tuple(float(v) for v in pos), rotation=tuple(float(v) for v in rot))
 
 
@@ -135,7 +135,8 @@ def motion_descriptor(m: Motion, rep: JointRepresentation) -> torch.Tensor:
     root = rep.rig.root
     pos = f[:, [j for j in range(m.num_joints) if j != root], POS]
     r = f[:, root]
-    tail = torch.stack([r[:, [0, 2]].norm(dim=-1).mean(), r[:, 1].mean(), r[:, 1].std()])
+    ground, height = r[:, [ROOT_LATERAL, ROOT_FORWARD]], r[:, ROOT_HEIGHT]
+    tail = torch.stack([ground.norm(dim=-1).mean(), height.mean(), height.std()])
     return torch.cat([pos.mean(0).flatten(), pos.std(0).flatten(), tail])
 
 
