@@ -358,3 +358,13 @@ def test_timeline_file_bounds_and_types(tmp_path, capsys):
         assert main(["generate", "--timeline", str(path), "--no-progress", "--out", str(tmp_path / "o.bvh")]) == 2
         assert time.perf_counter() - t0 < 30
         one_line_error(capsys, name, words)
+
+
+@pytest.mark.parametrize("seconds", [[0.5, 3.0], [3.0, 0.3], [0.2, 0.3], [0.6, 0.6, 0.6]])
+def test_timelines_with_short_segments_are_generated(human, seconds):
+    """A first (or last) segment shorter than the join window failed with 'crop [0, 0) of a 10-frame
+    motion is empty' in the CLI, the API and HTTP."""
+    prompts = ["A person walks.", "A person waves.", "A person bows."]
+    timeline = [{"prompt": p, "seconds": s} for p, s in zip(prompts, seconds, strict=False)]
+    res = human.generate(timeline, steps=2)
+    assert res[0].num_frames == round(sum(seconds) * human.fps) and res[0].is_finite()
