@@ -96,7 +96,7 @@ def crossfade(prev: Motion, new: Motion, overlap: int) -> Motion:
     The shared frames are blended from prev (weight 1 at the start) to new (weight 1 at the end)."""
     if overlap <= 0:
         return prev.concatenate(new)
-    head = prev.crop(0, prev.num_frames - overlap)
+    head = prev.crop(0, prev.num_frames - overlap) if prev.num_frames > overlap else None
     a = prev.crop(prev.num_frames - overlap)
     b = new.crop(0, overlap)
     w = 0.5 - 0.5 * torch.cos(math.pi * (torch.arange(overlap, dtype=a.dtype) + 1) / (overlap + 1))
@@ -110,7 +110,7 @@ def crossfade(prev: Motion, new: Motion, overlap: int) -> Motion:
     if a.foot_contacts is not None and b.foot_contacts is not None:
         contacts = torch.where(w[:, None] < 0.5, a.foot_contacts, b.foot_contacts)
     blended = Motion(prev.skeleton, prev.fps, root, quat_normalize(rots), contacts)
-    out = head.concatenate(blended) if head.num_frames else blended
+    out = blended if head is None else head.concatenate(blended)
     if new.num_frames > overlap:
         out = out.concatenate(new.crop(overlap))
     return out
@@ -120,8 +120,10 @@ def splice(motion: Motion, window: Motion, lo: int, fade_in: int, fade_out: int)
     """``motion`` with frames ``[lo, lo + window.num_frames)`` replaced by ``window``: its first
     ``fade_in`` frames blend from ``motion`` to the window, its last ``fade_out`` back to ``motion``."""
     hi = lo + window.num_frames
-    out = crossfade(motion.crop(0, lo + fade_in), window, fade_in)
-    return crossfade(out, motion.crop(hi - fade_out), fade_out)
+    # a window may start at frame 0 or end on the last frame (a first or last segment shorter than the
+    # join): nothing of ``motion`` is left on that side (issue 36: "crop [0, 0) ... is empty")
+    out = crossfade(motion.crop(0, lo + fade_in), window, fade_in) if lo + fade_in > 0 else window
+    return crossfade(out, motion.crop(hi - fade_out), fade_out) if hi - fade_out < motion.num_frames else out
 
 
 def segment_bounds(segments, fps: float) -> list[int]:
