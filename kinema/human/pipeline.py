@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -39,6 +39,21 @@ from kinema.postprocess.guard import require_finite
 from kinema.representation.flat import FlatRepresentation
 from kinema.rig import Rig
 from kinema.text import TextEncoder
+
+
+@dataclass(frozen=True)
+class SamplingCall:
+    """What every denoiser pass of one ``run`` shares: guidance, DDIM steps, the noise generator (one
+    stream for all passes, so a seed fixes the result), the first frame's heading, how many samples, the
+    (grounded) prompt embeddings and the keyjoint planner, if any."""
+
+    guide: Guidance
+    steps: int
+    generator: torch.Generator
+    heading: float
+    samples: int
+    texts: dict[str, Grounded]
+    planner: KeyjointPlanner | None = None
 
 
 class HumanPipeline(MotionPipeline):
@@ -147,7 +162,8 @@ class HumanPipeline(MotionPipeline):
             raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
                                                             opt, split_progress(progress)[0])
         else:
-            raw = self._sample_batch(plan, guide, steps, g, heading, samples, progress, planner, texts)
+            call = SamplingCall(guide, steps, g, heading, samples, texts, planner)
+            raw = self._sample_batch(plan, call, progress)
             plans = [plan] * samples
         t_sampled = time.perf_counter()
         require_finite(raw, "sampling")
@@ -248,58 +264,50 @@ class HumanPipeline(MotionPipeline):
         distinct = dict.fromkeys(p for p in prompts if p.strip())
         return [self.known_prompts.match(p, self.encode_text(p)[0]) for p in distinct]
 
-    def _generate_one(self, plan: SegmentPlan, guide, steps, g, heading, postprocess, progress):
-        """One motion (all segments and their regenerated joins) and its post-processing report ({} when off)."""
-        motion = self._sample_batch(plan, guide, steps, g, heading, 1, progress)[0]
-        return plan.postprocess(motion) if postprocess else (motion, {})
-
     def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
         return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,
                               anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
                               joint_sigma=self.joint_sigma)
 
-    def _sample_batch(self, plan: SegmentPlan, guide, steps, g, heading, samples: int, progress,
-                      planner: KeyjointPlanner | None = None,
-                      texts: dict[str, Grounded] | None = None) -> list[Motion]:
-        """``samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every
+    def _sample_batch(self, plan: SegmentPlan, call: SamplingCall, progress) -> list[Motion]:
+        """``call.samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every
         join's window regenerated between the two (kinema.human.segments), one batch of all samples per pass.
 
         Sampling all motions in one denoiser batch is faster per motion than one after another (the
         network runs on larger matrices). Segment k of every sample starts where that sample's motion
-        so far ends. Noise: one ``(samples, T, D)`` draw per pass from ``g``, so a seed fixes the
-        result, but sample i is not what a call with fewer samples returned for the same seed.
+        so far ends. Noise: one ``(samples, T, D)`` draw per pass from the call's generator, so a seed fixes
+        the result, but sample i is not what a call with fewer samples returned for the same seed.
         """
         motions: list[Motion] = []
         bar, callback = split_progress(progress)
-        passes = [steps] * len(plan.segments) + [kept_steps(steps, JOIN_STRENGTH)] * len(plan.joins)
+        passes = [call.steps] * len(plan.segments) + [kept_steps(call.steps, JOIN_STRENGTH)] * len(plan.joins)
         counter = None if callback is None else StepProgress(callback, steps=passes)
-        run = partial(self._sample_pass, guide=guide, steps=steps, g=g, bar=bar, planner=planner, texts=texts)
         for k, seg in enumerate(plan.segments):
-            rows = [plan.segment_targets(k, m if k else None, heading) for m in motions or [None] * samples]
-            parts = run(seg.prompt, rows, seg.num_frames, None if counter is None else counter.segment(k))
+            rows = [plan.segment_targets(k, m if k else None, call.heading) for m in motions or [None] * call.samples]
+            on_step = None if counter is None else counter.segment(k)
+            parts = self._sample_pass(seg.prompt, rows, seg.num_frames, call, bar, on_step)
             motions = parts if k == 0 else [m.concatenate(p) for m, p in zip(motions, parts, strict=True)]
         for j, jn in enumerate(plan.joins):
             rep = self.representation
             rows = [plan.join_targets(j, rep.from_motion(m)) for m in motions]
             on_step = None if counter is None else counter.segment(len(plan.segments) + j)
-            windows = run(jn.prompt, rows, jn.num_frames, on_step, strength=JOIN_STRENGTH)
+            windows = self._sample_pass(jn.prompt, rows, jn.num_frames, call, bar, on_step, strength=JOIN_STRENGTH)
             motions = [splice(m, w, jn.lo, jn.fade_in, jn.fade_out) for m, w in zip(motions, windows, strict=True)]
         return motions
 
-    def _sample_pass(self, prompt: str, rows, num_frames: int, on_step, *, guide, steps, g, bar,
-                     planner: KeyjointPlanner | None, texts: dict[str, Grounded] | None = None,
+    def _sample_pass(self, prompt: str, rows, num_frames: int, call: SamplingCall, bar, on_step,
                      strength: float = 1.0) -> list[Motion]:
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
         rep, L = self.representation, self.loaded
         targets, shift = stack_targets(rows)
-        text = self._text(prompt, texts)
+        text = self._text(prompt, call.texts)
         text = None if text is None else text.expand(len(rows), -1)
-        sample = sample_features if planner is None else partial(sample_with_keyjoint_plan, planner=planner)
-        settings = replace(self._settings(num_frames, guide, steps), strength=strength)
-        feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=g, progress=bar, on_step=on_step)
+        sample = sample_features if call.planner is None else partial(sample_with_keyjoint_plan, planner=call.planner)
+        settings = replace(self._settings(num_frames, call.guide, call.steps), strength=strength)
+        feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=call.generator, progress=bar,
+                       on_step=on_step)
         rep.shift_root_xz(feats, shift[:, None])
         return [rep.to_motion(f) for f in feats]
-
 
 #: the name this class had before the one-pipeline interface (kept for scripts that import it)
 KinemaModel = HumanPipeline
