@@ -78,7 +78,13 @@ def test_every_request_field_is_on_every_face_or_says_where_it_is() -> None:
         assert f.name in dests or (opt.cli is False and opt.cli_note), f.name
 
 
-def test_request_bounds_and_types_are_one_line_errors() -> None:
+def test_request_bounds_and_types_are_one_line_errors(monkeypatch) -> None:
+    monkeypatch.setenv("KINEMA_MAX_SECONDS", "1200")
+    assert GenerationRequest(prompt="x", seconds=900).seconds == 900  # a process may allow longer motions
+    monkeypatch.setenv("KINEMA_MAX_SECONDS", "-3")
+    with pytest.raises(KinemaError, match="KINEMA_MAX_SECONDS: expected a positive number"):
+        GenerationRequest(prompt="x")
+    monkeypatch.delenv("KINEMA_MAX_SECONDS")
     for bad, message in [({"samples": 0}, "samples"), ({"seconds": 1e9}, r"seconds: expected .* \(0, 600\]"),
                          ({"seconds": True}, "expected a finite number"), ({"postprocess": "no"}, "true or false"),
                          ({"heading": float("inf")}, "finite"), ({"prompt": "x", "timeline": [["y", 1]]}, "either"),
@@ -123,8 +129,10 @@ def test_both_models_take_the_same_request_and_refuse_what_they_cannot_do(tmp_pa
         creatures.generate(req.replace(rig=str(fox), grounding=0.5))
     with pytest.raises(KinemaError, match="needs a rig"):
         creatures.generate(req)
+    with pytest.raises(KinemaError, match="not a humanoid"):
+        human.generate(req.replace(rig=str(fox)))  # a character file: the human model retargets humanoids only
     with pytest.raises(KinemaError, match="drives its own skeleton"):
-        human.generate(req.replace(rig=str(fox)))
+        human.generate(req.replace(rig="fox0"))  # a rig id it does not have
 
 
 def test_server_serves_both_models_with_an_inline_rig_and_glb_out(tmp_path) -> None:

@@ -15,7 +15,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from kinema.pipeline.request import REQUEST_BOUNDS, GenerationRequest, Option, RequestBounds, options
+from kinema.pipeline.request import GenerationRequest, Option, RequestBounds, options
 
 #: fields the CLI spells in a unit other than the request's: name -> (CLI unit, to request unit)
 CLI_UNITS = {"heading": ("degrees", math.radians)}
@@ -51,7 +51,7 @@ def flag(name: str, opt: Option) -> str:
 
 
 def add_request_arguments(p: argparse.ArgumentParser, cls: type = GenerationRequest,
-                          bounds: RequestBounds = REQUEST_BOUNDS) -> None:
+                          bounds: RequestBounds | None = None) -> None:
     """One argument per request field of ``cls`` (see the module docstring)."""
     for f, opt in options(cls):
         if opt.cli is False:

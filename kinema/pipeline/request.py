@@ -21,17 +21,23 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from kinema.errors import KinemaError
+from kinema.runtime import positive_from_env
 
 #: largest seed `torch.Generator.manual_seed` takes as it is
 MAX_SEED = 2**64 - 1
-#: bounds a request may not exceed on any face (a server's limits can only be tighter); override a bound
-#: for your own process with ``dataclasses.replace(REQUEST_BOUNDS, max_seconds=...)`` and `check(bounds=...)`
 DEFAULT_SECONDS = 5.0
+#: environment variables that raise (or lower) a bound for a process: field -> variable
+BOUND_ENV = {"max_seconds": "KINEMA_MAX_SECONDS", "max_samples": "KINEMA_MAX_SAMPLES"}
 
 
 @dataclass(frozen=True)
 class RequestBounds:
-    """The largest request kinema accepts (memory grows with seconds x samples; see docs/limits)."""
+    """The largest request kinema accepts on any face (a server's limits can only be tighter).
+
+    Memory and time grow with seconds x samples: a 600-s motion is 12 000 frames at 20 fps, the longest
+    timeline the human model's joins were measured on; 64 samples of a 10-s window fill about 2 GB of
+    activations. ``KINEMA_MAX_SECONDS`` and ``KINEMA_MAX_SAMPLES`` override the first two for a process.
+    """
 
     max_seconds: float = 600.0
     max_samples: int = 64
@@ -40,8 +46,16 @@ class RequestBounds:
     max_fps: float = 240.0
     max_prompt_chars: int = 2000
 
+    @classmethod
+    def from_env(cls) -> RequestBounds:
+        """The defaults with the environment's overrides (a bad value is a one-line error naming it)."""
+        given = {f: positive_from_env(env, getattr(cls, f), integer=f == "max_samples") for f, env in BOUND_ENV.items()}
+        return cls(**given)
 
-REQUEST_BOUNDS = RequestBounds()
+
+def request_bounds() -> RequestBounds:
+    """The bounds every request is checked against: the defaults and the environment's overrides."""
+    return RequestBounds.from_env()
 
 
 @dataclass(frozen=True)
@@ -236,8 +250,10 @@ def _check_field(name: str, value: Any, opt: Option, bounds: RequestBounds) -> N
             raise KinemaError(f"{name}: expected one of {', '.join(opt.choices)}, got {value!r}")
 
 
-def check(request: GenerationRequest, bounds: RequestBounds = REQUEST_BOUNDS) -> None:
-    """Raise a one-line `KinemaError` for a field of the wrong type or out of ``bounds``."""
+def check(request: GenerationRequest, bounds: RequestBounds | None = None) -> None:
+    """Raise a one-line `KinemaError` for a field of the wrong type or out of ``bounds`` (default:
+    `request_bounds`)."""
+    bounds = bounds or request_bounds()
     for f, opt in options(type(request)):
         value = getattr(request, f.name)
         if value is not None:

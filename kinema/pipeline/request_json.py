@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, StrictInt, create_model
 
-from kinema.pipeline.request import REQUEST_BOUNDS, GenerationRequest, Option, RequestBounds, options
+from kinema.pipeline.request import GenerationRequest, Option, RequestBounds, options, request_bounds
 
 
 class Strict(BaseModel):
@@ -49,8 +49,9 @@ def _number_type(opt: Option, bounds: RequestBounds, integer: bool) -> Any:
     return Annotated[float, BeforeValidator(_no_bool), Field(allow_inf_nan=False, **limits)]
 
 
-def field_type(opt: Option, bounds: RequestBounds = REQUEST_BOUNDS) -> Any:
-    """The pydantic type of one request field (see the module docstring)."""
+def field_type(opt: Option, bounds: RequestBounds | None = None) -> Any:
+    """The pydantic type of one request field (see the module docstring); ``bounds``: `request_bounds`."""
+    bounds = bounds or request_bounds()
     if opt.kind == "int":
         return _number_type(opt, bounds, True)
     if opt.kind == "float":
@@ -68,7 +69,7 @@ def field_type(opt: Option, bounds: RequestBounds = REQUEST_BOUNDS) -> Any:
     return Any
 
 
-def request_model(name: str, *, cls: type = GenerationRequest, bounds: RequestBounds = REQUEST_BOUNDS,
+def request_model(name: str, *, cls: type = GenerationRequest, bounds: RequestBounds | None = None,
                   overrides: dict[str, Any] | None = None, extra: dict[str, tuple[Any, Any]] | None = None,
                   base: type[BaseModel] = Strict) -> type[BaseModel]:
     """A pydantic model named ``name`` with one optional field per field of ``cls`` (the request's own

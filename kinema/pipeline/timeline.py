@@ -19,7 +19,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
 from kinema.motion.core import Motion
-from kinema.pipeline.request import REQUEST_BOUNDS
+from kinema.pipeline.request import request_bounds
 
 #: Keys of a timeline segment object (besides ``comment`` and keys starting with ``_``, ignored).
 SEGMENT_KEYS = ("prompt", "seconds")
@@ -67,7 +67,7 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
                 or seconds <= 0:
             raise KinemaError(f"{source}: segment {i}: field 'seconds' must be a positive number, got {seconds!r}")
         out.append(Segment(prompt, float(seconds)))
-    total, limit = sum(seg.seconds for seg in out), REQUEST_BOUNDS.max_seconds
+    total, limit = sum(seg.seconds for seg in out), request_bounds().max_seconds
     if total > limit + 1e-9:  # before any work: 1e9 s used to hang prompt matching (issue 36)
         raise KinemaError(f"{source}: the timeline lasts {total:g} s; at most {limit:g} s")
     return out
