@@ -246,7 +246,8 @@ class JointRepresentation:
         skel = self.rig.skeleton
         if isinstance(joint, str):
             if joint not in skel.names:
-                raise KinemaError(f"constraint joint {joint!r} is not in rig {skel.name or ''} ({skel.num_joints} joints)")
+                raise KinemaError(f"constraint joint {joint!r} is not in rig {skel.name or ''} "
+                                  f"({skel.num_joints} joints)")
             return skel.index(joint)
         if not 0 <= int(joint) < skel.num_joints:
             raise KinemaError(f"constraint joint {joint} outside 0..{skel.num_joints - 1}")
