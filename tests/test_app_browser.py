@@ -104,6 +104,8 @@ def generate(page, session) -> None:
     wait_for(lambda: session.motions is not before and session.job is None, what="generation")
     assert "sample(s)," in session.status.content, session.status.content  # not "Failed: ..."
     page.get_by_text("sample(s),").first.wait_for(timeout=60000)  # and the page shows it
+    button(page, "Pause").click()  # a new motion plays at once; the tests below drive the frame themselves
+    wait_for(lambda: not session.player.playing, what="playback to pause")
 
 
 def screen_step(camera, point: torch.Tensor, axis: int, box) -> float:

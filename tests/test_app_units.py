@@ -70,7 +70,7 @@ def test_scene_constraints_are_valid_and_hit_what_was_shown(model, motion):
         "waypoint @ 20 (1.0 s)",
         "pose @ 10 (0.5 s)",
         "Hand_R pos+rot @ 30 (1.5 s)",
-        "left foot planted @ 30-40 (1.5-2.0 s)",
+        "left foot planted, right lifted @ 30-40 (1.5-2.0 s)",
     ]
     assert residual(edits.waypoint(500, 0, 0), motion) == "beyond the motion"
     assert edits.spanned(made[3], 5, 8)["frame_indices"] == [5, 6, 7, 8]

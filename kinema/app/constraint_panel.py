@@ -13,14 +13,20 @@ tab's Session: it supplies the shown motion and frame, the document, notificatio
 from __future__ import annotations
 
 import math
+import re
 
 from kinema.app import edits
 from kinema.app import generation as gen
 from kinema.app.residuals import residual
 from kinema.app.rig_constraints import waypoint_residual
+from kinema.app.rigs import skeleton_size
 from kinema.errors import KinemaError
 
 CLICK_MODES = ("off", "waypoint", "path")
+#: the move gizmo's size in sizes of the rig (0.45 m for a person: reachable, not hiding the character)
+GIZMO_SIZE = 0.27
+#: joint names of helper bones (IK targets, poles, roots of controls): never the default joint to pin
+HELPER_BONE = re.compile(r"(^|[^a-z])(ik|pole|target|ctrl|control)|^(ff|ffb)[._]|root$|armature$", re.IGNORECASE)
 TARGET_MODES = {"position": (True, False), "rotation": (False, True), "position + rotation": (True, True)}
 
 
@@ -50,10 +56,15 @@ class ConstraintPanel:
             self.target_btn = gui.add_button(
                 "Add target", icon="target", hint="pin the joint where it is at this frame; drag the gizmo to move it"
             )
-            self.contact = gui.add_dropdown("Feet", tuple(edits.CONTACT_PRESETS), initial_value="left foot planted")
+            self.contact = gui.add_dropdown(
+                "Feet", tuple(edits.CONTACT_PRESETS), initial_value=next(iter(edits.CONTACT_PRESETS)),
+                hint="each choice sets both feet over the range: a foot not planted is held off the ground",
+            )
             self.range = gui.add_multi_slider(
                 "Frames", min=0, max=1, step=1, initial_value=(0, 1), hint="frame range for contacts and paths"
             )
+            self.range_from = gui.add_number("From frame", 0, min=0, max=1, step=1, hint="first frame of the range")
+            self.range_to = gui.add_number("To frame", 1, min=0, max=1, step=1, hint="last frame of the range")
             self.contact_btn = gui.add_button(
                 "Add contacts", icon="shoe", hint="plant / lift the feet over the frame range"
             )
@@ -75,6 +86,9 @@ class ConstraintPanel:
         self.target_btn.on_click(lambda _: self._safely(self._target))
         self.contact_btn.on_click(lambda _: self._safely(self._contacts))
         self.items.on_update(lambda _: self._select_changed())
+        self.range.on_update(lambda _: self._range_to_boxes())
+        self.range_from.on_update(lambda _: self._boxes_to_range())
+        self.range_to.on_update(lambda _: self._boxes_to_range())
         self.heading_deg.on_update(lambda _: self._heading_changed())
         row.on_click(lambda e: self._safely(lambda: self._edit(e.target.value)))
         scene.on_click()(self._clicked)
@@ -109,6 +123,20 @@ class ConstraintPanel:
         self.range.max = hi
         lo_v = min(lo_v, hi - 1)
         self.range.value = (lo_v, hi if hi_v >= old_end or hi_v > hi or hi_v <= lo_v else hi_v)
+        self.range_from.max = self.range_to.max = hi
+        self._range_to_boxes()
+
+    def _range_to_boxes(self) -> None:
+        lo, hi = (int(v) for v in self.range.value)
+        if (self.range_from.value, self.range_to.value) != (lo, hi):
+            self.range_from.value, self.range_to.value = lo, hi
+
+    def _boxes_to_range(self) -> None:
+        """Typed frames set the range exactly (kept inside the timeline, in order); the boxes show what was set."""
+        lo, hi = edits.frame_range(self.range_from.value, self.range_to.value, int(self.range.max))
+        if tuple(int(v) for v in self.range.value) != (lo, hi):
+            self.range.value = (lo, hi)
+        self._range_to_boxes()
 
     # ------------------------------------------------------------------ list
     def refresh(self, select: int | None = None) -> None:
@@ -171,7 +199,7 @@ class ConstraintPanel:
         rotates = c["type"] == "end-effector" and "rotations" in c
         self.gizmo = self.scene.add_transform_controls(
             "/gizmo",
-            scale=0.45,
+            scale=GIZMO_SIZE * skeleton_size(self.host.skeleton),
             position=edits.anchor(c),
             wxyz=edits.rotation_wxyz(c),
             active_axes=(True, not ground, True),
@@ -256,5 +284,11 @@ class ConstraintPanel:
 
 
 def _default_joint(skeleton) -> str:
-    j = skeleton.roles.get("right_hand")
-    return skeleton.names[j] if j is not None else skeleton.names[-1]
+    """The joint "Add target" starts with: the right hand, else the head, else the last joint that is no
+    helper bone (Quaternius rigs end with IK targets such as ``IKFrontLeg.R``)."""
+    for role in ("right_hand", "head"):
+        j = skeleton.roles.get(role)
+        if j is not None:
+            return skeleton.names[j]
+    names = [n for n in skeleton.names if not HELPER_BONE.search(n)]
+    return (names or list(skeleton.names))[-1]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 
 from kinema.constraints import constraint_to_json, load_constraints
@@ -29,6 +30,14 @@ DEFAULT_TIMELINE = (
     {"prompt": "A person walks forward.", "seconds": 6.0},
     {"prompt": "A person turns around and waves.", "seconds": 5.0},
 )
+
+
+#: the shortest segment a session may hold (the Seconds boxes' lower end)
+MIN_SEGMENT_SECONDS = 0.5
+#: the longest segment a session may hold (the Seconds boxes' range; longer stretches are several segments)
+MAX_SEGMENT_SECONDS = 60.0
+#: the longest timeline a session may hold (a few minutes of motion: many minutes of CPU)
+MAX_SESSION_SECONDS = 180.0
 
 
 @dataclass
@@ -68,19 +77,54 @@ class Document:
         return json.dumps(obj, indent=1, allow_nan=False) + "\n"
 
 
+def creature_prompts(rig_name: str) -> tuple[dict, ...]:
+    """The default timeline for a model for any rig: the rig's file name as the subject (``Fox.glb``:
+    "A fox walks."), "A creature" when the name has no word."""
+    words = re.sub(r"[^a-z]+", " ", rig_name.rsplit(".", 1)[0].lower()).split()
+    noun = " ".join(words[:2]) or "creature"
+    article = "An" if noun[0] in "aeiou" else "A"
+    return ({"prompt": f"{article} {noun} walks.", "seconds": 6.0}, {"prompt": f"{article} {noun} turns around.",
+                                                                       "seconds": 5.0})
+
+
+def added_prompt(any_rig: bool, rig_name: str) -> str:
+    """What "Add prompt" writes: a person (human model) or the rig's subject (any-rig model) standing still."""
+    return creature_prompts(rig_name)[0]["prompt"].replace(" walks.", " stands still.") if any_rig else \
+        "A person stands still."
+
+
+def default_document(any_rig: bool, rig_name: str, settings: Settings) -> Document:
+    """A new tab's document: two prompts about a person (human model) or about the rig (any-rig model)."""
+    timeline = creature_prompts(rig_name) if any_rig else DEFAULT_TIMELINE
+    return Document(timeline=[dict(s) for s in timeline], settings=settings)
+
+
 def check_timeline(timeline: list[dict]) -> list[dict]:
     """The timeline validated by the generator's own parser, as plain ``{"prompt", "seconds"}`` dicts."""
     return [{"prompt": s.prompt, "seconds": float(s.seconds)} for s in parse_timeline(list(timeline), "timeline")]
 
 
-def _settings(obj, source: str) -> Settings:
+def check_session_length(timeline: list[dict], source: str) -> None:
+    """Refuse a segment shorter or longer than the Seconds boxes take, or a timeline longer than a session may be."""
+    for i, seg in enumerate(timeline):
+        if not MIN_SEGMENT_SECONDS <= seg["seconds"] <= MAX_SEGMENT_SECONDS:
+            raise KinemaError(f"{source}: timeline[{i}]: 'seconds' is {seg['seconds']:g}; a segment lasts "
+                              f"{MIN_SEGMENT_SECONDS:g} to {MAX_SEGMENT_SECONDS:g} s in the app (split a longer "
+                              "one into several prompts)")
+    total = sum(seg["seconds"] for seg in timeline)
+    if total > MAX_SESSION_SECONDS:
+        raise KinemaError(f"{source}: the timeline lasts {total:g} s; a session holds at most "
+                          f"{MAX_SESSION_SECONDS:g} s")
+
+
+def _settings(obj, source: str, max_steps: int) -> Settings:
     if not isinstance(obj, dict):
         raise KinemaError(f"{source}: 'settings' must be an object with {list(SETTING_KEYS)}")
     unknown = sorted(set(obj) - set(SETTING_KEYS))
     if unknown:
         raise KinemaError(f"{source}: settings: unknown keys {unknown} (expected {list(SETTING_KEYS)})")
     s = Settings(**obj)
-    for name, low, high in (("samples", 1, 4), ("seed", 0, 2**64 - 1), ("steps", 1, 10**6)):
+    for name, low, high in (("samples", 1, 4), ("seed", 0, 2**64 - 1), ("steps", 1, max_steps)):
         v = getattr(s, name)
         if name == "steps" and v is None:
             continue
@@ -89,8 +133,10 @@ def _settings(obj, source: str) -> Settings:
     return s
 
 
-def load_document(text: str | bytes, *, skeleton, fps: float, source: str = "session") -> Document:
-    """Parse and validate a session file against the model (skeleton, fps); errors name the field."""
+def load_document(text: str | bytes, *, skeleton, fps: float, source: str = "session",
+                  max_steps: int = 10**6) -> Document:
+    """Parse and validate a whole session file against the model (skeleton, fps, its most DDIM steps) and
+    the app's limits (`check_session_length`); errors name the field."""
     try:
         obj = json.loads(text)
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
@@ -111,7 +157,8 @@ def load_document(text: str | bytes, *, skeleton, fps: float, source: str = "ses
     ):
         raise KinemaError(f"{source}: 'fps' must be a positive number, got {file_fps!r}")
     timeline = check_timeline(obj.get("timeline", []))
+    check_session_length(timeline, source)
     frames = sum(round(s["seconds"] * fps) for s in timeline)
     cons = load_constraints({"fps": file_fps, "constraints": obj.get("constraints", [])}, skeleton, fps, frames)
-    settings = _settings(obj.get("settings", {}), source)
+    settings = _settings(obj.get("settings", {}), source, max_steps)
     return Document(timeline=timeline, constraints=[constraint_to_json(c) for c in cons], settings=settings)

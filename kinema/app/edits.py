@@ -19,12 +19,17 @@ from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
 from kinema.motion.core import Motion
 
 #: foot-contact presets: name -> flags for [L heel, L toe, R heel, R toe]
+#: each preset sets both feet (heel, toe flags of [left heel, left toe, right heel, right toe]): the generator
+#: reads 0 as "off the ground", so a preset planting one foot says that it lifts the other
 CONTACT_PRESETS = {
-    "left foot planted": (1, 1, 0, 0),
-    "right foot planted": (0, 0, 1, 1),
+    "left foot planted, right lifted": (1, 1, 0, 0),
+    "right foot planted, left lifted": (0, 0, 1, 1),
     "both feet planted": (1, 1, 1, 1),
     "both feet lifted": (0, 0, 0, 0),
 }
+#: names of sessions saved before the presets said what the other foot does
+OLD_PRESET_NAMES = {"left foot planted": "left foot planted, right lifted",
+                    "right foot planted": "right foot planted, left lifted"}
 
 
 def heading_vector(h: float) -> list[float]:
@@ -100,6 +105,7 @@ def target(motion: Motion, frame: int, joint: str, *, position: bool, rotation: 
 
 def contacts(start: int, end: int, preset: str) -> dict:
     """A ``foot-contact`` constraint holding one preset (see ``CONTACT_PRESETS``) on frames start..end."""
+    preset = OLD_PRESET_NAMES.get(preset, preset)
     if preset not in CONTACT_PRESETS:
         raise KinemaError(f"unknown contact preset {preset!r} (one of {list(CONTACT_PRESETS)})")
     lo, hi = sorted((int(start), int(end)))
@@ -108,6 +114,13 @@ def contacts(start: int, end: int, preset: str) -> dict:
         "frame_indices": list(range(lo, hi + 1)),
         "contacts": [list(CONTACT_PRESETS[preset])] * (hi - lo + 1),
     }
+
+
+def frame_range(first, last, end: int) -> tuple[int, int]:
+    """Typed frame numbers as a range inside ``0..end``, in order, at least one frame long."""
+    lo, hi = sorted(int(round(float(v))) for v in (first, last))
+    lo = min(max(lo, 0), max(end - 1, 0))
+    return lo, min(max(hi, lo + 1), end)
 
 
 def label(c: dict, fps: float) -> str:

@@ -6,6 +6,7 @@ private temporary folder and never written anywhere else; errors become notifica
 from __future__ import annotations
 
 import tempfile
+import traceback
 from pathlib import Path
 
 from kinema.app.rigs import model_rig
@@ -75,10 +76,14 @@ class FilesPanel:
         clip.on_upload(lambda e: self._guard(lambda: self._clip(clip.value.name, clip.value.content)))
 
     def _guard(self, fn) -> None:
+        """Run an upload's handler; any failure is one line in a notification (nothing half-applied)."""
         try:
             fn()
         except KinemaError as err:
             self.host.notify("Upload failed", str(err), error=True)
+        except Exception as err:  # a bug: the page says so in one line, the server log has the traceback
+            traceback.print_exc()
+            self.host.notify("Upload failed (internal error)", f"{type(err).__name__}: {err}", error=True)
 
     def _download(self, client, suffix: str) -> None:
         motion = self.host.result_motion()
@@ -94,6 +99,8 @@ class FilesPanel:
         client.send_file_download(f"kinema_motion{suffix}", data, save_immediately=True)
 
     def _clip(self, name: str, content: bytes) -> None:
-        m = self.host.model
-        motion = clip_on_model(name, content, skeleton=m.skeleton, fps=m.fps, scale=UNITS[self.units.value])
+        """A BVH clip on the skeleton constraints are written for (the model's, or the rig's for a model for
+        any rig or a character): joints matched by name."""
+        skeleton, fps = self.host.skeleton, self.host.model.fps
+        motion = clip_on_model(name, content, skeleton=skeleton, fps=fps, scale=UNITS[self.units.value])
         self.host.show_motions([motion], report=None, source=f"clip {name}")

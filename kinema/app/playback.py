@@ -32,6 +32,9 @@ class Player:
             self.time_md = gui.add_markdown("")
             self.loop = gui.add_checkbox("Loop", True)
             self.speed = gui.add_dropdown("Speed", tuple(SPEEDS), initial_value="1x")
+            self.follow = gui.add_checkbox(
+                "Follow character", True, hint="the camera moves with the character while it plays"
+            )
         self.playing = False
         self._stop = threading.Event()
         self.play_btn.on_click(lambda _: self.set_playing(not self.playing))

@@ -21,6 +21,7 @@ from kinema.io.gltf_writer import glb_bytes, rest_world
 from kinema.mesh import SkinnedMesh, bone_mesh
 from kinema.motion.contacts import foot_contacts
 from kinema.motion.core import Motion
+from kinema.retarget.detect import find_humanoid
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -37,6 +38,11 @@ class AppRig:
     contacts: tuple[int, ...]
     clips: dict[str, Motion] = field(default_factory=dict)
     own_colors: bool = False  # the mesh has the file's material colours (else it takes the sample colour)
+    humanoid: bool = False  # legs, arms and head found by name (kinema.retarget.detect): the human model drives it
+    source: bytes = b""  # the file's bytes (a character is handed to the pipeline as its file)
+
+    def size(self) -> float:
+        return skeleton_size(self.skeleton)
 
     def with_contacts(self, motion: Motion) -> Motion:
         """``motion`` with foot contact flags for this rig's contact joints when it has none."""
@@ -55,6 +61,12 @@ class AppRig:
     def glb(self, motion: Motion, name: str = "motion") -> bytes:
         """``motion`` (on this rig) as GLB bytes with this rig's skin."""
         return glb_bytes({name: motion}, mesh=self.mesh)
+
+
+def skeleton_size(skeleton: Skeleton) -> float:
+    """A skeleton's extent in its rest pose (metres, the largest of height, width, depth; at least 0.1)."""
+    rest = rest_world(skeleton)[1]
+    return max(0.1, float((rest.max(0) - rest.min(0)).max()))
 
 
 def _contacts(skeleton: Skeleton) -> tuple[int, ...]:
@@ -85,7 +97,8 @@ def load_rig(path: str | Path, *, fps: float, scale: float = 1.0) -> AppRig:
         skeleton, clips = motion.skeleton, {path.name: motion.resample(fps).to(torch.float32)}
     rig = model_rig(skeleton, name=path.name)
     clips = {k: rig.with_contacts(m.to(torch.float32)) for k, m in clips.items() if m.num_frames > 0}
-    return AppRig(path.name, skeleton, rig.mesh, rig.contacts, clips, own_colors=skeleton.mesh is not None)
+    return AppRig(path.name, skeleton, rig.mesh, rig.contacts, clips, own_colors=skeleton.mesh is not None,
+                  humanoid=find_humanoid(skeleton).is_humanoid, source=path.read_bytes())
 
 
 def load_rig_bytes(name: str, content: bytes, *, fps: float, scale: float = 1.0) -> AppRig:

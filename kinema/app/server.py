@@ -8,7 +8,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import viser
 
-from kinema.app.generation import is_any_rig
+from kinema.app.generation import AppRobot, is_any_rig
 from kinema.app.rigs import AppRig, model_rig
 from kinema.app.session import Session
 from kinema.errors import KinemaError
@@ -24,7 +24,8 @@ CAMERA_LOOK_AT = (0.0, 0.2, 3.4)
 class AppServer:
     """``kinema app``: serve the authoring UI for ``model`` on ``host:port`` (``steps``: DDIM steps
     a new tab starts with, None = the model's setting; ``rig``: the character new tabs show, default
-    the model's own skeleton; ``model_name`` names the model in messages)."""
+    the model's own skeleton; ``model_name`` names the model in messages; ``robot``: a robot every
+    generated motion is also retargeted onto and drawn beside it, kinema app --robot)."""
 
     def __init__(
         self,
@@ -35,11 +36,14 @@ class AppServer:
         host: str = "127.0.0.1",
         port: int = 8080,
         steps: int | None = None,
+        robot: AppRobot | None = None,
         verbose: bool = False,
     ):
         if rig is None and is_any_rig(model):
             raise KinemaError("an any-rig model needs a rig to start with: kinema app --model creatures --rig FILE")
-        self.model, self.steps, self.model_name = model, steps, model_name
+        if robot is not None and is_any_rig(model):
+            raise KinemaError("--robot: robots are retargeted from the human model's motions; drop --model creatures")
+        self.model, self.steps, self.model_name, self.robot = model, steps, model_name, robot
         self.rig = rig or model_rig(model.skeleton, name=model_name)
         self.pool = ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="kinema-app-generate")
         self.sessions: dict[int, Session] = {}

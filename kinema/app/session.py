@@ -8,35 +8,50 @@ from __future__ import annotations
 import threading
 import traceback
 
+import numpy as np
+
 from kinema.app import generation as gen
+from kinema.app.camera import CameraFollow, character_extent
 from kinema.app.constraint_panel import ConstraintPanel
-from kinema.app.document import Document, Settings, check_timeline, load_document
+from kinema.app.document import Document, Settings, added_prompt, check_timeline, default_document, load_document
 from kinema.app.files_panel import FilesPanel
 from kinema.app.markers import Markers, contact_flags_at
 from kinema.app.mesh_view import MeshView, SkinPool
 from kinema.app.playback import Player
 from kinema.app.rig_panel import RigPanel
-from kinema.app.rigs import AppRig
+from kinema.app.rigs import AppRig, skeleton_size
 from kinema.app.timeline_panel import TimelinePanel
-from kinema.app.views import OTHER_COLOR, SELECTED_COLOR, CharacterView, SkeletonView, rest_motion
+from kinema.app.views import OTHER_COLOR, ROBOT_COLOR, SELECTED_COLOR, CharacterView, SkeletonView, rest_motion
 from kinema.errors import KinemaError
 
-#: spacing (metres, towards -X, away from the camera) of the samples not selected, drawn beside the selected one
-SAMPLE_SPACING = 1.6
+#: spacing of the samples not selected (towards -X, away from the camera), drawn beside the selected one, in
+#: sizes of the rig (its rest pose's largest extent: 1.6 m for a 1.7 m person)
+SAMPLE_SPACING = 0.95
 SAMPLE_NAMES = ("1", "2", "3", "4")
+#: the share of the progress bar the denoiser steps fill; the rest is post-processing (foot contacts,
+#: constraints, retargeting), which reports no steps
+SAMPLING_SHARE = 90.0
+#: warnings shown in the status and the notification (the rest are counted)
+SHOWN_WARNINGS = 2
+#: characters of one warning shown (a keyframe miss lists every joint: it is cut)
+WARNING_CHARS = 160
 
 
 class Session:
     def __init__(self, app, client):
         self.app, self.client, self.model, self.rig = app, client, app.model, app.rig
         #: the skeleton constraints are written for (the human model's own; any-rig: the starting rig)
-        self.skeleton = self.rig.skeleton if gen.is_any_rig(self.model) else self.model.skeleton
-        self.doc = Document(settings=Settings(steps=app.steps))
+        self.skeleton = self.constraint_skeleton(self.rig)
+        self.doc = default_document(gen.is_any_rig(self.model), self.rig.name, Settings(steps=app.steps))
         self.motions = self.rig_motions()
         self.skin = self.rig.own_colors
         self.generated = False
+        self.from_timeline = False  # the shown motion was generated from the timeline (not a clip)
         self.selected = 0
         self.job = None
+        self.cancel = threading.Event()  # set by Cancel and when the tab closes: the job stops at its next step
+        self.closed = False
+        self.robot_motions: list = []
         self.lock = threading.Lock()
         scene, gui = client.scene, client.gui
         scene.set_up_direction("+y")
@@ -55,9 +70,11 @@ class Session:
         self.views: list[list[CharacterView]] = []
         self.skins = SkinPool(scene)
         self.markers = Markers(scene, self.skeleton, self.model.fps)
-        self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True))
+        self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True),
+                                      added_prompt(gen.is_any_rig(self.model), self.rig.name))
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
+        self.camera = CameraFollow(client, lambda: bool(self.player.follow.value) and self.player.playing)
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
         self.rig_panel = RigPanel(gui, self)
@@ -75,6 +92,9 @@ class Session:
                 color="green",
                 hint="generate from the timeline, keeping the constraints",
             )
+            self.cancel_btn = gui.add_button(
+                "Cancel", icon="x", color="red", visible=False, hint="stop this generation (nothing changes)"
+            )
             self.progress = gui.add_progress_bar(0.0, visible=False, animated=True)
             self.status = gui.add_markdown("Write prompts in the timeline, then press **Generate**.")
             self.samples = gui.add_slider("Samples", min=1, max=4, step=1, initial_value=s.samples)
@@ -89,10 +109,15 @@ class Session:
             )
             self.pick = gui.add_button_group("Show sample", SAMPLE_NAMES[:1])
         self.gen_btn.on_click(lambda _: self.generate())
+        self.cancel_btn.on_click(lambda _: self.stop_job("Cancelled"))
         self.pick.on_click(lambda e: self.select_sample(SAMPLE_NAMES.index(e.target.value)))
 
     def notify(self, title: str, body: str, *, error: bool = False) -> None:
         self.client.add_notification(title, body, color="red" if error else "blue", auto_close_seconds=8.0)
+
+    def notify(self, title: str, body: str, *, error: bool = False) -> None:
+        if not self.closed:
+            self.client.add_notification(title, body, color="red" if error else "blue", auto_close_seconds=8.0)
 
     # ------------------------------------------------------------------ motions
     def shown_motion(self):
@@ -102,10 +127,13 @@ class Session:
         """The shown motion once there is one (generated or uploaded), else None."""
         return self.shown_motion() if self.generated else None
 
-    def show_motions(self, motions, *, report, source: str | None) -> None:
-        """Replace the motions (samples) drawn; the first is selected."""
+    def show_motions(self, motions, *, report, source: str | None, robots=(), play: bool = False) -> None:
+        """Replace the motions (samples) drawn, each with its robot motion when given; the first is
+        selected, the camera frames it, and with ``play`` it plays from the start."""
         with self.lock:
             self.motions, self.generated, self.selected = list(motions), source is not None, 0
+            self.from_timeline = source == "generated"
+            self.robot_motions = list(robots)
             for group in self.views:
                 for v in group:
                     v.remove()
@@ -116,22 +144,43 @@ class Session:
         if source is not None and report is None:
             self.status.content = f"Showing {source}."
         self._length_changed()
+        self.player.seek(0)
+        self.frame_camera()
+        self.player.set_playing(play)
+
+    def spacing(self) -> float:
+        """Metres between samples side by side: scaled to the rig's size (twice that with a robot beside each)."""
+        size = skeleton_size(self.shown_motion().skeleton)
+        return SAMPLE_SPACING * size * (2.0 if self.robot_motions else 1.0)
+
+    def lanes(self) -> list[float]:
+        """X offset of each sample's lane, the selected one first (at 0)."""
+        return [-k * self.spacing() for k in range(len(self.motions))]
 
     def select_sample(self, i: int) -> None:
         with self.lock:
             self.selected = min(max(i, 0), len(self.motions) - 1)
             others = [k for k in range(len(self.motions)) if k != self.selected]
+            lanes = self.lanes()
             for k, group in enumerate(self.views):
-                lane = 0 if k == self.selected else others.index(k) + 1
-                for view in group:
-                    view.color = SELECTED_COLOR if k == self.selected else OTHER_COLOR
-                    view.trail = k == self.selected
+                x = lanes[0 if k == self.selected else others.index(k) + 1]
+                for view, motion in zip(group, self._group_motions(k), strict=True):
+                    robot = motion is not self.motions[k]
+                    view.color = ROBOT_COLOR if robot else SELECTED_COLOR if k == self.selected else OTHER_COLOR
+                    view.trail = k == self.selected and not robot
                     view.remove()
-                    view.set_motion(self.motions[k], offset=(-lane * SAMPLE_SPACING, 0.0, 0.0))
+                    shift = self.spacing() / 2 if robot else 0.0
+                    view.set_motion(motion, offset=(x + shift, 0.0, 0.0))
         self.show_frame(self.player.frame)
         self.constraints.show_residuals()
         if len(self.motions) > 1:
             self.pick.label = f"Show sample ({self.selected + 1} in orange)"
+
+    def _group_motions(self, k: int) -> list:
+        """What each view of sample ``k`` draws: the sample (bones, skin), then its robot motion if any."""
+        group = self.views[k]
+        robot = self.robot_motions[k] if k < len(self.robot_motions) else None
+        return [self.motions[k]] * (len(group) - (robot is not None)) + ([robot] if robot is not None else [])
 
     def show_frame(self, frame: int) -> None:
         with self.lock:
@@ -139,15 +188,30 @@ class Session:
                 for view in group:
                     view.show(frame)
         # constraints are on this skeleton; the any-rig model takes no foot contacts (none drawn)
-        ours = self.shown_motion().skeleton.same_topology(self.skeleton) and not gen.is_any_rig(self.model)
+        shown = self.shown_motion()
+        ours = shown.skeleton.same_topology(self.skeleton) and not gen.is_any_rig(self.model)
         flags = contact_flags_at(self.doc.constraints, frame) if ours else None
-        self.markers.draw_contacts(self.shown_motion(), frame, flags)
+        self.markers.draw_contacts(shown, frame, flags)
+        f = min(max(int(frame), 0), shown.num_frames - 1)
+        self.camera.follow(shown.positions[f, 0].detach().double().numpy())
+
+    def frame_camera(self) -> None:
+        """Point the camera at the shown character (its widest pose, the samples beside it)."""
+        shown = self.shown_motion()
+        positions = shown.positions.detach().double().numpy()
+        frame = min(self.player.frame, len(positions) - 1)
+        points = character_extent(positions, frame, self.lanes())
+        if self.robot_motions:
+            points = np.concatenate([points, points + np.array([self.spacing() / 2, 0.0, 0.0])])
+        self.camera.frame(points, positions[frame, 0])
 
     def _length_changed(self) -> None:
-        """The slider spans the shown motion, or the timeline before anything is generated (so that
-        constraints can be laid out in time first; the rest pose stands in for every frame)."""
+        """The Frame slider and the constraints' frame range span the same frames: the timeline's (so that
+        constraints can be laid out in time before generating; the rest pose, or the generated motion's
+        last pose past its end, stands in), except for an uploaded clip or a rig's clip, shown whole."""
         frames = self.doc.num_frames(self.model.fps)
-        self.player.set_length(self.shown_motion().num_frames if self.generated else frames)
+        clip = self.generated and not self.from_timeline
+        self.player.set_length(self.shown_motion().num_frames if clip else frames)
         self.constraints.set_length(frames)
 
     # ------------------------------------------------------------------ generation
@@ -173,50 +237,97 @@ class Session:
             samples=self.doc.settings.samples,
             steps=self.doc.settings.steps,
             seed=self.doc.settings.seed,
+            robot=self.app.robot,
         )
-        self.gen_btn.disabled = True
+        self.cancel.clear()
+        self.gen_btn.disabled, self.cancel_btn.visible = True, True
         self.progress.value, self.progress.visible = 0.0, True
-        self.status.content = "Generating..."
+        self.status.content = "Generating... (waiting for a free worker)"
         self.job = self.app.pool.submit(self._run, timeline, args)
 
+    def stop_job(self, why: str) -> None:
+        """Stop this tab's generation at its next denoiser step (Cancel, or the tab closing)."""
+        job = self.job
+        if job is None:
+            return
+        self.cancel.set()
+        if job.cancel():  # still waiting in the pool's queue: it never starts
+            self._job_done(f"{why}: nothing changed.")
+        else:
+            self.status.content = f"{why}: stopping at the next step..."
+
     def _run(self, timeline, args) -> None:
+        done = "Failed (internal error, see the server log)."
         try:
             result = gen.outcome(self.model, self.rig, timeline, progress=self._progress, **args)
+            if self.cancel.is_set():  # cancelled during post-processing: the result is dropped
+                raise gen.Cancelled
             for note in result.notes:
                 self.notify("Note", note)
-            self.show_motions(result.motions, report=result, source="generated")
-            self._report(result)
+            self.show_motions(result.motions, report=result, source="generated", robots=result.robot_motions,
+                              play=True)
+            done = self._report(result)
+        except gen.Cancelled:
+            done = "Cancelled: nothing changed."
         except KinemaError as err:
-            self.notify("Generation failed", str(err), error=True)
-            self.status.content = f"Failed: {err}"
+            self.notify("Generation failed", _cut(str(err)), error=True)
+            done = f"Failed: {_cut(str(err))}"
         except Exception as err:  # a bug: keep the page alive, log the traceback on the server
             traceback.print_exc()
-            self.notify("Internal error", f"{type(err).__name__}: {err}", error=True)
-            self.status.content = "Failed (internal error, see the server log)."
+            self.notify("Internal error", f"{type(err).__name__}: {_cut(str(err))}", error=True)
         finally:
-            self.job = None
-            self.gen_btn.disabled = False
-            self.progress.visible = False
+            self._job_done(done)
+
+    def _job_done(self, status: str) -> None:
+        self.job = None
+        if self.closed:
+            return
+        self.status.content = status
+        self.gen_btn.disabled, self.cancel_btn.visible = False, False
+        self.progress.visible = False
 
     def _progress(self, done: int, total: int) -> None:
-        """The denoiser steps done so far (``generate``'s progress callback, on the worker thread)."""
-        self.progress.value = 100.0 * done / total
-        self.status.content = f"Generating... step {done} of {total}"
+        """The denoiser steps done so far (``generate``'s progress callback, on the worker thread); raises
+        `Cancelled` once Cancel was pressed or the tab closed, which stops the pipeline there."""
+        if self.cancel.is_set():
+            raise gen.Cancelled
+        self.progress.value = SAMPLING_SHARE * done / total
+        if done < total:
+            self.status.content = f"Generating... step {done} of {total}"
+        else:
+            self.status.content = (
+                f"Post-processing (foot contacts, constraints{', retargeting' if self._retargets() else ''})... "
+                f"all {total} steps done"
+            )
 
-    def _report(self, report: gen.Outcome) -> None:
+    def _retargets(self) -> bool:
+        return gen.is_character(self.model, self.rig) or self.app.robot is not None
+
+    def _report(self, report: gen.Outcome) -> str:
+        """The status text after a generation; unmet constraints in a short list and one notification."""
         text = report.text
-        if report.warnings:
-            text += "\n\n" + "\n".join(f"- {w}" for w in dict.fromkeys(report.warnings))
-            self.notify("Constraints not all met", "; ".join(dict.fromkeys(report.warnings)), error=True)
-        self.status.content = text
+        warnings = list(dict.fromkeys(report.warnings))
+        if warnings:
+            shown = [_cut(w) for w in warnings[:SHOWN_WARNINGS]]
+            more = f" (+{len(warnings) - SHOWN_WARNINGS} more)" if len(warnings) > SHOWN_WARNINGS else ""
+            text += "\n\n" + "\n".join(f"- {w}" for w in shown) + more
+            self.notify("Constraints not all met", shown[0] + more + " (see Residuals)", error=True)
+        return text
 
     # ------------------------------------------------------------------ rigs
+    def constraint_skeleton(self, rig: AppRig):
+        """The skeleton constraints are written for: the rig's when the model generates on it (any-rig
+        model) or retargets onto it (a character for the human model), else the model's own."""
+        on_rig = gen.is_any_rig(self.model) or gen.is_character(self.model, rig)
+        return rig.skeleton if on_rig else self.model.skeleton
+
     def rig_motions(self) -> list:
         """What a rig shows before anything is generated: its first clip, else its rest pose."""
         return list(self.rig.clips.values())[:1] or [rest_motion(self.rig.skeleton, self.model.fps)]
 
     def _views(self, i: int, skeleton) -> list[CharacterView]:
-        """Sample ``i``'s views: the skin when shown, else the bones; planted contacts and the trail always."""
+        """Sample ``i``'s views: the skin when shown, else the bones; planted contacts and the trail always;
+        then the robot's body frames when a robot is shown."""
         color = SELECTED_COLOR if i == 0 else OTHER_COLOR
         scene, rig = self.client.scene, self.rig
         contacts = rig.contacts if skeleton.same_topology(rig.skeleton) else None
@@ -226,6 +337,8 @@ class Session:
         ]
         if skin:
             views.append(MeshView(self.skins, i, skeleton, rig.mesh, color=color, own_colors=rig.own_colors))
+        if i < len(self.robot_motions):
+            views.append(SkeletonView(scene, f"/robot{i}", self.robot_motions[i].skeleton, color=ROBOT_COLOR))
         return views
 
     def redraw(self) -> None:
@@ -241,14 +354,15 @@ class Session:
         """Show ``rig`` (and its first clip); say when the model cannot generate for it."""
         self.rig = rig
         self.skin = rig.own_colors
-        if gen.is_any_rig(self.model) and not rig.skeleton.same_topology(self.skeleton):
-            self._constraints_on(rig.skeleton)
+        skeleton = self.constraint_skeleton(rig)
+        if not skeleton.same_topology(self.skeleton):
+            self._constraints_on(skeleton)
         self.rig_panel.refresh()
         self.show_motions(self.rig_motions(), report=None, source=f"rig {rig.name}")
         self._say_if_playback_only()
 
     def _constraints_on(self, skeleton) -> None:
-        """Any-rig model, new rig: constraints are now written for ``skeleton`` (the old ones, made for
+        """A rig with other joints: constraints are now written for ``skeleton`` (the old ones, made for
         another skeleton, are cleared and the joint list is the new rig's)."""
         dropped = len(self.doc.constraints)
         self.skeleton = skeleton
@@ -263,6 +377,9 @@ class Session:
         why = gen.cannot_generate(self.model, self.rig, self.app.model_name)
         if why is not None:
             self.notify(f"{self.rig.name}: playback only", why, error=True)
+        elif gen.is_character(self.model, self.rig):
+            self.notify(f"{self.rig.name}: humanoid character",
+                        "motions are generated on the model's skeleton and retargeted onto it")
 
     def show_clip(self, name: str) -> None:
         self.rig_panel.select(name)
@@ -270,7 +387,11 @@ class Session:
 
     # ------------------------------------------------------------------ files
     def load_session(self, name: str, content: bytes) -> None:
-        doc = load_document(content, skeleton=self.skeleton, fps=self.model.fps, source=name)
+        """Load a session file whole, or refuse it whole (a one-line message; nothing changes)."""
+        if self.job is not None:
+            raise KinemaError(f"{name}: not loaded while generating (press Cancel first)")
+        doc = load_document(content, skeleton=self.skeleton, fps=self.model.fps, source=name,
+                            max_steps=gen.max_steps(self.model))
         self.doc = doc
         self.timeline.set_document(doc)
         s = doc.settings
@@ -282,4 +403,13 @@ class Session:
         self.notify("Session loaded", f"{name}: {len(doc.timeline)} prompt(s), {len(doc.constraints)} constraint(s)")
 
     def close(self) -> None:
+        """The tab closed: its generation stops at the next step, its clock stops."""
+        self.closed = True
+        self.stop_job("Tab closed")
         self.player.close()
+
+
+def _cut(text: str, chars: int = WARNING_CHARS) -> str:
+    """The first line of ``text``, at most ``chars`` characters."""
+    line = text.strip().splitlines()[0] if text.strip() else ""
+    return line if len(line) <= chars and line == text.strip() else line[: chars - 1].rstrip() + "…"

@@ -9,18 +9,28 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from kinema.app.document import Document
+from kinema.app.document import MAX_SEGMENT_SECONDS, MIN_SEGMENT_SECONDS, Document
 
-MIN_SECONDS = 0.5
-MAX_SECONDS = 60.0
+MIN_SECONDS = MIN_SEGMENT_SECONDS
+MAX_SECONDS = MAX_SEGMENT_SECONDS
 ROW_ACTIONS = ("▲", "▼", "✕")
+
+
+def clamp_seconds(value) -> float:
+    """A typed duration brought into [MIN_SECONDS, MAX_SECONDS] (text that is not a number: MIN_SECONDS)."""
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        return MIN_SECONDS
+    return min(max(seconds, MIN_SECONDS), MAX_SECONDS) if seconds == seconds else MIN_SECONDS
 
 
 class TimelinePanel:
     """GUI for ``doc.timeline``; ``changed()`` is called after each edit (to refresh frame ranges)."""
 
-    def __init__(self, gui, doc: Document, changed: Callable[[], None], notify: Callable[[str], None]):
-        self.gui, self.doc, self.changed, self.notify = gui, doc, changed, notify
+    def __init__(self, gui, doc: Document, changed: Callable[[], None], notify: Callable[[str], None],
+                 new_prompt: str = "A person stands still."):
+        self.gui, self.doc, self.changed, self.notify, self.new_prompt = gui, doc, changed, notify, new_prompt
         with gui.add_folder("Timeline"):
             self.rows_box = gui.add_folder(None)
             self.add_btn = gui.add_button("Add prompt", icon="plus", hint="append a prompt to the timeline")
@@ -61,7 +71,9 @@ class TimelinePanel:
 
         @secs.on_update
         def _(_) -> None:
-            seg["seconds"] = min(max(float(secs.value), MIN_SECONDS), MAX_SECONDS)
+            seg["seconds"] = clamp_seconds(secs.value)
+            if secs.value != seg["seconds"]:  # out-of-range text does not stay in the box
+                secs.value = seg["seconds"]
             self._total()
             self.changed()
 
@@ -86,7 +98,7 @@ class TimelinePanel:
         self.changed()
 
     def _add(self) -> None:
-        self.doc.timeline.append({"prompt": "A person stands still.", "seconds": 3.0})
+        self.doc.timeline.append({"prompt": self.new_prompt, "seconds": 3.0})
         self.rebuild()
         self.changed()
 

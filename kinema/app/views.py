@@ -22,6 +22,7 @@ from kinema.skeleton import Skeleton
 PLANTED_COLOR = (40, 200, 90)
 SELECTED_COLOR = (240, 160, 40)
 OTHER_COLOR = (140, 150, 170)
+ROBOT_COLOR = (60, 130, 210)  # a robot retargeted from each sample (kinema app --robot)
 
 
 class CharacterView(Protocol):

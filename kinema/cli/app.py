@@ -40,6 +40,11 @@ def register(sub) -> None:
         default="centimetres",
         help="length unit of a .bvh --rig (default centimetres)",
     )
+    p.add_argument(
+        "--robot",
+        help="also retarget every generated motion onto a robot and draw it beside the human: 'g1' or an MJCF "
+        "file (docs/robots.md; human model only)",
+    )
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only; "
                    "another address needs --public)")
     p.add_argument("--public", action="store_true", help="allow a --host other than loopback: the app has no "
@@ -70,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     if args.public and not is_loopback(args.host):
         print(f"kinema app: warning: --public: anyone who can reach {args.host} can use this app", flush=True)
     try:
-        from kinema.app.generation import max_steps
+        from kinema.app.generation import AppRobot, max_steps
         from kinema.app.server import AppServer
     except ImportError as err:
         if "viser" not in str(err):
@@ -79,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from kinema.app.files_panel import UNITS
     from kinema.app.rigs import load_rig
     from kinema.generate import load_model
+    from kinema.robot import load_robot
     from kinema.runtime import configure_threads
 
     if args.rig is not None and not args.rig.is_file():
@@ -88,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
     rig = None if args.rig is None else load_rig(args.rig, fps=model.fps, scale=UNITS[args.rig_units])
     if args.steps is not None and args.steps > max_steps(model):
         raise KinemaError(f"--steps: at most {max_steps(model)} for this model, got {args.steps}")
-    app = AppServer(model, rig=rig, model_name=str(args.model), host=args.host, port=args.port, steps=args.steps)
+    robot = None if args.robot is None else AppRobot(args.robot, load_robot(args.robot))
+    app = AppServer(model, rig=rig, model_name=str(args.model), host=args.host, port=args.port, steps=args.steps,
+                    robot=robot)
     print(f"kinema app: open {app.url} (Ctrl+C to stop)", flush=True)
     try:
         while True:

@@ -1,0 +1,75 @@
+"""The tab's camera: frame the character when a motion is shown (its size and the samples beside it fit
+the view, whatever the rig's scale: a fox as well as a person) and follow it while it plays (the camera
+keeps the angle the user orbited to and moves with the selected sample's root).
+
+Positions are world metres, Y up. ``direction`` is where the camera stands seen from what it looks at.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: the default view: from the character's left (+X), above, looking a little ahead along +Z
+VIEW_DIRECTION = np.array([4.4, 4.4, -2.4]) / np.linalg.norm([4.4, 4.4, -2.4])
+#: room around the character (1 = its bounding sphere touches the view's edges)
+MARGIN = 1.35
+#: the camera follows once the character's root has moved this far (metres) since the last move
+FOLLOW_STEP = 0.02
+
+
+def frame_view(points: np.ndarray, fov: float, direction=VIEW_DIRECTION) -> tuple[np.ndarray, np.ndarray]:
+    """(camera position, look-at point) that fit ``points`` (N, 3) in a vertical field of view ``fov``
+    (radians), seen from ``direction``."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = pts.min(0), pts.max(0)
+    centre = (lo + hi) / 2
+    radius = max(0.25, float(np.linalg.norm(hi - lo)) / 2)
+    distance = MARGIN * radius / math.sin(min(max(fov, 0.2), 2.5) / 2)
+    return centre + np.asarray(direction, dtype=np.float64) * distance, centre
+
+
+def character_extent(positions: np.ndarray, frame: int, lanes: list[float]) -> np.ndarray:
+    """The points to frame: the selected motion's pose at ``frame`` (T, J, 3 positions) and the widest
+    pose of the whole motion around it, repeated at every sample lane's X offset (lanes: 0 = selected)."""
+    f = int(np.clip(frame, 0, len(positions) - 1))
+    pose = positions[f]
+    root = pose[0]
+    widest = (positions - positions[:, :1]).reshape(-1, 3)
+    span = np.stack([widest.min(0), widest.max(0)]) + root
+    span[:, 1] = (min(0.0, span[0, 1]), span[1, 1])  # the floor under it stays in view
+    return np.concatenate([span + np.array([x, 0.0, 0.0]) for x in lanes] + [pose])
+
+
+class CameraFollow:
+    """Frames and follows the shown character in one tab (``client.camera``); ``enabled`` is read from
+    the "Follow character" checkbox."""
+
+    def __init__(self, client, enabled):
+        self.client, self.enabled = client, enabled
+        self.target: np.ndarray | None = None
+
+    def frame(self, points: np.ndarray, target) -> None:
+        """Point the camera at ``points`` from the default angle; ``target``: the root it then follows."""
+        cam = self.client.camera
+        position, look_at = frame_view(points, float(cam.fov))
+        cam.position = tuple(position)
+        cam.look_at = tuple(look_at)
+        self.target = np.asarray(target, dtype=np.float64)
+
+    def follow(self, target) -> None:
+        """Move the camera with the root (same angle and distance) while "Follow character" is on."""
+        target = np.asarray(target, dtype=np.float64)
+        if self.target is None or not self.enabled():
+            self.target = target
+            return
+        delta = target - self.target
+        delta[1] = 0.0
+        if float(np.linalg.norm(delta)) < FOLLOW_STEP:
+            return
+        cam = self.client.camera
+        look_at = np.asarray(cam.look_at, dtype=np.float64) + delta
+        cam.position = tuple(np.asarray(cam.position, dtype=np.float64) + delta)
+        cam.look_at = tuple(look_at)
+        self.target = target

@@ -1,0 +1,165 @@
+"""`kinema app` in headless Chromium: long jobs and first impressions (issue 36). A generation can be
+cancelled (nothing changes) and stops when its tab closes; a session file asking for 500 s is refused
+whole with a message; a generated motion plays at once, framed by the camera; an uploaded fox rig fits
+the view. Skipped when Playwright or the browser is missing (tests/test_app_browser.py says how)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kinema
+from tests.browser import button, chromium_path, launch, row_input
+
+if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":
+    import viser  # noqa: F401
+    from playwright import sync_api
+
+    assert chromium_path() is not None, "chromium-headless-shell is missing (see .ci/run)"
+else:
+    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright (see .ci/run)")
+    pytest.importorskip("viser", reason="pip install 'kinema[app]'")
+    if chromium_path() is None:
+        pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
+
+from kinema.app.server import AppServer  # noqa: E402
+from tests.browser import world_to_screen  # noqa: E402
+from tests.test_app_browser import wait_for  # noqa: E402
+
+DRAFT_STEPS = 2  # a quick generation
+LONG_STEPS = 400  # a generation long enough to cancel (seconds of work)
+FOX = Path("/work/shared/datasets/quaternius/animals_pack/Fox.glb")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def app():
+    server = AppServer(kinema.load_model("default"), port=_free_port(), steps=DRAFT_STEPS)
+    yield server
+    server.stop()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_api.sync_playwright() as p:
+        b = launch(p)
+        yield b
+        b.close()
+
+
+def open_tab(app, browser):
+    """(page, session) of a new tab once its panel is up."""
+    before = set(app.sessions)
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.goto(app.url)
+    page.get_by_text("Add prompt").wait_for(timeout=90000)
+    session = wait_for(lambda: next((app.sessions[k] for k in set(app.sessions) - before), None), what="a session")
+    return page, session
+
+
+@pytest.fixture(scope="module")
+def tab(app, browser):
+    page, session = open_tab(app, browser)
+    yield page, session
+    page.close()
+
+
+def upload_button(page, folder: str, label: str):
+    """The upload button ``label`` in the (collapsed by default) ``folder``."""
+    if not button(page, label).is_visible():
+        page.get_by_text(folder, exact=True).click()
+    return button(page, label)
+
+
+def set_steps(page, session, steps: int) -> None:
+    box = row_input(page, "Steps")
+    box.fill(str(steps))
+    box.press("Enter")
+    wait_for(lambda: int(session.steps.value) == steps, timeout=10, what=f"steps {steps}")
+
+
+def start_long_job(page, session) -> None:
+    set_steps(page, session, LONG_STEPS)
+    button(page, "Generate").click()
+    wait_for(lambda: "step " in session.status.content, timeout=60, what="the first denoiser step")
+
+
+def test_bad_session_is_refused_whole(tab, tmp_path):
+    page, session = tab
+    before = [dict(s) for s in session.doc.timeline]
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps({"kinema_session": 1, "timeline": [{"prompt": "A person walks.", "seconds": 500}]}))
+    with page.expect_file_chooser() as fc:
+        upload_button(page, "Files", "Load session").click()
+    fc.value.set_files(path)
+    page.get_by_text("a segment lasts 0.5 to 60 s in the app").first.wait_for(timeout=10000)
+    assert session.doc.timeline == before  # nothing half-applied
+    assert row_input(page, "Seconds 1").input_value() == "6"
+    assert page.get_by_text("Traceback").count() == 0
+
+
+def test_generated_motion_plays_at_once_and_is_framed(tab):
+    page, session = tab
+    before = session.motions
+    button(page, "Generate").click()
+    wait_for(lambda: session.motions is not before and session.job is None, timeout=300, what="generation")
+    assert "sample(s)," in session.status.content, session.status.content
+    wait_for(lambda: session.player.playing and session.player.frame > 3, timeout=10, what="autoplay")
+    button(page, "Pause").click()
+    wait_for(lambda: not session.player.playing, what="playback to pause")
+    cam, box = session.client.camera, page.locator("canvas").first.bounding_box()
+    pose = session.shown_motion().positions[session.player.frame].double().numpy()
+    xy = np.array([world_to_screen(cam, p, box) for p in pose])
+    inside = (xy[:, 0] > box["x"]) & (xy[:, 0] < box["x"] + box["width"]) & (xy[:, 1] > box["y"])
+    assert inside.all() and (xy[:, 1] < box["y"] + box["height"]).all(), xy
+    height = xy[:, 1].max() - xy[:, 1].min()
+    assert height > 0.12 * box["height"], height  # the character is not a speck either
+
+
+def test_cancel_stops_the_generation_and_changes_nothing(tab):
+    page, session = tab
+    before = session.motions
+    start_long_job(page, session)
+    button(page, "Cancel").click()
+    wait_for(lambda: session.job is None, timeout=30, what="the job to stop")
+    assert session.status.content == "Cancelled: nothing changed."
+    assert session.motions is before
+    page.get_by_text("Cancelled: nothing changed.").wait_for(timeout=10000)
+    assert not session.cancel_btn.visible and not session.gen_btn.disabled
+
+
+def test_closing_the_tab_stops_its_generation(app, browser):
+    page, session = open_tab(app, browser)
+    before = session.motions
+    start_long_job(page, session)
+    page.close()
+    wait_for(lambda: session.closed, timeout=30, what="the server to see the tab close")
+    wait_for(lambda: session.job is None, timeout=30, what="the job to stop")
+    assert session.motions is before  # it stopped: nothing was generated for a closed tab
+
+
+@pytest.mark.skipif(not FOX.is_file(), reason="the Quaternius Fox.glb is not in the shared data folder")
+def test_a_fox_rig_fits_the_view(tab):
+    page, session = tab
+    with page.expect_file_chooser() as fc:
+        upload_button(page, "Rig", "Upload rig").click()
+    fc.value.set_files(FOX)
+    wait_for(lambda: session.rig.name == "Fox.glb" and session.views, timeout=60, what="the fox")
+    page.get_by_text("playback only").first.wait_for(timeout=10000)  # the human model cannot drive a fox
+    button(page, "Pause").click() if session.player.playing else None
+    cam, box = session.client.camera, page.locator("canvas").first.bounding_box()
+    frame = session.player.frame
+    pose = session.shown_motion().positions[frame].double().numpy()
+    xy = np.array([world_to_screen(cam, p, box) for p in pose])
+    assert (xy[:, 0] > box["x"]).all() and (xy[:, 0] < box["x"] + box["width"]).all(), xy
+    assert (xy[:, 1] > box["y"]).all() and (xy[:, 1] < box["y"] + box["height"]).all(), xy
