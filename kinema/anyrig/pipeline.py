@@ -191,6 +191,7 @@ class AnyRigPipeline(MotionPipeline):
         rig_n = rep_n.rig
         constraints = list(constraints)
         targets = rep_n.encode(constraints, scale, T) if constraints else None
+        guide = self._guidance(guidance)
         feats = sample_features(
             self.loaded.denoiser,
             batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),
@@ -198,7 +199,7 @@ class AnyRigPipeline(MotionPipeline):
             text_emb=self._texts(prompts),
             targets=targets,
             sampler=self.loaded.sampler,
-            guidance=self._guidance(guidance),
+            guidance=guide,
             steps=steps,
             samples=samples,
             generator=torch.Generator().manual_seed(seed),
@@ -210,11 +211,11 @@ class AnyRigPipeline(MotionPipeline):
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
                                   segments=len(prompts), frames=T, seed=seed)
         t_sampled = time.perf_counter()
+        _require_finite(feats)
         motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
         report.seconds = time.perf_counter() - t0
         report.timings = {"sampling": t_sampled - t0, "postprocess": report.seconds - (t_sampled - t0)}
-        g = self._guidance(guidance)
-        report.guidance = (g.w_text, g.w_constr)
+        report.guidance = (guide.w_text, guide.w_constr)
         return GenerationResult(motions, report)
 
     def _normalised(self, rig_m: Rig) -> tuple[JointRepresentation, float]:
@@ -370,6 +371,13 @@ class AnyRigPipeline(MotionPipeline):
             report.warnings.append(f"post-processing: translated foot locking undone, it made the motion worse: {why}")
             return m, {**locked, "undone": problems}
         return new, locked
+
+
+def _require_finite(feats: torch.Tensor) -> None:
+    """A one-line error instead of a NaN motion that fails later without a cause (issue 36)."""
+    if not bool(torch.isfinite(feats).all()):
+        raise KinemaError("sampling produced NaN or infinite values: an input far outside what the model can take "
+                          "(a huge target, heading or weight?)")
 
 
 def _waypoint_frames(constraints) -> list[int]:
