@@ -126,4 +126,4 @@ def test_commands_in_retarget_docs_parse():
     parser = build_parser()
     for line in lines:
         args = parser.parse_args(shlex.split(line, comments=True)[1:])
-        assert args.command in ("retarget", "inspect")
+        assert args.command in ("retarget", "inspect", "generate")
