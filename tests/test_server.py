@@ -139,7 +139,7 @@ def test_health_models_and_api_key(server):
     (m,) = models["models"]
     assert m["rig"]["name"] == "bandai-namco" and len(m["rig"]["joints"]) == 21 and m["rig"]["fps"] == 20
     assert m["limits"]["max_steps"] == 5 and models["limits"]["max_seconds"] == 2 and len(m["sha256"]) == 64
-    assert set(models["formats"]) == {"bvh", "npz", "glb", "json"}
+    assert set(models["formats"]) == {"bvh", "npz", "glb", "json", "csv"}
     spec = httpx.get(f"{url}/openapi.json").json()
     assert {"/v1/generate", "/v1/jobs", "/v1/jobs/{job_id}", "/v1/models", "/healthz"} <= set(spec["paths"])
     assert httpx.get(f"{url}/docs").status_code == 200
