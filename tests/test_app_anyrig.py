@@ -16,12 +16,14 @@ import kinema  # noqa: E402
 from kinema.app import edits  # noqa: E402
 from kinema.app.constraint_panel import ConstraintPanel  # noqa: E402
 from kinema.app.document import Document, check_timeline  # noqa: E402
+from kinema.app.files_panel import FilesPanel  # noqa: E402
 from kinema.app.generation import outcome  # noqa: E402
 from kinema.app.rig_constraints import planned_root, to_anyrig  # noqa: E402
 from kinema.app.rigs import load_rig  # noqa: E402
 from kinema.app.views import rest_motion  # noqa: E402
 from kinema.constraints.character import JointTarget, Keyframe, RootPath  # noqa: E402
 from kinema.rig import Rig  # noqa: E402
+from kinema.skeleton import Skeleton  # noqa: E402
 from tests.app_rig_data import NAMES, synthetic_rig_glb  # noqa: E402
 
 
@@ -32,13 +34,13 @@ class _Handle:
     def on_update(self, fn):
         return fn
 
-    on_click = on_update
+    on_click = on_upload = on_update
 
 
 class _Gui:
     """Just what ConstraintPanel builds (records nothing but the values)."""
 
-    def add_folder(self, _label):
+    def add_folder(self, _label, **_):
         return contextlib.nullcontext()
 
     def add_dropdown(self, _label, options, initial_value=None, **_):
@@ -59,6 +61,13 @@ class _Scene:
 class _Host:
     def __init__(self, model, skeleton):
         self.model, self.skeleton, self.doc = model, skeleton, Document(constraints=[])
+        self.shown, self.notes = [], []
+
+    def show_motions(self, motions, *, report, source):
+        self.shown.append((list(motions), source))
+
+    def notify(self, title, body, *, error=False):
+        self.notes.append(f"{title}: {body}")
 
 
 @pytest.fixture(scope="module")
@@ -156,3 +165,22 @@ def test_fox_head_target_is_met_and_ik_bone_targets_are_named(model):
         "the any-rig model cannot take foot-contact constraints, targets on bones it moves by translation "
         "(IKFrontLeg.L, FFB.R; target a leg bone instead); they were left out"
     ]
+
+
+def test_bvh_clip_upload_works_with_the_creatures_model(model, rig, tmp_path):
+    """"Upload BVH clip" reads the clip onto the rig's skeleton (the model has none of its own); a clip of
+    other joints is a one-line notification."""
+    host = _Host(model, rig.skeleton)
+    panel = FilesPanel(_Gui(), host)
+    walk = rig.clips["Walk"]
+    walk.save(tmp_path / "walk.bvh", scale=100.0)  # centimetres: the panel's default units
+    panel._guard(lambda: panel._clip("walk.bvh", (tmp_path / "walk.bvh").read_bytes()))
+    assert not host.notes, host.notes
+    (motion,), source = host.shown[-1]
+    assert source == "clip walk.bvh" and motion.skeleton.same_topology(rig.skeleton)
+    assert motion.num_frames == walk.num_frames
+    chain = Skeleton(["a", "b", "c"], [-1, 0, 1], torch.tensor([[0, 1.0, 0], [0, 0.5, 0], [0, 0.5, 0]]))
+    rest_motion(chain, model.fps).save(tmp_path / "chain.bvh", scale=100.0)
+    panel._guard(lambda: panel._clip("chain.bvh", (tmp_path / "chain.bvh").read_bytes()))
+    assert len(host.notes) == 1 and host.notes[0].startswith("Upload failed: ") and "\n" not in host.notes[0]
+    assert "Traceback" not in host.notes[0] and "Error:" not in host.notes[0], host.notes

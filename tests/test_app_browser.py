@@ -36,7 +36,7 @@ else:
 
 from kinema.app.mesh_view import MeshView  # noqa: E402
 from kinema.app.residuals import residual  # noqa: E402
-from kinema.app.server import AppServer  # noqa: E402
+from kinema.app.server import CAMERA_LOOK_AT, CAMERA_POSITION, AppServer  # noqa: E402
 from kinema.io.bvh import read_bvh  # noqa: E402
 from kinema.io.gltf import read_gltf  # noqa: E402
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time  # noqa: E402
@@ -182,6 +182,7 @@ def test_played_frame_advances(tab):
 def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
     page, session, log = tab
     canvas = page.locator("canvas").first
+    set_camera(session.client.camera, CAMERA_POSITION, CAMERA_LOOK_AT)  # the generated motion was framed closer
     for frame, x, z in WAYPOINTS:
         seek(page, frame, session)
         box = canvas.bounding_box()

@@ -99,7 +99,7 @@ def outcome(model, rig: AppRig, timeline: list[dict], *, constraints, samples: i
 def _outcome(model, rig: AppRig, res, robot) -> Outcome:
     r = res.report
     drawn = is_any_rig(model) or is_character(model, rig)
-    motions = [rig.with_contacts(m) for m in res.motions] if drawn else list(res.motions)
+    motions = [rig.with_contacts(on_rig(m, rig)) for m in res.motions] if drawn else list(res.motions)
     on = f" on {rig.name}" if drawn else ""
     text = (f"{len(motions)} sample(s){on}, {motions[0].num_frames} frames, {r.segments} segment(s), {r.steps} steps, "
             f"seed {r.seed}: **{r.seconds:.1f} s**")
@@ -109,6 +109,14 @@ def _outcome(model, rig: AppRig, res, robot) -> Outcome:
     if robots:
         text += f"; beside each, the robot {robot.spec} (blue)" + _robot_words(r.robot)
     return Outcome(motions, text, list(r.warnings), list(r.left_out), robots)
+
+
+def on_rig(motion: Motion, rig: AppRig) -> Motion:
+    """A character's motion on the joints the app shows: the retargeting reads the file's every bone, the
+    app's rig leaves out bones no skin follows (IK foot and pole helpers), which are dropped here."""
+    names = set(rig.skeleton.names)
+    extra = [n for n in motion.skeleton.names if n not in names]
+    return motion.prune(extra) if extra else motion
 
 
 def _robot_words(measures: list[dict]) -> str:

@@ -25,8 +25,8 @@ from kinema.app.views import OTHER_COLOR, ROBOT_COLOR, SELECTED_COLOR, Character
 from kinema.errors import KinemaError
 
 #: spacing of the samples not selected (towards -X, away from the camera), drawn beside the selected one, in
-#: sizes of the rig (its rest pose's largest extent: 1.6 m for a 1.7 m person)
-SAMPLE_SPACING = 0.95
+#: sizes of the rig (its rest pose's largest extent: 1.6 m for the human model's 1.36 m)
+SAMPLE_SPACING = 1.2
 SAMPLE_NAMES = ("1", "2", "3", "4")
 #: the share of the progress bar the denoiser steps fill; the rest is post-processing (foot contacts,
 #: constraints, retargeting), which reports no steps
@@ -253,7 +253,7 @@ class Session:
         self.cancel.set()
         if job.cancel():  # still waiting in the pool's queue: it never starts
             self._job_done(f"{why}: nothing changed.")
-        else:
+        elif not self.closed:
             self.status.content = f"{why}: stopping at the next step..."
 
     def _run(self, timeline, args) -> None:
@@ -305,14 +305,10 @@ class Session:
 
     def _report(self, report: gen.Outcome) -> str:
         """The status text after a generation; unmet constraints in a short list and one notification."""
-        text = report.text
-        warnings = list(dict.fromkeys(report.warnings))
-        if warnings:
-            shown = [_cut(w) for w in warnings[:SHOWN_WARNINGS]]
-            more = f" (+{len(warnings) - SHOWN_WARNINGS} more)" if len(warnings) > SHOWN_WARNINGS else ""
-            text += "\n\n" + "\n".join(f"- {w}" for w in shown) + more
-            self.notify("Constraints not all met", shown[0] + more + " (see Residuals)", error=True)
-        return text
+        lines, toast = summarize_warnings(report.warnings)
+        if toast:
+            self.notify("Constraints not all met", toast, error=True)
+        return report.text + ("\n\n" + "\n".join(lines) if lines else "")
 
     # ------------------------------------------------------------------ rigs
     def constraint_skeleton(self, rig: AppRig):
@@ -409,7 +405,21 @@ class Session:
         self.player.close()
 
 
+def summarize_warnings(warnings: list[str]) -> tuple[list[str], str]:
+    """(status lines, notification text) for a generation's warnings: the first ``SHOWN_WARNINGS``, each
+    cut to one line of ``WARNING_CHARS``, and how many more there are; ([], "") without warnings."""
+    distinct = list(dict.fromkeys(warnings))
+    if not distinct:
+        return [], ""
+    shown = [_cut(w) for w in distinct[:SHOWN_WARNINGS]]
+    more = f" (+{len(distinct) - SHOWN_WARNINGS} more)" if len(distinct) > SHOWN_WARNINGS else ""
+    return [f"- {w}" for w in shown[:-1]] + [f"- {shown[-1]}{more}"], f"{shown[0]}{more} (see Residuals)"
+
+
 def _cut(text: str, chars: int = WARNING_CHARS) -> str:
     """The first line of ``text``, at most ``chars`` characters."""
-    line = text.strip().splitlines()[0] if text.strip() else ""
-    return line if len(line) <= chars and line == text.strip() else line[: chars - 1].rstrip() + "…"
+    text = text.strip()
+    line = text.splitlines()[0] if text else ""
+    if len(line) > chars:
+        return line[: chars - 1].rstrip() + "…"
+    return line if line == text else line + " …"
