@@ -60,9 +60,9 @@ def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
     from kinema.model.vocabulary import KnownPrompts
     from kinema.text import get_text_encoder
 
-    captions = [c for rec in MotionDataset(data, "train").clips for c in rec["captions"]]
+    clips = [rec["captions"] for rec in MotionDataset(data, "train").clips]
     encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
-    known = KnownPrompts.build(captions, encoder, manner_phrases())
+    known = KnownPrompts.from_clips(clips, encoder, manner_phrases())
     print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")
 
 

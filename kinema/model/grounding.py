@@ -28,13 +28,24 @@ captions that name none ("A person walks ahead.", the neutral style's "A person 
 neutral way."), and one that names one only on captions that name one ("Someone strolls slowly ahead."
 -> "Someone walks slowly ahead.").
 
+Same actions, likewise (kinema.model.actions): MiniLM put "A person walks forward and reaches out with
+the right hand." nearest to "A person walks forward and turns to the right." (0.80), so grounding swapped
+a reach for a turn. A prompt that names actions is grounded only on captions that name all of them
+("Someone strolls ahead." {walk} on a walk, never on a wave; "lifts the right hand to say farewell" {raise}
+may go to "raises their right hand and waves goodbye" {raise, wave}); one that names an action the
+model has not learned ("A person kicks.", "A person dances.", "A person punches.": too few or no training
+clips, KnownPrompts.untrained) is 'unknown', whatever its similarity; one that names none ("Somebody
+heads forward.") is grounded as before, on captions of any action.
+
 Four cases are left alone:
 
 - a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`): the model knows
   it, so its embedding is returned unchanged (grounding is the identity there; tested);
-- an unknown prompt (nearest caption below ``UNKNOWN_BELOW``): rewriting it into the nearest known action
-  would silently produce something else; it keeps its own embedding and the unknown-prompt warning;
-- no caption that names the same sides is near enough (best below ``UNKNOWN_BELOW``): 'unmatched';
+- an unknown prompt (nearest caption below ``UNKNOWN_BELOW``, or an action the model has not learned):
+  rewriting it into the nearest known action would silently produce something else; it keeps its own
+  embedding and the unknown-prompt warning;
+- no caption that names the same sides, manner and actions is near enough (best below
+  ``UNKNOWN_BELOW``): 'unmatched' (a prompt whose actions no caption names together also gets a warning);
 - ``weight`` 0 (grounding off).
 
 Settings are a small dataclass saved as JSON in a model's ``checkpoint.json`` under ``"grounding"``
@@ -53,6 +64,7 @@ from typing import Any
 import torch
 
 from kinema.errors import KinemaError
+from kinema.model.actions import actions_in
 from kinema.model.vocabulary import UNKNOWN_BELOW, KnownPrompts
 
 #: cosine at or above which a prompt counts as the training caption itself (float16-stored caption
@@ -141,8 +153,9 @@ def as_grounding(value, base: Grounding) -> Grounding:
 @dataclass(frozen=True)
 class Grounded:
     """A prompt's conditioning embedding ``(1, E)`` and what grounding did: ``status`` is 'grounded',
-    'exact' (a training caption), 'unknown' (too far from every caption), 'unmatched' (no caption naming
-    the same sides is near enough) or 'off'; ``captions`` the
+    'exact' (a training caption), 'unknown' (too far from every caption, or an action the model has not
+    learned), 'unmatched' (no caption naming the same sides, manner and actions is near enough) or 'off';
+    ``captions`` the
     (caption, weight in the blend) pairs, empty unless grounded; the prompt's own weight is ``1 - sum``."""
 
     embedding: torch.Tensor
@@ -157,6 +170,18 @@ class Grounded:
         }
 
 
+def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts) -> torch.Tensor:
+    """Which captions ``(N,)`` bool a prompt may be grounded on: same sides, same manner (when the known
+    prompts list manner phrases) and, when the prompt names actions, all of them."""
+    want = sides(prompt)
+    same = torch.tensor([sides(c) == want for c in known.captions])
+    if known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none, and so on
+        same &= known.mannered == known.names_manner(prompt)
+    if actions:
+        same &= torch.tensor([actions <= a for a in known.caption_actions])
+    return same
+
+
 def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, settings: Grounding) -> Grounded:
     """The embedding ``(1, E)`` to condition on for ``prompt`` (its own ``embedding`` ``(1, E)`` or ``(E,)``)."""
     e = embedding.float().reshape(1, -1)
@@ -165,13 +190,11 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     best, _ = known.nearest(e[0], 1)
     if prompt.strip() in known.caption_set or float(best[0]) >= EXACT_ABOVE:
         return Grounded(e, "exact")
-    if float(best[0]) < UNKNOWN_BELOW:
+    actions = actions_in(prompt)
+    if float(best[0]) < UNKNOWN_BELOW or known.untrained(actions):
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
-    want = sides(prompt)
-    same = torch.tensor([sides(c) == want for c in known.captions])
-    if known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none, and so on
-        same &= known.mannered == known.names_manner(prompt)
+    same = _candidates(prompt, actions, known)
     sims = torch.where(same, known.embeddings @ unit[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
     if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:

@@ -13,12 +13,24 @@ captions that are not train captions reach 0.745-0.98 (median 0.85), and paraphr
 her left arm up high." 0.892), while actions the data lacks stay below 0.68 ("A person jumps up in
 place." 0.622, "Someone hops on one foot." 0.678, "A person sits down on a chair." 0.337, "A person picks
 up a box." 0.369).
+
+Similarity alone misses actions the model does not know when the sentence around them is familiar ("A
+person kicks." is 0.81 from a kick caption, "A person dances." 0.87 from a dance caption, yet the default
+model makes neither). So the known prompts also compare actions (kinema.model.actions): a prompt that
+names an action no training caption names ("A person punches.": 'punch'), or one that the training clips
+show too rarely to learn (fewer than ``MIN_ACTION_CLIPS`` clips, counted per action when the file was
+written: ``action_clips``), is unknown and its warning names the action; a prompt whose actions are all
+learned but never appear together in one caption ("A person walks and waves.") is warned too. Evidence
+for the threshold (model card of the default model, train split with mirrors): kick, dance (2 clips each),
+call and slash (4) are not produced; bow (22), guide, bye (24 each) are. A file without ``action_clips``
+(older exports) counts every action its captions name as learned.
 """
 
 from __future__ import annotations
 
 import json
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,12 +40,15 @@ from safetensors.torch import save
 
 from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
+from kinema.model.actions import actions_in, clips_per_action
 
 FILE_NAME = "known_prompts.safetensors"
 #: cosine similarity below which a prompt counts as unknown (see the module docstring for the numbers)
 UNKNOWN_BELOW = 0.70
 #: nearest captions reported with a match
 NEAREST = 3
+#: an action shown by fewer training clips (mirrors included) is not learned (see the module docstring)
+MIN_ACTION_CLIPS = 10
 
 
 @dataclass(frozen=True)
@@ -43,20 +58,30 @@ class PromptMatch:
     prompt: str
     nearest: list[tuple[str, float]]
     known: bool
+    #: the actions the prompt names (kinema.model.actions) and what the model lacks of them, in words
+    actions: tuple[str, ...] = ()
+    action_notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         return {
             "prompt": self.prompt,
             "known": self.known,
+            "actions": list(self.actions),
             "nearest": [{"caption": c, "similarity": round(s, 4)} for c, s in self.nearest],
         }
 
     def warning(self) -> str:
         near = "; ".join(f"{c!r} ({s:.2f})" for c, s in self.nearest)
+        far = self.nearest[0][1] < UNKNOWN_BELOW
+        reasons = [f"best similarity {self.nearest[0][1]:.2f} < {UNKNOWN_BELOW:.2f}"] if far else []
+        what = (
+            "is far from every caption the model was trained on"
+            if far
+            else "asks for what the model was not trained on"
+        )
         return (
-            f"prompt {self.prompt!r} is far from every caption the model was trained on (best similarity "
-            f"{self.nearest[0][1]:.2f} < {UNKNOWN_BELOW:.2f}); the motion may show something else. "
-            f"Nearest known captions: {near}"
+            f"prompt {self.prompt!r} {what} ({'; '.join(reasons + list(self.action_notes))}); "
+            f"the motion may show something else. Nearest known captions: {near}"
         )
 
 
@@ -64,7 +89,12 @@ class KnownPrompts:
     """Training captions and their unit-length embeddings ``(N, E)`` from text encoder ``encoder_id``."""
 
     def __init__(
-        self, captions: list[str], embeddings: torch.Tensor, encoder_id: str, manner_phrases: tuple[str, ...] = ()
+        self,
+        captions: list[str],
+        embeddings: torch.Tensor,
+        encoder_id: str,
+        manner_phrases: tuple[str, ...] = (),
+        action_clips: Mapping[str, int] | None = None,
     ):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
             raise KinemaError(
@@ -79,20 +109,56 @@ class KnownPrompts:
         longest_first = sorted(self.manner_phrases, key=len, reverse=True)
         self._manner = re.compile(r"\b(?:" + "|".join(map(re.escape, longest_first)) + r")\b", re.IGNORECASE)
         self.mannered = torch.tensor([self.names_manner(c) for c in self.captions], dtype=torch.bool)
+        # the actions each caption names; per action the training clips that show it (empty = not known)
+        self.caption_actions = [actions_in(c) for c in self.captions]
+        self.action_clips = dict(sorted((action_clips or {}).items()))
+        self.action_sets = frozenset(self.caption_actions)
+        self.named_actions = frozenset().union(*self.caption_actions)
+        self.learned = frozenset(
+            a for a in self.named_actions if self.action_clips.get(a, MIN_ACTION_CLIPS) >= MIN_ACTION_CLIPS
+        )
+
+    def action_notes(self, actions: frozenset[str]) -> tuple[str, ...]:
+        """Why a prompt naming ``actions`` is unknown to the model, one phrase per reason (empty: it is not):
+        actions no caption names, actions too few training clips show, or learned actions no one caption
+        names all of."""
+        notes = [f"the model was not trained on {a!r}" for a in sorted(actions - self.named_actions)]
+        notes += [
+            f"the model was not trained on {a!r} enough to learn it: only {self.action_clips[a]} training clips show it"
+            for a in sorted((actions & self.named_actions) - self.learned)
+        ]
+        if not notes and not any(actions <= a for a in self.action_sets):
+            notes.append(f"no training caption has {' and '.join(map(repr, sorted(actions)))} together")
+        return tuple(notes)
+
+    def untrained(self, actions: frozenset[str]) -> frozenset[str]:
+        """The ``actions`` the model has not learned (no caption names them, or too few clips show them)."""
+        return actions - self.learned
 
     def names_manner(self, text: str) -> bool:
         """Whether ``text`` contains one of :attr:`manner_phrases` (False when there are none)."""
         return bool(self.manner_phrases) and self._manner.search(text) is not None
 
     @classmethod
-    def build(cls, captions, encoder, manner_phrases: tuple[str, ...] = ()) -> KnownPrompts:
+    def build(
+        cls, captions, encoder, manner_phrases: tuple[str, ...] = (), action_clips: Mapping[str, int] | None = None
+    ) -> KnownPrompts:
         """Embed the unique ``captions`` (sorted) with ``encoder`` (a kinema.text encoder); ``manner_phrases``
         are the words that name a manner in them (kinema.data.phrasings.manner_phrases for kinema's captions;
-        those no caption uses are dropped)."""
+        those no caption uses are dropped); ``action_clips`` how many training clips show each action
+        (kinema.model.actions.clips_per_action of the clips' captions)."""
         unique = sorted({c.strip() for c in captions if c and c.strip()})
         if not unique:
             raise KinemaError("known prompts: no captions to embed")
-        return cls(unique, encoder.encode(unique).float(), encoder.id, cls.phrases_in(manner_phrases, unique))
+        phrases = cls.phrases_in(manner_phrases, unique)
+        return cls(unique, encoder.encode(unique).float(), encoder.id, phrases, action_clips)
+
+    @classmethod
+    def from_clips(cls, clip_captions: list[list[str]], encoder, manner_phrases: tuple[str, ...] = ()) -> KnownPrompts:
+        """:meth:`build` from training clips, each given as its captions: all their captions, and per action
+        the number of clips that show it."""
+        captions = [c for caps in clip_captions for c in caps]
+        return cls.build(captions, encoder, manner_phrases, clips_per_action(clip_captions))
 
     @staticmethod
     def phrases_in(phrases, captions) -> tuple[str, ...]:
@@ -108,6 +174,8 @@ class KnownPrompts:
             "captions": json.dumps(self.captions),
             "manner_phrases": json.dumps(list(self.manner_phrases)),
         }
+        if self.action_clips:
+            meta["action_clips"] = json.dumps(self.action_clips)
         path = Path(folder) / FILE_NAME
         atomic_write_bytes(path, save({"embeddings": self.embeddings.half().contiguous()}, metadata=meta))
         return path
@@ -123,8 +191,10 @@ class KnownPrompts:
                 meta = f.metadata() or {}
                 emb = f.get_tensor("embeddings")
             captions = json.loads(meta["captions"])
-            return cls(captions, emb, meta["text_encoder"], tuple(json.loads(meta.get("manner_phrases", "[]"))))
-        except (OSError, KeyError, TypeError, ValueError, RuntimeError, SafetensorError) as err:
+            phrases = tuple(json.loads(meta.get("manner_phrases", "[]")))
+            clips = {str(a): int(n) for a, n in json.loads(meta.get("action_clips", "{}")).items()}
+            return cls(captions, emb, meta["text_encoder"], phrases, clips)
+        except (OSError, KeyError, TypeError, ValueError, AttributeError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
     def nearest(self, embedding: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -144,4 +214,6 @@ class KnownPrompts:
         """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``."""
         sims, idx = self.nearest(embedding, NEAREST)
         nearest = [(self.captions[int(i)], float(v)) for v, i in zip(sims, idx, strict=True)]
-        return PromptMatch(prompt, nearest, nearest[0][1] >= UNKNOWN_BELOW)
+        actions = actions_in(prompt)
+        notes = self.action_notes(actions)
+        return PromptMatch(prompt, nearest, nearest[0][1] >= UNKNOWN_BELOW and not notes, tuple(sorted(actions)), notes)
