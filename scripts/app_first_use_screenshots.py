@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import sys
 import tempfile
 import time
@@ -26,24 +25,10 @@ from kinema.app.generation import AppRobot  # noqa: E402
 from kinema.app.rigs import load_rig  # noqa: E402
 from kinema.app.server import AppServer  # noqa: E402
 from kinema.robot import load_robot  # noqa: E402
+from scripts.app_screenshot import free_port, wait_for  # noqa: E402
 from tests.browser import button, launch, row_input  # noqa: E402
 
 CHARACTER = Path("/work/shared/datasets/quaternius/cyberpunk_pack/Character.glb")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_for(cond, timeout: float = 300.0):
-    t0 = time.time()
-    while time.time() - t0 < timeout:
-        if cond():
-            return
-        time.sleep(0.1)
-    raise SystemExit(f"timed out waiting for the app (line {cond.__code__.co_firstlineno})")
 
 
 def open_page(browser, app):
@@ -62,7 +47,7 @@ def close_notifications(page) -> None:
 
 def generate_and_pause(page, session, pause_at: int = 40) -> None:
     button(page, "Generate").click()
-    wait_for(lambda: session.job is None and session.generated)
+    wait_for(lambda: session.job is None and session.generated, timeout=600)
     wait_for(lambda: session.player.frame >= pause_at, timeout=30)
     button(page, "Pause").click()
     time.sleep(1.0)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import shutil
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,15 @@ def chromium_path() -> str | None:
 
 def launch(playwright):
     return playwright.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+
+
+@contextmanager
+def chromium(sync_api):
+    """A launched browser for the length of a ``with`` block (``sync_api``: playwright.sync_api)."""
+    with sync_api.sync_playwright() as p:
+        b = launch(p)
+        yield b
+        b.close()
 
 
 def row_input(page, label: str):

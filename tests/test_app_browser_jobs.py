@@ -7,14 +7,13 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import kinema
-from tests.browser import button, chromium_path, launch, row_input
+from tests.browser import button, chromium, chromium_path, row_input
 
 if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":
     import viser  # noqa: F401
@@ -29,17 +28,17 @@ else:
 
 from kinema.app.server import AppServer  # noqa: E402
 from tests.browser import world_to_screen  # noqa: E402
-from tests.test_app_browser import wait_for  # noqa: E402
+from tests.test_app_browser import _free_port, wait_for  # noqa: E402
 
 DRAFT_STEPS = 2  # a quick generation
 LONG_STEPS = 400  # a generation long enough to cancel (seconds of work)
 FOX = Path("/work/shared/datasets/quaternius/animals_pack/Fox.glb")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+@pytest.fixture(scope="module")
+def browser():
+    with chromium(sync_api) as b:
+        yield b
 
 
 @pytest.fixture(scope="module")
@@ -47,14 +46,6 @@ def app():
     server = AppServer(kinema.load_model("default"), port=_free_port(), steps=DRAFT_STEPS)
     yield server
     server.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with sync_api.sync_playwright() as p:
-        b = launch(p)
-        yield b
-        b.close()
 
 
 def open_tab(app, browser):

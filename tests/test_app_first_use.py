@@ -55,10 +55,15 @@ def test_session_over_the_apps_limits_is_refused_with_one_line(model):
             load_document(_session(timeline), skeleton=model.skeleton, fps=model.fps, source="s.json")
         assert "\n" not in str(err.value) and str(err.value).startswith("s.json: ")
     with pytest.raises(KinemaError, match=r"'steps' must be an integer in \[1, 1000\]"):
-        load_document(_session([{"prompt": "A person walks.", "seconds": 2}], settings={"steps": 1588}),
-                      skeleton=model.skeleton, fps=model.fps, max_steps=1000)
-    ok = load_document(_session([{"prompt": "A person walks.", "seconds": 60}] * 3), skeleton=model.skeleton,
-                       fps=model.fps)
+        load_document(
+            _session([{"prompt": "A person walks.", "seconds": 2}], settings={"steps": 1588}),
+            skeleton=model.skeleton,
+            fps=model.fps,
+            max_steps=1000,
+        )
+    ok = load_document(
+        _session([{"prompt": "A person walks.", "seconds": 60}] * 3), skeleton=model.skeleton, fps=model.fps
+    )
     assert ok.seconds() == 180
 
 
@@ -136,8 +141,16 @@ def test_progress_can_cancel_a_generation(model):
         raise Cancelled
 
     with pytest.raises(Cancelled):
-        outcome(model, model_rig(model.skeleton), [{"prompt": "A person walks.", "seconds": 2}], constraints=None,
-                samples=1, steps=10, seed=0, progress=stop)
+        outcome(
+            model,
+            model_rig(model.skeleton),
+            [{"prompt": "A person walks.", "seconds": 2}],
+            constraints=None,
+            samples=1,
+            steps=10,
+            seed=0,
+            progress=stop,
+        )
     assert calls == [1]  # stopped at the first step
 
 
@@ -146,8 +159,16 @@ def test_a_humanoid_character_is_generated_on_by_retargeting(model):
     character = load_rig(CHARACTER, fps=model.fps)
     assert character.humanoid and is_character(model, character)
     assert cannot_generate(model, character, "default") is None
-    result = outcome(model, character, [{"prompt": "A person walks forward.", "seconds": 2}], constraints=None,
-                     samples=1, steps=2, seed=0, progress=lambda d, t: None)
+    result = outcome(
+        model,
+        character,
+        [{"prompt": "A person walks forward.", "seconds": 2}],
+        constraints=None,
+        samples=1,
+        steps=2,
+        seed=0,
+        progress=lambda d, t: None,
+    )
     (motion,) = result.motions
     assert motion.skeleton.same_topology(character.skeleton) and motion.num_frames == round(2 * model.fps)
     assert "on Character.glb" in result.text
@@ -162,8 +183,17 @@ def test_a_non_humanoid_keeps_its_message(model):
 
 def test_robot_is_drawn_beside_each_sample(model):
     robot = AppRobot("g1", load_robot("g1"))
-    result = outcome(model, model_rig(model.skeleton), [{"prompt": "A person walks forward.", "seconds": 2}],
-                     constraints=None, samples=2, steps=2, seed=0, progress=lambda d, t: None, robot=robot)
+    result = outcome(
+        model,
+        model_rig(model.skeleton),
+        [{"prompt": "A person walks forward.", "seconds": 2}],
+        constraints=None,
+        samples=2,
+        steps=2,
+        seed=0,
+        progress=lambda d, t: None,
+        robot=robot,
+    )
     assert len(result.robot_motions) == 2 and "robot g1" in result.text
     drawn = result.robot_motions[0]
     assert drawn.num_frames == result.motions[0].num_frames

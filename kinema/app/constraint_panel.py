@@ -57,7 +57,9 @@ class ConstraintPanel:
                 "Add target", icon="target", hint="pin the joint where it is at this frame; drag the gizmo to move it"
             )
             self.contact = gui.add_dropdown(
-                "Feet", tuple(edits.CONTACT_PRESETS), initial_value=next(iter(edits.CONTACT_PRESETS)),
+                "Feet",
+                tuple(edits.CONTACT_PRESETS),
+                initial_value=next(iter(edits.CONTACT_PRESETS)),
                 hint="each choice sets both feet over the range: a foot not planted is held off the ground",
             )
             self.range = gui.add_multi_slider(

@@ -83,14 +83,19 @@ def creature_prompts(rig_name: str) -> tuple[dict, ...]:
     words = re.sub(r"[^a-z]+", " ", rig_name.rsplit(".", 1)[0].lower()).split()
     noun = " ".join(words[:2]) or "creature"
     article = "An" if noun[0] in "aeiou" else "A"
-    return ({"prompt": f"{article} {noun} walks.", "seconds": 6.0}, {"prompt": f"{article} {noun} turns around.",
-                                                                       "seconds": 5.0})
+    return (
+        {"prompt": f"{article} {noun} walks.", "seconds": 6.0},
+        {"prompt": f"{article} {noun} turns around.", "seconds": 5.0},
+    )
 
 
 def added_prompt(any_rig: bool, rig_name: str) -> str:
     """What "Add prompt" writes: a person (human model) or the rig's subject (any-rig model) standing still."""
-    return creature_prompts(rig_name)[0]["prompt"].replace(" walks.", " stands still.") if any_rig else \
-        "A person stands still."
+    return (
+        creature_prompts(rig_name)[0]["prompt"].replace(" walks.", " stands still.")
+        if any_rig
+        else "A person stands still."
+    )
 
 
 def default_document(any_rig: bool, rig_name: str, settings: Settings) -> Document:
@@ -108,13 +113,16 @@ def check_session_length(timeline: list[dict], source: str) -> None:
     """Refuse a segment shorter or longer than the Seconds boxes take, or a timeline longer than a session may be."""
     for i, seg in enumerate(timeline):
         if not MIN_SEGMENT_SECONDS <= seg["seconds"] <= MAX_SEGMENT_SECONDS:
-            raise KinemaError(f"{source}: timeline[{i}]: 'seconds' is {seg['seconds']:g}; a segment lasts "
-                              f"{MIN_SEGMENT_SECONDS:g} to {MAX_SEGMENT_SECONDS:g} s in the app (split a longer "
-                              "one into several prompts)")
+            raise KinemaError(
+                f"{source}: timeline[{i}]: 'seconds' is {seg['seconds']:g}; a segment lasts "
+                f"{MIN_SEGMENT_SECONDS:g} to {MAX_SEGMENT_SECONDS:g} s in the app (split a longer "
+                "one into several prompts)"
+            )
     total = sum(seg["seconds"] for seg in timeline)
     if total > MAX_SESSION_SECONDS:
-        raise KinemaError(f"{source}: the timeline lasts {total:g} s; a session holds at most "
-                          f"{MAX_SESSION_SECONDS:g} s")
+        raise KinemaError(
+            f"{source}: the timeline lasts {total:g} s; a session holds at most {MAX_SESSION_SECONDS:g} s"
+        )
 
 
 def _settings(obj, source: str, max_steps: int) -> Settings:
@@ -133,8 +141,9 @@ def _settings(obj, source: str, max_steps: int) -> Settings:
     return s
 
 
-def load_document(text: str | bytes, *, skeleton, fps: float, source: str = "session",
-                  max_steps: int = 10**6) -> Document:
+def load_document(
+    text: str | bytes, *, skeleton, fps: float, source: str = "session", max_steps: int = 10**6
+) -> Document:
     """Parse and validate a whole session file against the model (skeleton, fps, its most DDIM steps) and
     the app's limits (`check_session_length`); errors name the field."""
     try:

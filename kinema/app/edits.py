@@ -28,8 +28,10 @@ CONTACT_PRESETS = {
     "both feet lifted": (0, 0, 0, 0),
 }
 #: names of sessions saved before the presets said what the other foot does
-OLD_PRESET_NAMES = {"left foot planted": "left foot planted, right lifted",
-                    "right foot planted": "right foot planted, left lifted"}
+OLD_PRESET_NAMES = {
+    "left foot planted": "left foot planted, right lifted",
+    "right foot planted": "right foot planted, left lifted",
+}
 
 
 def heading_vector(h: float) -> list[float]:

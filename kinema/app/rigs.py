@@ -97,8 +97,16 @@ def load_rig(path: str | Path, *, fps: float, scale: float = 1.0) -> AppRig:
         skeleton, clips = motion.skeleton, {path.name: motion.resample(fps).to(torch.float32)}
     rig = model_rig(skeleton, name=path.name)
     clips = {k: rig.with_contacts(m.to(torch.float32)) for k, m in clips.items() if m.num_frames > 0}
-    return AppRig(path.name, skeleton, rig.mesh, rig.contacts, clips, own_colors=skeleton.mesh is not None,
-                  humanoid=find_humanoid(skeleton).is_humanoid, source=path.read_bytes())
+    return AppRig(
+        path.name,
+        skeleton,
+        rig.mesh,
+        rig.contacts,
+        clips,
+        own_colors=skeleton.mesh is not None,
+        humanoid=find_humanoid(skeleton).is_humanoid,
+        source=path.read_bytes(),
+    )
 
 
 def load_rig_bytes(name: str, content: bytes, *, fps: float, scale: float = 1.0) -> AppRig:

@@ -13,7 +13,7 @@ import numpy as np
 from kinema.app import generation as gen
 from kinema.app.camera import CameraFollow, character_extent
 from kinema.app.constraint_panel import ConstraintPanel
-from kinema.app.document import Document, Settings, added_prompt, check_timeline, default_document, load_document
+from kinema.app.document import Settings, added_prompt, check_timeline, default_document, load_document
 from kinema.app.files_panel import FilesPanel
 from kinema.app.markers import Markers, contact_flags_at
 from kinema.app.mesh_view import MeshView, SkinPool
@@ -70,8 +70,13 @@ class Session:
         self.views: list[list[CharacterView]] = []
         self.skins = SkinPool(scene)
         self.markers = Markers(scene, self.skeleton, self.model.fps)
-        self.timeline = TimelinePanel(gui, self.doc, self._length_changed, lambda t: self.notify(t, "", error=True),
-                                      added_prompt(gen.is_any_rig(self.model), self.rig.name))
+        self.timeline = TimelinePanel(
+            gui,
+            self.doc,
+            self._length_changed,
+            lambda t: self.notify(t, "", error=True),
+            added_prompt(gen.is_any_rig(self.model), self.rig.name),
+        )
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
         self.camera = CameraFollow(client, lambda: bool(self.player.follow.value) and self.player.playing)
@@ -111,9 +116,6 @@ class Session:
         self.gen_btn.on_click(lambda _: self.generate())
         self.cancel_btn.on_click(lambda _: self.stop_job("Cancelled"))
         self.pick.on_click(lambda e: self.select_sample(SAMPLE_NAMES.index(e.target.value)))
-
-    def notify(self, title: str, body: str, *, error: bool = False) -> None:
-        self.client.add_notification(title, body, color="red" if error else "blue", auto_close_seconds=8.0)
 
     def notify(self, title: str, body: str, *, error: bool = False) -> None:
         if not self.closed:
@@ -264,8 +266,7 @@ class Session:
                 raise gen.Cancelled
             for note in result.notes:
                 self.notify("Note", note)
-            self.show_motions(result.motions, report=result, source="generated", robots=result.robot_motions,
-                              play=True)
+            self.show_motions(result.motions, report=result, source="generated", robots=result.robot_motions, play=True)
             done = self._report(result)
         except gen.Cancelled:
             done = "Cancelled: nothing changed."
@@ -374,8 +375,10 @@ class Session:
         if why is not None:
             self.notify(f"{self.rig.name}: playback only", why, error=True)
         elif gen.is_character(self.model, self.rig):
-            self.notify(f"{self.rig.name}: humanoid character",
-                        "motions are generated on the model's skeleton and retargeted onto it")
+            self.notify(
+                f"{self.rig.name}: humanoid character",
+                "motions are generated on the model's skeleton and retargeted onto it",
+            )
 
     def show_clip(self, name: str) -> None:
         self.rig_panel.select(name)
@@ -386,8 +389,9 @@ class Session:
         """Load a session file whole, or refuse it whole (a one-line message; nothing changes)."""
         if self.job is not None:
             raise KinemaError(f"{name}: not loaded while generating (press Cancel first)")
-        doc = load_document(content, skeleton=self.skeleton, fps=self.model.fps, source=name,
-                            max_steps=gen.max_steps(self.model))
+        doc = load_document(
+            content, skeleton=self.skeleton, fps=self.model.fps, source=name, max_steps=gen.max_steps(self.model)
+        )
         self.doc = doc
         self.timeline.set_document(doc)
         s = doc.settings

@@ -28,8 +28,14 @@ def clamp_seconds(value) -> float:
 class TimelinePanel:
     """GUI for ``doc.timeline``; ``changed()`` is called after each edit (to refresh frame ranges)."""
 
-    def __init__(self, gui, doc: Document, changed: Callable[[], None], notify: Callable[[str], None],
-                 new_prompt: str = "A person stands still."):
+    def __init__(
+        self,
+        gui,
+        doc: Document,
+        changed: Callable[[], None],
+        notify: Callable[[str], None],
+        new_prompt: str = "A person stands still.",
+    ):
         self.gui, self.doc, self.changed, self.notify, self.new_prompt = gui, doc, changed, notify, new_prompt
         with gui.add_folder("Timeline"):
             self.rows_box = gui.add_folder(None)
