@@ -117,6 +117,32 @@ def test_generated_motion_plays_at_once_and_is_framed(tab):
     assert height > 0.12 * box["height"], height  # the character is not a speck either
 
 
+def test_frame_slider_and_range_agree_after_adding_a_prompt(tab):
+    page, session = tab
+    assert session.generated
+    button(page, "Add prompt").click()
+    wait_for(lambda: len(session.doc.timeline) == 3, timeout=10, what="the new prompt")
+    frames = session.doc.num_frames(session.model.fps)
+    wait_for(lambda: session.player.num_frames == frames, timeout=10, what="the Frame slider to follow")
+    assert int(session.constraints.range.max) == frames - 1 == int(session.player.slider.max)
+    box = row_input(page, "Seconds 3")
+    box.fill("500")
+    box.press("Enter")
+    wait_for(lambda: session.doc.timeline[2]["seconds"] == 60.0, timeout=10, what="the clamped duration")
+    wait_for(lambda: row_input(page, "Seconds 3").input_value() == "60", timeout=10, what="the box to show 60")
+    page.get_by_role("button", name="✕").nth(2).click()  # back to the default timeline
+    wait_for(lambda: len(session.doc.timeline) == 2, timeout=10, what="the prompt removed")
+
+
+def test_frame_range_takes_typed_frames(tab):
+    page, session = tab
+    for label, value in (("From frame", 60), ("To frame", 110)):
+        box = row_input(page, label)
+        box.fill(str(value))
+        box.press("Enter")
+    wait_for(lambda: tuple(session.constraints.range.value) == (60, 110), timeout=10, what="the range 60-110")
+
+
 def test_cancel_stops_the_generation_and_changes_nothing(tab):
     page, session = tab
     before = session.motions

@@ -56,20 +56,7 @@ class ConstraintPanel:
             self.target_btn = gui.add_button(
                 "Add target", icon="target", hint="pin the joint where it is at this frame; drag the gizmo to move it"
             )
-            self.contact = gui.add_dropdown(
-                "Feet",
-                tuple(edits.CONTACT_PRESETS),
-                initial_value=next(iter(edits.CONTACT_PRESETS)),
-                hint="each choice sets both feet over the range: a foot not planted is held off the ground",
-            )
-            self.range = gui.add_multi_slider(
-                "Frames", min=0, max=1, step=1, initial_value=(0, 1), hint="frame range for contacts and paths"
-            )
-            self.range_from = gui.add_number("From frame", 0, min=0, max=1, step=1, hint="first frame of the range")
-            self.range_to = gui.add_number("To frame", 1, min=0, max=1, step=1, hint="last frame of the range")
-            self.contact_btn = gui.add_button(
-                "Add contacts", icon="shoe", hint="plant / lift the feet over the frame range"
-            )
+            self._build_contacts(gui)
             self.items = gui.add_dropdown("Selected", ("(none)",), initial_value="(none)")
             self.heading_deg = gui.add_slider(
                 "Heading (deg)",
@@ -94,6 +81,23 @@ class ConstraintPanel:
         self.heading_deg.on_update(lambda _: self._heading_changed())
         row.on_click(lambda e: self._safely(lambda: self._edit(e.target.value)))
         scene.on_click()(self._clicked)
+
+    def _build_contacts(self, gui) -> None:
+        """Feet, the Frames range with its From / To boxes, and Add contacts."""
+        self.contact = gui.add_dropdown(
+            "Feet",
+            tuple(edits.CONTACT_PRESETS),
+            initial_value=next(iter(edits.CONTACT_PRESETS)),
+            hint="each choice sets both feet over the range: a foot not planted is held off the ground",
+        )
+        self.range = gui.add_multi_slider(
+            "Frames", min=0, max=1, step=1, initial_value=(0, 1), hint="frame range for contacts and paths"
+        )
+        self.range_from = gui.add_number("From frame", 0, min=0, max=1, step=1, hint="first frame of the range")
+        self.range_to = gui.add_number("To frame", 1, min=0, max=1, step=1, hint="last frame of the range")
+        self.contact_btn = gui.add_button(
+            "Add contacts", icon="shoe", hint="plant / lift the feet over the frame range"
+        )
 
     # ------------------------------------------------------------------ helpers
     @property
