@@ -11,7 +11,9 @@ import torch
 
 import kinema
 from kinema.cli import main
+from kinema.data.phrasings import PROBES
 from kinema.errors import KinemaError
+from kinema.model.actions import actions_in
 from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, sides
 from kinema.model.vocabulary import KnownPrompts
 from kinema.text import get_text_encoder
@@ -45,7 +47,7 @@ def test_a_paraphrase_gets_the_blend_of_its_nearest_captions(known):
     sims = known.embeddings @ e[0]
     assert 0.7 < float(sims.max()) < 0.9999  # near a caption, but none of them
     settings = Grounding(weight=0.6, temperature=0.05, top_k=2)
-    out = ground("Somebody strolls ahead.", e, known, settings)
+    out = ground("Somebody goes ahead.", e, known, settings)  # names no action: captions of any action blend
     assert out.status == "grounded"
     top = sims.topk(2)
     w = torch.softmax(top.values.double() / 0.05, dim=0).float()
@@ -58,7 +60,7 @@ def test_a_paraphrase_gets_the_blend_of_its_nearest_captions(known):
     d = out.to_dict()
     assert d["prompt_weight"] == pytest.approx(0.4) and d["captions"][0]["caption"] == "A person walks forward."
     # weight 1, one caption: the nearest caption's own embedding
-    solo = ground("Somebody strolls ahead.", e, known, Grounding(weight=1.0, top_k=1))
+    solo = ground("Somebody goes ahead.", e, known, Grounding(weight=1.0, top_k=1))
     torch.testing.assert_close(solo.embedding[0], known.embeddings[i])
 
 
@@ -121,6 +123,28 @@ def test_known_prompts_keep_the_manner_phrases_their_captions_use(tmp_path):
     known.save(tmp_path)
     again = KnownPrompts.load(tmp_path)
     assert again.manner_phrases == known.manner_phrases and torch.equal(again.mannered, known.mannered)
+
+
+def test_grounding_keeps_the_actions_the_prompt_names():
+    """Issue 36: "... walks forward and reaches out ..." was grounded on "... walks forward and turns to the
+    right." (nearest in embedding space). A prompt is grounded only on captions naming all its actions, and a
+    prompt naming an action the model has not learned (no caption, or too few clips) is unknown."""
+    caps = ["A person walks forward and turns around.", "A person walks ahead.", "A person kicks.", "A person waves."]
+    emb = torch.tensor([[1.0, 0, 0, 0], [0.7, 0.7, 0, 0], [0.8, 0, 0.6, 0], [0, 0, 0, 1.0]])
+    known = KnownPrompts(caps, emb, "x", (), {"walk": 40, "turn": 20, "kick": 2, "wave": 30})
+    e = torch.nn.functional.normalize(torch.tensor([[0.99, 0.12, 0, 0]]), dim=-1)  # nearest: the walk-and-turn
+    assert known.match("p", e).nearest[0][0] == caps[0]
+    out = ground("Someone strolls on.", e, known, Grounding(weight=1.0, top_k=3))
+    assert out.status == "grounded" and [c for c, _ in out.captions] == [caps[0], caps[1]]  # both name a walk
+    out = ground("Someone strolls and veers on.", e, known, Grounding(weight=1.0, top_k=3))
+    assert [c for c, _ in out.captions] == [caps[0]]  # walk and turn: only the caption naming both
+    for prompt in ("A person walks on and reaches out.", "A person kicks on."):  # never named / 2 clips
+        out = ground(prompt, e, known, Grounding(weight=1.0, top_k=3))
+        assert out.status == "unknown" and torch.equal(out.embedding, e)
+    assert ground("A person walks and waves.", e, known, Grounding(weight=1.0)).status == "unmatched"
+    assert known.action_notes(frozenset({"walk", "wave"})) == ("no training caption has 'walk' and 'wave' together",)
+    out = ground("Somebody goes on.", e, known, Grounding(weight=1.0, top_k=1))  # names no action: as before
+    assert [c for c, _ in out.captions] == [caps[0]]
 
 
 @pytest.mark.parametrize(
@@ -254,3 +278,38 @@ def test_the_default_is_saved_with_the_model(tiny_checkpoint, tmp_path, capsys, 
     (bad / "checkpoint.json").write_text(json.dumps(info))
     with pytest.raises(KinemaError, match=r"checkpoint.json: field 'grounding': unknown keys \['alpha'\]"):
         kinema.load_model(bad)
+
+
+# the shipped model's grounding of the probes of kinema.data.phrasings before issue 36's action rule: unchanged
+PROBE_CAPTIONS = {
+    "Someone strolls slowly ahead.": "Someone walks slowly ahead.",
+    "A man saunters forward at a leisurely pace.": "A person walks forward at a slow, leisurely pace.",
+    "Somebody heads forward on foot.": "Someone takes a walk forward.",
+    "A woman goes for a walk straight ahead.": "A woman walks straight ahead.",
+    "A man jogs quickly forward.": "A man sprints forward.",
+    "Somebody jogs ahead.": "A person runs ahead.",
+    "A person sprints as fast as possible.": "Someone sprints straight ahead at full speed in an ordinary way.",
+    "Someone races ahead at top speed.": "A person dashes ahead at top speed.",
+    "A woman lifts her left arm up high.": "A woman raises her left arm up.",
+    "Somebody holds the left hand up in the air.": "Someone puts their left hand up in an ordinary way.",
+    "A man lifts his right arm up high.": "A man raises his right arm up.",
+    "A character holds the right hand up in the air.": "Someone puts their right hand up in an ordinary way.",
+    "A person ambles along slowly.": None,  # unknown (0.69)
+}
+
+
+def test_the_probes_ground_as_before_and_synonyms_on_their_action(model):
+    assert set(PROBE_CAPTIONS) == {p.prompt for p in PROBES}
+    grounded = model.ground_prompts([*PROBE_CAPTIONS, "A person strolls forward."])
+    for prompt, caption in PROBE_CAPTIONS.items():
+        got = grounded[prompt].captions
+        assert (got[0][0] if got else None) == caption, prompt
+    (stroll,) = grounded["A person strolls forward."].captions
+    assert actions_in(stroll[0]) == {"walk"}  # a synonym goes to its action
+
+
+def test_the_reaching_walk_is_not_grounded_on_a_turn(model):
+    prompt = "A person walks forward and reaches out with the right hand."
+    nearest = model.known_prompts.match(prompt, model.encode_text(prompt)[0]).nearest[0][0]
+    assert nearest == "A person walks forward and turns to the right."  # still the nearest in embedding space
+    assert model.ground_prompts([prompt])[prompt].status == "unknown"

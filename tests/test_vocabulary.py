@@ -7,8 +7,10 @@ import torch
 
 import kinema
 from kinema.cli import main
+from kinema.data.dataset import MotionDataset
 from kinema.errors import KinemaError
-from kinema.model.vocabulary import FILE_NAME, UNKNOWN_BELOW, KnownPrompts
+from kinema.model.actions import actions_in, clips_per_action
+from kinema.model.vocabulary import FILE_NAME, MIN_ACTION_CLIPS, UNKNOWN_BELOW, KnownPrompts
 from kinema.text import get_text_encoder
 
 CAPTIONS = ["A person walks forward.", "A person bows.", "A person waves their right hand.", "A person bows."]
@@ -104,6 +106,8 @@ def test_export_writes_known_prompts(tiny_checkpoint, tiny_data, tmp_path, capsy
     assert (out / FILE_NAME).is_file() and "known captions" in capsys.readouterr().out
     loaded = kinema.load_model(out)
     assert loaded.known_prompts is not None and loaded.known_prompts.encoder_id == "hash-test-32"
+    train = [rec["captions"] for rec in MotionDataset(tiny_data, "train").clips]
+    assert loaded.known_prompts.action_clips == clips_per_action(train) and loaded.known_prompts.action_clips
     assert (
         main(
             [
@@ -118,3 +122,60 @@ def test_export_writes_known_prompts(tiny_checkpoint, tiny_data, tmp_path, capsy
         == 2
     )
     assert "not a dataset build" in capsys.readouterr().err and not (tmp_path / "m2").exists()
+
+
+# ----------------------------------------------------------------------------- actions (issues 36, 38)
+def test_action_counts_round_trip_and_older_files_still_load(tmp_path):
+    enc = get_text_encoder("hash-test-32")
+    clips = [["A person walks forward."], ["A person walks forward.", "A person bows."], ["A person kicks."]]
+    known = KnownPrompts.from_clips(clips, enc)
+    assert known.action_clips == {"bow": 1, "kick": 1, "walk": 2} and known.learned == frozenset()  # all < 10
+    known.save(tmp_path)
+    assert KnownPrompts.load(tmp_path).action_clips == known.action_clips
+    older = KnownPrompts(known.captions, known.embeddings, known.encoder_id)  # written before action_clips
+    older.save(tmp_path / "old")
+    back = KnownPrompts.load(tmp_path / "old")
+    assert back.action_clips == {} and back.learned == {"bow", "kick", "walk"}  # every named action counts
+    assert back.match("A person kicks.", enc.encode(["A person kicks."])[0]).known
+    assert not back.match("A person punches.", enc.encode(["A person kicks."])[0]).known  # never named
+
+
+def test_the_default_model_knows_which_actions_its_clips_show():
+    known = kinema.load_model().known_prompts
+    clips = known.action_clips
+    assert clips["kick"] == clips["dance"] == 2 and clips["call"] == clips["slash"] == 4  # 1-2 takes, mirrored
+    assert min(clips[a] for a in ("walk", "run", "turn", "bow", "wave", "raise", "guide")) >= 2 * MIN_ACTION_CLIPS
+    assert known.named_actions - known.learned == {"kick", "dance", "call", "slash", "spin"}
+    assert "punch" not in known.named_actions and "jump" not in known.named_actions
+
+
+@pytest.mark.parametrize(
+    "prompt, says",
+    [
+        ("A person walks forward and reaches out with the right hand.", "the model was not trained on 'reach'"),
+        ("A person kicks with their right leg.", "the model was not trained on 'kick' enough to learn it"),
+        ("A person kicks.", "only 2 training clips show it"),
+        ("A person dances.", "the model was not trained on 'dance' enough to learn it"),
+        ("A person punches.", "the model was not trained on 'punch'"),
+    ],
+)
+def test_a_prompt_whose_action_the_model_does_not_know_is_warned(model, prompt, says):
+    """Issue 36: these were grounded on other captions without a word (the reach on a walk-and-turn)."""
+    (match,) = model.match_prompts([prompt])
+    assert not match.known and says in match.warning() and "\n" not in match.warning()
+    assert match.to_dict()["actions"] == sorted(actions_in(prompt))
+    grounded = model.ground_prompts([prompt])[prompt]
+    assert grounded.status == "unknown" and grounded.captions == ()
+    assert torch.equal(grounded.embedding, model.encode_text(prompt))  # conditioned on its own words
+
+
+def test_actions_no_caption_names_together_are_warned(model):
+    (match,) = model.match_prompts(["A person walks forward and waves."])
+    assert not match.known and "no training caption has 'walk' and 'wave' together" in match.warning()
+    assert match.warning().startswith("prompt 'A person walks forward and waves.' asks for what the model was not")
+
+
+def test_the_warning_reaches_the_report(model):
+    rep = model.generate("A person dances.", seconds=1.0, steps=1, postprocess=False).report
+    assert len(rep.warnings) == 1 and "'dance'" in rep.warnings[0]
+    assert rep.prompts[0]["grounding"]["status"] == "unknown" and rep.prompts[0]["actions"] == ["dance"]

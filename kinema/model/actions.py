@@ -60,7 +60,7 @@ ACTION_WORDS: dict[str, tuple[str, ...]] = {
     "swim": (r"swim(?:s|ming)?", r"swam"),
     "roll": (r"roll(?:s|ed|ing)?", r"somersault(?:s|ed|ing)?", r"cartwheel(?:s|ed|ing)?", r"(?:back)?flip(?:s|ped)?"),
     "fall": (r"fall(?:s|ing|en)?", r"fell", r"stumbl(?:e|es|ed|ing)", r"trip(?:s|ped|ping)?"),
-    "throw": (r"(?:throw|throws|throwing|threw|toss|tosses|tossed)(?! (?:a |some )?(?:left |right )?(?:punch|jab))",),
+    "throw": (r"(?:throw|throws|throwing|threw|toss|tosses|tossed)(?!(?: \w+){0,3} (?:punch|jab))",),
     "catch": (r"catch(?:es|ing)?", r"caught"),
     "pick up": (r"pick(?:s|ed|ing)?(?: \w+){0,3} up",),
     "carry": (r"carr(?:y|ies|ied|ying)",),
