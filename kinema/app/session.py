@@ -305,10 +305,11 @@ class Session:
         return gen.is_character(self.model, self.rig) or self.app.robot is not None
 
     def _report(self, report: gen.Outcome) -> str:
-        """The status text after a generation; unmet constraints in a short list and one notification."""
+        """The status text after a generation; its warnings (unmet constraints, prompts the model does not
+        know) in a short list and one notification."""
         lines, toast = summarize_warnings(report.warnings)
         if toast:
-            self.notify("Constraints not all met", toast, error=True)
+            self.notify("Generated, with warnings", toast, error=True)
         return report.text + ("\n\n" + "\n".join(lines) if lines else "")
 
     # ------------------------------------------------------------------ rigs
@@ -417,7 +418,7 @@ def summarize_warnings(warnings: list[str]) -> tuple[list[str], str]:
         return [], ""
     shown = [_cut(w) for w in distinct[:SHOWN_WARNINGS]]
     more = f" (+{len(distinct) - SHOWN_WARNINGS} more)" if len(distinct) > SHOWN_WARNINGS else ""
-    return [f"- {w}" for w in shown[:-1]] + [f"- {shown[-1]}{more}"], f"{shown[0]}{more} (see Residuals)"
+    return [f"- {w}" for w in shown[:-1]] + [f"- {shown[-1]}{more}"], f"{shown[0]}{more}"
 
 
 def _cut(text: str, chars: int = WARNING_CHARS) -> str:
