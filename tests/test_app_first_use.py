@@ -27,6 +27,7 @@ from kinema.app.generation import AppRobot, Cancelled, cannot_generate, is_chara
 from kinema.app.rigs import load_rig, model_rig, skeleton_size
 from kinema.app.session import summarize_warnings
 from kinema.app.timeline_panel import MAX_SECONDS, MIN_SECONDS, clamp_seconds
+from kinema.cli import build_parser
 from kinema.errors import KinemaError
 from kinema.robot import load_robot
 from kinema.skeleton import Skeleton
@@ -199,3 +200,9 @@ def test_robot_is_drawn_beside_each_sample(model):
     assert drawn.num_frames == result.motions[0].num_frames
     heights = drawn.positions[..., 1]
     assert float(heights.max()) > 1.0 and float(heights.min()) > -0.05  # a standing robot, Y up, on the floor
+
+
+def test_app_command_takes_a_robot():
+    args = build_parser().parse_args(["app", "--robot", "g1", "--steps", "4"])
+    assert args.robot == "g1" and args.steps == 4
+    assert build_parser().parse_args(["app"]).robot is None
