@@ -5,9 +5,8 @@ root stands over the origin, turned so that the context's last frame faces +Z (a
 then told to bow stayed bent over 45-57 deg for 10 s in a frame that was not turned; turned, it bows
 and stands up again like an unturned one). Its first `CONTEXT_SECONDS` are the last frames generated
 so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt, steering
-path, targets: kinema.stream.controls) constrain the rest. Its first `SKIP_SECONDS` after the context
-are dropped (the previous window's frames are kept there: the denoiser's first free frames lag the
-keyframes) and the next `BLEND_SECONDS` are cross-faded from the previous window
+path, targets: kinema.stream.controls) constrain the rest. Its next `BLEND_SECONDS` are cross-faded
+from the previous window (`SKIP_SECONDS` after the context may be left out first; 0 by default)
 (kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended). While steering,
 the window is turned to face along its path; every window is lifted or lowered onto the first one's
 ground level (at most `FLOOR_STEP` a window). Windows are not post-processed, except while a target
@@ -17,8 +16,8 @@ is held: after context keyframes the raw denoiser leaves a hand target 25-30 cm 
 Frames are handed out in order (``next_frames(n)`` or iteration). A command (``set_prompt``, ``steer``,
 ``target``, ``clear``) cuts the frames not yet handed out back to ``lookahead`` seconds after the last
 one handed out and regenerates from there: the first frame that obeys it (the new window's weight
-past one half) is ``lookahead + SKIP_SECONDS + BLEND_SECONDS / 2`` seconds of motion later (0.45 s by
-default), whatever the window length. The first window after a prompt switch runs with a stronger
+past one half) is ``lookahead + SKIP_SECONDS + BLEND_SECONDS / 2`` seconds of motion later (0.25 s by
+default: 3 + 0 + 2 frames), whatever the window length. The first window after a prompt switch runs with a stronger
 text guidance (`SWITCH_GUIDANCE`). Frames already handed out are dropped from memory (the last
 `HISTORY_FRAMES` are kept for the smoothed root), so a stream's memory does not grow.
 
@@ -60,9 +59,13 @@ STREAM_STEPS = 10
 #: seconds of the previous motion imposed on a window's first frames
 CONTEXT_SECONDS = 0.2
 #: seconds of a window's own frames after its context that are not used (the previous window's are
-#: kept there): the denoiser's first free frames after keyframes lag them (measured: pelvis speed
-#: 2.9 -> 1.3 m/s in one frame on a walk, recovering over ~0.3 s)
-SKIP_SECONDS = 0.2
+#: kept there). The denoiser's first free frames after keyframes lag them (pelvis speed 2.9 -> 1.3 m/s
+#: in one frame on a walk, recovering over ~0.3 s), which skipping 0.2 s hid while the cross-fade
+#: blended root *positions*; with the root's velocity blended (`stitch`) it is not needed, and skipping
+#: dropped a window's own start: a wave -> jog switch in a 10-min stream made a 474 m/s^2 pop at the
+#: seam (the windows' own largest: 282). 0 s: the seams of the first 100 s of
+#: examples/streams/ten_minutes.jsonl peak at 230 m/s^2 and the latency falls from 0.45 to 0.25 s.
+SKIP_SECONDS = 0.0
 #: seconds over which a window is cross-faded from the previous one's provisional frames
 BLEND_SECONDS = 0.25
 #: frames kept before the next context (the smoothed root is measured over them)
