@@ -6,29 +6,18 @@ the view. Skipped when Playwright or the browser is missing (tests/test_app_brow
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+# importing the page tests' module first skips this one too when Playwright, viser or the browser is missing
+from tests.test_app_browser import _free_port, sync_api, wait_for
+
+# isort: split
 import kinema
-from tests.browser import button, chromium, chromium_path, row_input
-
-if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":
-    import viser  # noqa: F401
-    from playwright import sync_api
-
-    assert chromium_path() is not None, "chromium-headless-shell is missing (see .ci/run)"
-else:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright (see .ci/run)")
-    pytest.importorskip("viser", reason="pip install 'kinema[app]'")
-    if chromium_path() is None:
-        pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
-
-from kinema.app.server import AppServer  # noqa: E402
-from tests.browser import world_to_screen  # noqa: E402
-from tests.test_app_browser import _free_port, wait_for  # noqa: E402
+from kinema.app.server import AppServer
+from tests.browser import button, chromium, row_input, world_to_screen
 
 DRAFT_STEPS = 2  # a quick generation
 LONG_STEPS = 400  # a generation long enough to cancel (seconds of work)
@@ -123,8 +112,12 @@ def test_frame_slider_and_range_agree_after_adding_a_prompt(tab):
     button(page, "Add prompt").click()
     wait_for(lambda: len(session.doc.timeline) == 3, timeout=10, what="the new prompt")
     frames = session.doc.num_frames(session.model.fps)
-    wait_for(lambda: session.player.num_frames == frames, timeout=10, what="the Frame slider to follow")
-    assert int(session.constraints.range.max) == frames - 1 == int(session.player.slider.max)
+    wait_for(
+        lambda: session.player.num_frames == frames and int(session.constraints.range.max) == frames - 1,
+        timeout=10,
+        what="the Frame slider and the Frames range to follow",
+    )
+    assert int(session.player.slider.max) == frames - 1
     box = row_input(page, "Seconds 3")
     box.fill("500")
     box.press("Enter")

@@ -134,6 +134,21 @@ def test_samples_spacing_scales_with_the_rig(model):
     assert skeleton_size(small) == pytest.approx(0.2)
 
 
+def _walk(model, rig, *, samples: int = 1, steps: int = 2, progress=None, robot=None):
+    """A 2-s walk generated through the app's `outcome`."""
+    return outcome(
+        model,
+        rig,
+        [{"prompt": "A person walks forward.", "seconds": 2}],
+        constraints=None,
+        samples=samples,
+        steps=steps,
+        seed=0,
+        progress=progress or (lambda d, t: None),
+        robot=robot,
+    )
+
+
 def test_progress_can_cancel_a_generation(model):
     calls = []
 
@@ -142,16 +157,7 @@ def test_progress_can_cancel_a_generation(model):
         raise Cancelled
 
     with pytest.raises(Cancelled):
-        outcome(
-            model,
-            model_rig(model.skeleton),
-            [{"prompt": "A person walks.", "seconds": 2}],
-            constraints=None,
-            samples=1,
-            steps=10,
-            seed=0,
-            progress=stop,
-        )
+        _walk(model, model_rig(model.skeleton), steps=10, progress=stop)
     assert calls == [1]  # stopped at the first step
 
 
@@ -160,16 +166,7 @@ def test_a_humanoid_character_is_generated_on_by_retargeting(model):
     character = load_rig(CHARACTER, fps=model.fps)
     assert character.humanoid and is_character(model, character)
     assert cannot_generate(model, character, "default") is None
-    result = outcome(
-        model,
-        character,
-        [{"prompt": "A person walks forward.", "seconds": 2}],
-        constraints=None,
-        samples=1,
-        steps=2,
-        seed=0,
-        progress=lambda d, t: None,
-    )
+    result = _walk(model, character)
     (motion,) = result.motions
     assert motion.skeleton.same_topology(character.skeleton) and motion.num_frames == round(2 * model.fps)
     assert "on Character.glb" in result.text
@@ -184,17 +181,7 @@ def test_a_non_humanoid_keeps_its_message(model):
 
 def test_robot_is_drawn_beside_each_sample(model):
     robot = AppRobot("g1", load_robot("g1"))
-    result = outcome(
-        model,
-        model_rig(model.skeleton),
-        [{"prompt": "A person walks forward.", "seconds": 2}],
-        constraints=None,
-        samples=2,
-        steps=2,
-        seed=0,
-        progress=lambda d, t: None,
-        robot=robot,
-    )
+    result = _walk(model, model_rig(model.skeleton), samples=2, robot=robot)
     assert len(result.robot_motions) == 2 and "robot g1" in result.text
     drawn = result.robot_motions[0]
     assert drawn.num_frames == result.motions[0].num_frames
