@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -25,7 +27,7 @@ from kinema.app.document import (
 )
 from kinema.app.generation import AppRobot, Cancelled, cannot_generate, is_character, outcome
 from kinema.app.rigs import load_rig, model_rig, skeleton_size
-from kinema.app.session import summarize_warnings
+from kinema.app.session import Session, summarize_warnings
 from kinema.app.timeline_panel import MAX_SECONDS, MIN_SECONDS, clamp_seconds
 from kinema.cli import build_parser
 from kinema.errors import KinemaError
@@ -193,3 +195,18 @@ def test_app_command_takes_a_robot():
     args = build_parser().parse_args(["app", "--robot", "g1", "--steps", "4"])
     assert args.robot == "g1" and args.steps == 4
     assert build_parser().parse_args(["app"]).robot is None
+
+
+def test_progress_names_post_processing_and_cancel_stops_it(model):
+    session = Session.__new__(Session)  # only what the progress callback reads: no browser
+    session.cancel, session.model, session.rig = threading.Event(), model, model_rig(model.skeleton)
+    session.progress, session.status = SimpleNamespace(value=0.0), SimpleNamespace(content="")
+    session.app = SimpleNamespace(robot=None)
+    session._progress(26, 52)
+    assert session.status.content == "Generating... step 26 of 52" and session.progress.value == 45.0
+    session._progress(52, 52)  # the denoiser is done; post-processing follows, which reports no steps
+    assert session.status.content.startswith("Post-processing (foot contacts, constraints)")
+    assert session.progress.value == 90.0
+    session.cancel.set()
+    with pytest.raises(Cancelled):
+        session._progress(52, 52)
