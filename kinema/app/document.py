@@ -28,7 +28,7 @@ SESSION_KEYS = ("kinema_session", "fps", "timeline", "constraints", "settings")
 SETTING_KEYS = ("samples", "seed", "steps")
 DEFAULT_TIMELINE = (
     {"prompt": "A person walks forward.", "seconds": 6.0},
-    {"prompt": "A person turns around and waves.", "seconds": 5.0},
+    {"prompt": "A person waves.", "seconds": 5.0},  # a prompt the model knows (a turn and a wave never share a caption)
 )
 
 
