@@ -72,7 +72,7 @@ PIPELINE_RULES = {
     "human": ("kinema.anyrig", "kinema.generate", *FACES),
     "anyrig": ("kinema.human", "kinema.generate", *FACES),
     "generate": FACES,
-    "stream": FACES,
+    "stream": ("kinema.pipeline", "kinema.human", "kinema.anyrig", "kinema.generate", *FACES),
     "objectives": ("kinema.human", "kinema.anyrig", "kinema.generate", *FACES),
     "batch": ("kinema.server", "kinema.cli", "kinema.app"),
     "server": ("kinema.batch", "kinema.cli", "kinema.app"),

@@ -23,6 +23,7 @@ from kinema.pipeline.progress import ProgressFn
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationResult
 from kinema.pipeline.stages import load_stage
+from kinema.stream import MotionStream, open_stream
 
 
 @dataclass(frozen=True)
@@ -161,6 +162,11 @@ class MotionPipeline(ABC):
         if str(rig) in {r.name for r in self.rigs()} or not Path(rig).is_file():
             return None  # its own rig, or no character file: the pipeline says what it drives
         return load_stage(stages.CHARACTER).open(rig, self.resolve_rig(None).skeleton)
+
+    def stream(self, request: GenerationRequest | None = None, **options) -> MotionStream:
+        """An endless live motion of this model, window by window, following prompt, steering and target
+        commands while it plays (kinema.stream.open_stream, docs/stream.md)."""
+        return open_stream(self, request, **options)
 
     @abstractmethod
     def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:
