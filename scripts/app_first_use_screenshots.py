@@ -28,7 +28,7 @@ from kinema.robot import load_robot  # noqa: E402
 from scripts.app_screenshot import free_port, wait_for  # noqa: E402
 from tests.browser import button, launch, row_input  # noqa: E402
 
-CHARACTER = Path("/work/shared/datasets/quaternius/cyberpunk_pack/Character.glb")
+CHARACTER = REPO.parent / "shared" / "datasets" / "quaternius" / "cyberpunk_pack" / "Character.glb"
 
 
 def open_page(browser, app):

@@ -263,12 +263,8 @@ class AnyRigPipeline(MotionPipeline):
         return out
 
     def _guidance(self, guidance) -> Guidance:
-        if guidance is None:
-            return self.loaded.guidance
-        if isinstance(guidance, Guidance):
-            return guidance
-        w_text, w_constr = guidance
-        return Guidance(self.loaded.guidance.mode, w_text, w_constr)
+        """The call's guidance (two weights keep the checkpoint's guidance mode)."""
+        return Guidance.given(guidance, self.loaded.guidance)
 
     def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
         """Features -> motion, post-processed in rig units (rest pose 1 across, so the human-tuned

@@ -86,6 +86,20 @@ class Guidance:
             return Guidance(GuidanceMode.REGULAR, self.w_text, self.w_constr)
         return Guidance(self.mode, self.w_text, self.w_constr)
 
+    @classmethod
+    def given(cls, value, default: Guidance, mode: GuidanceMode | str | None = None) -> Guidance:
+        """A call's guidance: ``default`` for None, a `Guidance` as it is, or ``(w_text, w_constr)`` with
+        ``mode`` (default: the default's mode)."""
+        if value is None:
+            return default
+        if isinstance(value, Guidance):
+            return value
+        try:
+            w_text, w_constr = (float(w) for w in value)
+        except (TypeError, ValueError):
+            raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {value!r}") from None
+        return cls(default.mode if mode is None else mode, w_text, w_constr)
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable settings."""
         return {"mode": self.mode.value, "w_text": self.w_text, "w_constr": self.w_constr}

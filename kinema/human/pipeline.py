@@ -10,7 +10,6 @@ place the motion elsewhere in the world.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, replace
 from functools import partial
@@ -221,19 +220,8 @@ class HumanPipeline(MotionPipeline):
         return out
 
     def _guidance(self, guidance) -> Guidance:
-        if guidance is None:
-            return self.loaded.guidance
-        if isinstance(guidance, Guidance):
-            return guidance
-        try:
-            w_text, w_constr = (float(w) for w in guidance)
-        except (TypeError, ValueError):
-            raise KinemaError(f"guidance must be two numbers (w_text, w_constr), got {guidance!r}") from None
-        for name, w in (("w_text", w_text), ("w_constr", w_constr)):
-            if not (math.isfinite(w) and w >= 0):
-                raise KinemaError(f"guidance {name} must be a finite number >= 0 (0 = no guidance, 1 = the "
-                                  f"conditional model alone, > 1 = stronger), got {w}")
-        return Guidance(mode="separated", w_text=w_text, w_constr=w_constr)
+        """The call's guidance (two weights are separated guidance; the request checked them)."""
+        return Guidance.given(guidance, self.loaded.guidance, mode="separated")
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:
         return None if not prompt.strip() else self.text_encoder.encode([prompt]).float()
