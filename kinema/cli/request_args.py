@@ -17,8 +17,8 @@ from pathlib import Path
 
 from kinema.pipeline.request import GenerationRequest, Option, RequestBounds, options
 
-#: fields the CLI spells in a unit other than the request's: name -> (CLI unit, to request unit)
-CLI_UNITS = {"heading": ("degrees", math.radians)}
+#: fields the CLI spells in a unit other than the request's: name -> (help in the CLI's unit, to request unit)
+CLI_UNITS = {"heading": ("first-frame facing about +Y in degrees (0 faces +Z, 90 faces +X)", math.radians)}
 
 
 def _bounded(name: str, opt: Option, bounds: RequestBounds):
@@ -56,7 +56,7 @@ def add_request_arguments(p: argparse.ArgumentParser, cls: type = GenerationRequ
     for f, opt in options(cls):
         if opt.cli is False:
             continue
-        help_text = opt.help + (f" [{CLI_UNITS[f.name][0]}]" if f.name in CLI_UNITS else "")
+        help_text = CLI_UNITS[f.name][0] if f.name in CLI_UNITS else opt.help
         if opt.cli == "PROMPT":
             p.add_argument("prompt", nargs="?", default=None, help=help_text)
         elif opt.kind == "bool" and f.default is True:

@@ -101,7 +101,8 @@ class GenerationRequest:
     timeline: Any = option(None, kind="json", file=True, metavar="FILE",
                            help="several prompts in sequence: a list of {prompt, seconds} (docs/formats.md)")
     seconds: float | None = option(None, kind="float", low=0, open_low=True, high="max_seconds",
-                                   help=f"duration of a single prompt (default {DEFAULT_SECONDS:g})")
+                                   help=f"duration of a single prompt (default {DEFAULT_SECONDS:g}; 4 for a model for "
+                                        "any rig)")
     samples: int = option(1, kind="int", low=1, high="max_samples",
                           help="how many motions (same request, different noise), sampled as one batch")
     seed: int = option(0, kind="int", low=0, high=MAX_SEED, help="random seed: fixes the result")
