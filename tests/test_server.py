@@ -13,7 +13,6 @@ import io
 import json
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -24,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from server_process import stop_server
 
 httpx = pytest.importorskip("httpx")
 pytest.importorskip("fastapi")
@@ -110,12 +110,7 @@ def server(tmp_path_factory):
             time.sleep(0.2)
         yield url, proc
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(15)
+        stop_server(proc)
         log.close()
 
 

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
 import sys
 import time
 
 import pytest
+from server_process import stop_server
 
 websockets = pytest.importorskip("websockets")
 pytest.importorskip("uvicorn")
@@ -55,12 +55,7 @@ def url(tmp_path_factory):
                 time.sleep(0.2)
         yield f"ws://127.0.0.1:{port}/v1/stream"
     finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(15)
+        stop_server(proc)
         log.close()
         text = (tmp / "server.log").read_text()
         assert "Traceback" not in text, text
