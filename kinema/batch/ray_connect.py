@@ -2,16 +2,22 @@
 
 ``ray.init(address=...)`` keeps retrying an address where no Ray listens. Before it runs, a
 ``HOST:PORT`` or ``ray://HOST:PORT`` address is probed with a plain TCP connection
-(`PROBE_TIMEOUT` seconds): nothing listening is a one-line error at once. Then ``ray.init`` itself
-runs in a daemon thread that is given `CONNECT_TIMEOUT` seconds (something that accepts connections
-but is no Ray head, or ``auto`` finding a dead cluster); past that the batch stops with a one-line
-error. ``KINEMA_RAY_TIMEOUT`` (seconds) overrides `CONNECT_TIMEOUT`.
+(`PROBE_TIMEOUT` seconds): nothing listening is a one-line error at once. Then a short-lived child
+process tries ``ray.init`` on the address and is given `CONNECT_TIMEOUT` seconds (something that
+accepts connections but is no Ray head, or ``auto`` finding a dead cluster); past that it is killed
+and the batch stops with a one-line error. Only an address the child joined is joined in this
+process. (A thread would not do: a ``ray.init`` given up on keeps running inside Ray's C++ core,
+and the process aborts with ``std::bad_alloc`` when it exits.) ``KINEMA_RAY_TIMEOUT`` (seconds)
+overrides `CONNECT_TIMEOUT`.
 """
 
 from __future__ import annotations
 
+import os
+import signal
 import socket
-import threading
+import subprocess
+import sys
 
 from kinema.errors import KinemaError
 from kinema.runtime import positive_from_env
@@ -50,26 +56,29 @@ def connect_timeout() -> float:
     return positive_from_env(TIMEOUT_ENV, CONNECT_TIMEOUT)
 
 
-def init_bounded(ray, address: str, **kwargs) -> None:
-    """``ray.init(address=address, **kwargs)`` that gives up after `connect_timeout` seconds."""
-    probe(address)
-    limit = connect_timeout()
-    outcome: dict = {}
+#: what the child process runs: join, leave, exit 0
+JOIN_SCRIPT = "import sys, ray; ray.init(address=sys.argv[1], log_to_driver=False); ray.shutdown()"
 
-    def connect() -> None:
-        try:
-            ray.init(address=address, **kwargs)
-            outcome["ok"] = True
-        except Exception as err:  # reported in the caller's thread
-            outcome["error"] = err
 
-    thread = threading.Thread(target=connect, name="kinema-ray-init", daemon=True)
-    thread.start()
-    thread.join(limit)
-    if thread.is_alive():
+def check_joinable(address: str, limit: float) -> None:
+    """A one-line error unless a child process joins the cluster at ``address`` within ``limit`` seconds."""
+    child = subprocess.Popen([sys.executable, "-c", JOIN_SCRIPT, address], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        _, err = child.communicate(timeout=limit)
+    except subprocess.TimeoutExpired:
+        os.killpg(child.pid, signal.SIGKILL)
+        child.communicate()
         raise KinemaError(f"--ray {address}: no Ray cluster answered within {limit:g} s (is a Ray head running "
-                          f"there? {TIMEOUT_ENV} sets the wait)")
-    if "error" in outcome:
-        err = outcome["error"]
-        raise KinemaError(f"--ray {address}: cannot join the Ray cluster ({type(err).__name__}: "
-                          f"{str(err).splitlines()[0] if str(err) else ''})") from None
+                          f"there? {TIMEOUT_ENV} sets the wait)") from None
+    if child.returncode != 0:
+        lines = [line.strip() for line in err.splitlines() if line.strip()]
+        reason = lines[-1] if lines else f"exit status {child.returncode}"
+        raise KinemaError(f"--ray {address}: cannot join the Ray cluster ({reason})")
+
+
+def init_bounded(ray, address: str, **kwargs) -> None:
+    """``ray.init(address=address, **kwargs)`` once a child process has joined there within `connect_timeout`."""
+    probe(address)
+    check_joinable(address, connect_timeout())
+    ray.init(address=address, **kwargs)
