@@ -62,7 +62,7 @@ SETTINGS = {
 def emit(out: str, threads: int) -> None:
     """Generate every case in this process and save its arrays to ``out``."""
     torch.set_num_threads(threads)
-    model = kinema.load_model()
+    model = kinema.load_model(precision="fp32")
     with np.load(FIXTURE) as data:
         todo = cases(data["input_kf_rot"], data["input_kf_root"])
     arrays = {}

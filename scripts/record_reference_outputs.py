@@ -25,7 +25,7 @@ from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
 
 def main(out: str, only: str | None = None) -> None:
     torch.set_num_threads(1)
-    model = kinema.load_model()
+    model = kinema.load_model(precision="fp32")
     seed_motion = model.generate("A person walks forward.", seconds=2.0, steps=5, seed=11, postprocess=False)[0]
     kf_rot = quat_to_axis_angle(seed_motion.local_rotations[[0, 30]].double()).numpy()
     kf_root = seed_motion.root_translation[[0, 30]].double().numpy()

@@ -15,6 +15,7 @@ from kinema.anyrig.pipeline import AnyRigPipeline
 from kinema.errors import KinemaError
 from kinema.human.pipeline import HumanPipeline
 from kinema.model.loading import find_checkpoint, read_checkpoint_info
+from kinema.model.precision import resolve_precision
 from kinema.pipeline.base import MotionPipeline
 from kinema.text import MemoryCachedEncoder, get_text_encoder
 
@@ -54,12 +55,14 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
 
 
 def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES) -> MotionPipeline:
+               text_memory: int = TEXT_MEMORY_ENTRIES, precision: str = "auto") -> MotionPipeline:
     """Load a model for generation: ``"default"``, ``"creatures"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
     so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
     behind it that persists between processes (the CLI passes kinema.runtime's user cache).
+    ``precision``: ``"fp32"``, ``"bf16"`` (the denoiser's weights in bfloat16) or ``"auto"`` (bf16 on a
+    CPU with bf16 instructions, for a pipeline that offers it; kinema.model.precision, docs/speed.md).
     """
     path = resolve_model_path(name_or_path)
     ckpt = find_checkpoint(path)
@@ -73,4 +76,11 @@ def load_model(name_or_path: str | Path = "default", text_cache: Path | None = N
         encoder = get_text_encoder(encoder_id, cache_dir=text_cache)
         return MemoryCachedEncoder(encoder, text_memory) if text_memory else encoder
 
-    return PIPELINES[name].load(ckpt, text_encoder_for)
+    cls = PIPELINES[name]
+    chosen = resolve_precision(precision)
+    if chosen not in cls.precisions:
+        if precision == chosen:  # asked for by name
+            raise KinemaError(f"precision: the {name} model {path.name!r} runs in {', '.join(cls.precisions)} only, "
+                              f"not {precision}")
+        chosen = "fp32"
+    return cls.load(ckpt, text_encoder_for, **({} if chosen == "fp32" else {"precision": chosen}))

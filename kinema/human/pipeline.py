@@ -72,6 +72,7 @@ class HumanPipeline(MotionPipeline):
     """
 
     pipeline_name = "human"
+    precisions = ("fp32", "bf16")
 
     def __init__(self, loaded: LoadedModel, text_encoder: TextEncoder, known_prompts: KnownPrompts | None = None):
         self.loaded = loaded
@@ -83,8 +84,8 @@ class HumanPipeline(MotionPipeline):
         self.grounding: Grounding = loaded.grounding
 
     @classmethod
-    def load(cls, ckpt: Path, text_encoder_for) -> HumanPipeline:
-        loaded = load_denoiser(ckpt)
+    def load(cls, ckpt: Path, text_encoder_for, precision: str = "fp32") -> HumanPipeline:
+        loaded = load_denoiser(ckpt, precision=precision)
         known = KnownPrompts.load(loaded.path)
         if known is not None and known.encoder_id != loaded.text_encoder_id:
             raise KinemaError(f"{ckpt}: its known prompts were embedded with {known.encoder_id!r}, the model uses "
@@ -94,6 +95,11 @@ class HumanPipeline(MotionPipeline):
     @property
     def skeleton(self):
         return self.loaded.skeleton
+
+    @property
+    def precision(self) -> str:
+        """``"fp32"`` or ``"bf16"``: the dtype of the denoiser's weights (kinema.model.precision)."""
+        return self.loaded.precision
 
     @property
     def representation(self) -> FlatRepresentation:
@@ -122,7 +128,8 @@ class HumanPipeline(MotionPipeline):
                           "for any rig (--model creatures) for this rig")
 
     def __repr__(self) -> str:
-        return f"HumanPipeline({self.loaded.path}, {self.skeleton.num_joints} joints @ {self.fps:g} fps)"
+        return (f"HumanPipeline({self.loaded.path}, {self.skeleton.num_joints} joints @ {self.fps:g} fps, "
+                f"{self.precision})")
 
     # ------------------------------------------------------------------ public
     def run(self, request: GenerationRequest, *, progress: bool | ProgressFn = False) -> GenerationResult:

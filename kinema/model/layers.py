@@ -96,6 +96,9 @@ class StageTransformer(nn.Module):
         B, T, _ = frames.shape
         if T > self.max_frames:
             raise ValueError(f"{T} frames exceed the model's max_frames={self.max_frames}")
+        out_dtype, dtype = frames.dtype, self.in_proj.weight.dtype
+        if dtype != out_dtype:  # bf16 weights (kinema.model.precision): the stage runs in their dtype
+            frames, text_emb, c_dir = frames.to(dtype), text_emb.to(dtype), c_dir.to(dtype)
         tokens = torch.cat([self.cond(t, text_emb, c_dir), self.in_proj(frames)], dim=1)
         tokens = tokens + self.pos_enc[: self.num_cond + T].to(tokens.dtype)
         key_padding = None
@@ -103,4 +106,4 @@ class StageTransformer(nn.Module):
             cond_valid = torch.ones(B, self.num_cond, dtype=torch.bool, device=pad_mask.device)
             key_padding = ~torch.cat([cond_valid, pad_mask.to(torch.bool)], dim=1)  # True = ignore
         hidden = self.encoder(tokens, src_key_padding_mask=key_padding)
-        return self.out_proj(hidden[:, self.num_cond:])
+        return self.out_proj(hidden[:, self.num_cond:]).to(out_dtype)

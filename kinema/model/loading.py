@@ -16,6 +16,7 @@ from kinema.errors import KinemaError
 from kinema.model.config import ModelConfig
 from kinema.model.denoiser import Denoiser
 from kinema.model.grounding import DEFAULT_GROUNDING, Grounding
+from kinema.model.precision import set_precision
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.layout import FeatureLayout
 from kinema.representation.stats import NormStats
@@ -53,6 +54,7 @@ class LoadedModel:
     path: Path
     representation: FlatRepresentation
     grounding: Grounding = DEFAULT_GROUNDING
+    precision: str = "fp32"
 
 
 def weights_file(ckpt: Path, ema: bool = True) -> Path:
@@ -104,8 +106,9 @@ def read_grounding(info: dict, ckpt: Path) -> Grounding:
     return Grounding.from_dict(info["grounding"], f"{ckpt / 'checkpoint.json'}: field 'grounding'")
 
 
-def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
-    """Read ``checkpoint.json`` and the (EMA) safetensors weights of a checkpoint or run folder."""
+def load_denoiser(path: str | Path, ema: bool = True, precision: str = "fp32") -> LoadedModel:
+    """Read ``checkpoint.json`` and the (EMA) safetensors weights of a checkpoint or run folder;
+    ``precision`` ``"bf16"`` converts the transformer stages' weights (kinema.model.precision)."""
     ckpt = find_checkpoint(path)
     info = read_checkpoint_info(ckpt)
     state = read_weights(weights_file(ckpt, ema))
@@ -130,6 +133,7 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
             path=ckpt,
             representation=rep,
             grounding=read_grounding(info, ckpt),
+            precision=precision,
         )
     except KinemaError as err:  # e.g. a SkeletonError for a malformed skeleton entry
         raise KinemaError(f"{ckpt}: cannot load model ({err})") from None
@@ -137,4 +141,5 @@ def load_denoiser(path: str | Path, ema: bool = True) -> LoadedModel:
         raise KinemaError(f"{ckpt}: cannot load model ({type(err).__name__}: {err})") from None
     for p in loaded.denoiser.parameters():
         p.requires_grad_(False)
+    set_precision(loaded.denoiser, precision)
     return loaded

@@ -78,6 +78,8 @@ class MotionPipeline(ABC):
     default_seconds: ClassVar[float] = 5.0
     #: True when a request must name a rig (the model drives no skeleton of its own)
     needs_rig: ClassVar[bool] = False
+    #: inference precisions ``load`` takes as ``precision=`` (kinema.model.precision); fp32 is never passed
+    precisions: ClassVar[tuple[str, ...]] = ("fp32",)
 
     @classmethod
     @abstractmethod
