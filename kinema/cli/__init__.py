@@ -7,6 +7,7 @@ anything else is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -65,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    before = os.environ.get("KINEMA_PRECISION")
+    if getattr(args, "precision", None):  # every model this command (its server, workers) loads
+        os.environ["KINEMA_PRECISION"] = args.precision
     try:
         result = args.func(args)
     except KinemaError as err:
@@ -73,6 +77,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("kinema: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if getattr(args, "precision", None):  # main() called in-process (tests) leaves the environment as it was
+            if before is None:
+                os.environ.pop("KINEMA_PRECISION", None)
+            else:
+                os.environ["KINEMA_PRECISION"] = before
     return int(result or 0)
 
 

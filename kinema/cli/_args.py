@@ -91,6 +91,14 @@ def unit_float(text: str) -> float:
     return x
 
 
+def add_precision_argument(p: argparse.ArgumentParser) -> None:
+    """``--precision auto|fp32|bf16``: the denoiser's inference precision (kinema.model.precision; the
+    CLI's entry point puts it into ``$KINEMA_PRECISION`` for every model the command loads)."""
+    p.add_argument("--precision", choices=("auto", "fp32", "bf16"),
+                   help="denoiser precision: bf16 weights where the CPU has bf16 instructions (auto, the default; "
+                        "else $KINEMA_PRECISION), fp32 or bf16 (docs/speed.md)")
+
+
 def add_grounding_arguments(p: argparse.ArgumentParser) -> None:
     """``--grounding WEIGHT``, ``--grounding-top-k K``, ``--grounding-temperature T`` (prompt grounding,
     kinema.model.grounding); each left out keeps the model's saved setting."""

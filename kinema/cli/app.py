@@ -10,7 +10,7 @@ import argparse
 import time
 from pathlib import Path
 
-from kinema.cli._args import positive_int
+from kinema.cli._args import add_precision_argument, positive_int
 from kinema.cli.serve import _port
 from kinema.errors import KinemaError
 from kinema.server.config import is_loopback
@@ -58,6 +58,7 @@ def register(sub) -> None:
     p.add_argument(
         "--threads", type=positive_int, help="torch CPU threads (default: KINEMA_THREADS, else kinema.runtime's choice)"
     )
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

@@ -11,7 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from kinema.cli._args import positive_float, positive_int
+from kinema.cli._args import add_precision_argument, positive_float, positive_int
 
 
 def register(sub) -> None:
@@ -34,6 +34,7 @@ def register(sub) -> None:
     b.add_argument("--bench-jobs", type=positive_int, default=8, help="motions per configuration (default 8)")
     b.add_argument("--seconds", type=positive_float, default=4.0, help="motion length in the benchmark (default 4)")
     b.add_argument("--steps", type=positive_int, help="DDIM steps in the benchmark (default: the model's)")
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

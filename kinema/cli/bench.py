@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from kinema.cli._args import positive_float, positive_int
+from kinema.cli._args import add_precision_argument, positive_float, positive_int
 from kinema.cli.batch import register_bench as register_batch_bench
 from kinema.cli.bench_keyjoint_planning import register_bench as register_keyjoint_planning_bench
 from kinema.cli.bench_objectives import register_bench as register_objectives_bench
@@ -309,6 +309,7 @@ def _register_generate(targets) -> None:
     _add_generate_options(p, "default")
     p.add_argument("--seconds", type=positive_float, default=5.0)
     p.add_argument("--no-cold-start", action="store_true", help="skip the fresh-process section")
+    add_precision_argument(p)
     p.set_defaults(func=_run_generate)
 
 

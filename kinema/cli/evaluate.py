@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import add_grounding_arguments, grounding_overrides, non_negative_float, positive_int, seed
+from kinema.cli._args import (
+    add_grounding_arguments,
+    add_precision_argument,
+    grounding_overrides,
+    non_negative_float,
+    positive_int,
+    seed,
+)
 from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
 from kinema.cli.evaluate_sfcontrol import run_sfcontrol
 from kinema.runtime import text_cache_dir
@@ -42,6 +49,7 @@ def register(sub) -> None:
     p.add_argument("--filmstrips", type=int, default=4, help="rendered cases (default 4)")
     p.add_argument("--no-progress", action="store_true")
     add_sfcontrol_arguments(p)
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import positive_int, sample_paths
+from kinema.cli._args import add_precision_argument, positive_int, sample_paths
 from kinema.cli.request_args import add_request_arguments, request_from_args
 from kinema.runtime import text_cache_dir
 
@@ -39,6 +39,7 @@ def register(sub) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bars (quiet stderr)")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                    "2 on a quiet machine and 1 on a busy one; see docs/speed.md)")
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

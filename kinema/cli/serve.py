@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import non_negative_int, positive_float, positive_int
+from kinema.cli._args import add_precision_argument, non_negative_int, positive_float, positive_int
 
 MISSING_EXTRA = "kinema serve needs the server extra: pip install 'kinema[server]' (fastapi, uvicorn)"
 
@@ -58,6 +58,7 @@ def register(sub) -> None:
     p.add_argument("--threads", type=positive_int, help="torch CPU threads in all (default: KINEMA_THREADS, else "
                    "kinema.runtime's choice)")
     p.add_argument("--log-level", default="info", choices=["critical", "error", "warning", "info", "debug"])
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import positive_int
+from kinema.cli._args import add_precision_argument, positive_int
 from kinema.errors import KinemaError
 
 
@@ -31,6 +31,7 @@ def register(sub) -> None:
                    help="seconds kept ahead of the played frames when a command arrives (default 0.15)")
     p.add_argument("--steps", type=positive_int, help="DDIM steps per window (default 10)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the first window (default 0)")
+    add_precision_argument(p)
     p.set_defaults(func=run)
 
 

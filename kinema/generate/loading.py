@@ -55,14 +55,15 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
 
 
 def load_model(name_or_path: str | Path = "default", text_cache: Path | None = None,
-               text_memory: int = TEXT_MEMORY_ENTRIES, precision: str = "auto") -> MotionPipeline:
+               text_memory: int = TEXT_MEMORY_ENTRIES, precision: str | None = None) -> MotionPipeline:
     """Load a model for generation: ``"default"``, ``"creatures"`` or a path to a run/checkpoint folder.
 
     Prompt embeddings are kept in memory (the last ``text_memory`` prompts, thread-safe LRU; 0 = off),
     so repeated prompts are encoded once per process; ``text_cache`` (a folder) adds a disk cache
     behind it that persists between processes (the CLI passes kinema.runtime's user cache).
     ``precision``: ``"fp32"``, ``"bf16"`` (the denoiser's weights in bfloat16) or ``"auto"`` (bf16 on a
-    CPU with bf16 instructions, for a pipeline that offers it; kinema.model.precision, docs/speed.md).
+    CPU with bf16 instructions, for a pipeline that offers it); None: ``$KINEMA_PRECISION``, else auto
+    (kinema.model.precision, docs/speed.md).
     """
     path = resolve_model_path(name_or_path)
     ckpt = find_checkpoint(path)

@@ -14,6 +14,7 @@ than fp32. ``auto`` picks bf16 only where the CPU has them and ``AUTO_BF16`` say
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -23,6 +24,9 @@ from torch import nn
 from kinema.errors import KinemaError
 
 PRECISIONS = ("auto", "fp32", "bf16")
+#: environment variable holding the precision a ``load_model`` call without one uses (default auto);
+#: every command's ``--precision`` sets it, so servers, batch workers and streams load alike
+ENV = "KINEMA_PRECISION"
 #: does ``auto`` pick bf16 on a CPU with bf16 instructions? (docs/speed.md, "bf16 inference")
 AUTO_BF16 = True
 
@@ -49,12 +53,14 @@ def fast_bf16() -> bool:
 
 
 def resolve_precision(precision: str | None) -> str:
-    """``"fp32"`` or ``"bf16"`` for a requested ``precision`` (``auto``/None: bf16 on a CPU with bf16
-    instructions when ``AUTO_BF16``, else fp32); anything else is a one-line KinemaError."""
+    """``"fp32"`` or ``"bf16"`` for a requested ``precision`` (None: ``$KINEMA_PRECISION``, else auto;
+    auto: bf16 on a CPU with bf16 instructions when ``AUTO_BF16``, else fp32); anything else is a
+    one-line KinemaError."""
+    where = "precision"
     if precision is None:
-        precision = "auto"
+        precision, where = os.environ.get(ENV, "auto") or "auto", ENV
     if precision not in PRECISIONS:
-        raise KinemaError(f"precision: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
+        raise KinemaError(f"{where}: expected one of {', '.join(PRECISIONS)}, got {precision!r}")
     if precision == "auto":
         return "bf16" if AUTO_BF16 and fast_bf16() else "fp32"
     return precision
