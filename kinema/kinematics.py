@@ -8,6 +8,7 @@ length J (root -1).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import torch
@@ -27,19 +28,49 @@ def forward_kinematics(
     """Global rotations ``(..., J, 4)`` and positions ``(..., J, 3)`` of every joint.
 
     ``G_j = G_parent @ L_j`` and ``p_j = p_parent + G_parent @ offset_j``; the root sits at
-    ``root_translation`` with rotation ``L_root``.
+    ``root_translation`` with rotation ``L_root``. All joints of one depth are done in one batched
+    quaternion product (a 21-joint human: 8 levels instead of 21 joints), with the same arithmetic per
+    element as joint by joint, so the results are bit for bit those of a per-joint loop.
     """
     offsets = offsets.to(dtype=local_rotations.dtype, device=local_rotations.device)
-    rots: list[torch.Tensor] = []
-    pos: list[torch.Tensor] = []
+    order, levels = depth_levels(tuple(int(p) for p in parents))
+    dim = local_rotations.dim() - 2
+    roots = levels[0][0]
+    rots = [local_rotations.index_select(dim, roots)]
+    root = root_translation.to(local_rotations.dtype).unsqueeze(-2)
+    pos = [root.expand(*root.shape[:-2], len(roots), 3)]
+    G_done, P_done = rots[0], pos[0]
+    for joints, parent_slots in levels[1:]:
+        Gp, Pp = G_done.index_select(dim, parent_slots), P_done.index_select(dim, parent_slots)
+        rots.append(quat_mul(Gp, local_rotations.index_select(dim, joints)))
+        pos.append(Pp + quat_rotate(Gp, offsets.index_select(offsets.dim() - 2, joints).expand_as(Pp)))
+        G_done, P_done = torch.cat(rots, dim=-2), torch.cat(pos, dim=-2)
+    if order is None:
+        return G_done, P_done
+    return G_done.index_select(dim, order), P_done.index_select(dim, order)
+
+
+@lru_cache(maxsize=64)
+def depth_levels(parents: tuple[int, ...]) -> tuple[torch.Tensor | None, list[tuple[torch.Tensor, torch.Tensor]]]:
+    """The joints of ``parents`` grouped by depth: ``levels[d] = (joints, parent_slots)`` (LongTensors)
+    where ``parent_slots`` index each joint's parent in the depth-ordered list of all shallower joints
+    (level 0: the roots, no parents); and ``order``, the permutation from that depth order back to joint
+    order (None when the joints are already in depth order)."""
+    depth: list[int] = []
     for j, p in enumerate(parents):
-        if p < 0:
-            rots.append(local_rotations[..., j, :])
-            pos.append(root_translation.to(local_rotations.dtype))
-        else:
-            rots.append(quat_mul(rots[p], local_rotations[..., j, :]))
-            pos.append(pos[p] + quat_rotate(rots[p], offsets[..., j, :].expand_as(pos[p])))
-    return torch.stack(rots, dim=-2), torch.stack(pos, dim=-2)
+        if p >= j:
+            raise ValueError(f"joint {j}'s parent {p} does not come before it")
+        depth.append(0 if p < 0 else depth[p] + 1)
+    levels: list[tuple[torch.Tensor, torch.Tensor]] = []
+    slot: dict[int, int] = {}
+    for d in range(max(depth, default=-1) + 1):
+        joints = [j for j in range(len(parents)) if depth[j] == d]
+        slots = [slot[parents[j]] for j in joints] if d else []
+        levels.append((torch.tensor(joints), torch.tensor(slots, dtype=torch.long)))
+        for j in joints:
+            slot[j] = len(slot)
+    order = [slot[j] for j in range(len(parents))]
+    return (None if order == list(range(len(parents))) else torch.tensor(order)), levels
 
 
 def positions_from_global_rotations(
