@@ -69,7 +69,13 @@ def test_build_three_files(quaternius_root, tmp_path, capsys) -> None:
     assert set(bull["file_scales"]) == set(bull["files"]) and all(s > 0 for s in bull["file_scales"].values())
     by_id = {r["clip_id"]: r for r in cache.clips}
     gallop = by_id["animals_pack/Alpaca.glb#AnimalArmature|Gallop"]
-    assert gallop["captions"][0] == "An alpaca gallops." and gallop["flags"] == ["in_place"]
+    assert gallop["captions"][0] == "An alpaca gallops." and gallop["flags"] == ["travel_recovered"]
+    assert gallop["travel"] > 0.5 and gallop["recovered_speed"] > 1.0  # on the spot in the file; feet say it goes
+    assert meta["forward_check"]["animals_pack/Alpaca.glb"] > 0.99  # its walk goes along +Z, its forward axis
+    walk = by_id["animals_pack/Alpaca.glb#AnimalArmature|Walk"]
+    assert 0.1 < walk["recovered_speed"] < gallop["recovered_speed"] / 1.3
+    idle = by_id["animals_pack/Alpaca.glb#AnimalArmature|Idle"]
+    assert idle["travel"] < 0.01 and "travel_recovered" not in idle["flags"]
     assert gallop["content"] == "gallop" and gallop["style"] == "alpaca" and gallop["fps"] == 20
     kick = by_id["animals_pack/Bull.glb#AnimalArmature|Attack_Kick"]
     assert "animals_pack/Cow.glb#AnimalArmature|Attack_Kick" in kick["duplicates"]
@@ -84,7 +90,7 @@ def test_build_three_files(quaternius_root, tmp_path, capsys) -> None:
     assert torch.allclose(stored.positions.double(), source.positions * scale, atol=1e-5)
     assert main(["data", "stats", str(out)]) == 0
     table = capsys.readouterr().out
-    assert "quaternius; 2 rigs" in table and "bull" in table and "flags: in_place" in table
+    assert "quaternius; 2 rigs" in table and "bull" in table and "flags: travel_recovered" in table
 
 
 def test_glb_in_folder_build(quaternius_root, tmp_path) -> None:

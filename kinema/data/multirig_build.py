@@ -38,12 +38,16 @@ MIN_EXTENT = 1e-4
 
 @dataclass
 class Description:
-    """What a build says about one clip: captions, action label, subject noun, flags."""
+    """What a build says about one clip: captions, action label, subject noun, flags; ``motion`` replaces
+    the clip's motion when the build changes it (travel recovered from planted feet), and ``record``
+    adds fields to its clips.json record."""
 
     captions: list[str]
     action: str = ""
     subject: str = ""
     flags: list[str] = field(default_factory=list)
+    motion: Motion | None = None
+    record: dict = field(default_factory=dict)
 
 
 #: ``describe(file, clip_name, normalised_motion, travel) -> Description``
@@ -119,6 +123,9 @@ def assemble(files: list[SourceFile], fps: float, describe: Describe, *, train_r
             if not d.captions:
                 uncaptioned.append(clip_id)
                 continue
+            if d.motion is not None:
+                m = d.motion
+                dist = travel(m)
             rec = {
                 "clip_id": clip_id,
                 "rig": rig_id,
@@ -133,6 +140,7 @@ def assemble(files: list[SourceFile], fps: float, describe: Describe, *, train_r
                 "hash": h,
                 "travel": round(dist, 4),
                 "duplicates": [],
+                **d.record,
             }
             seen[h] = rec
             writer.add_clip(m, rec)
