@@ -49,6 +49,33 @@ def test_training_writes_resumable_checkpoints(trained, creature_cache) -> None:
         other.resume()
 
 
+def test_fine_tune_starts_from_a_trained_models_weights(trained, creature_cache, tmp_path) -> None:
+    """``--init-from``: the weights (not the normalisation) come from the trained model; another
+    architecture is refused in one line."""
+    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
+    tc = AnyRigTrainConfig(steps=2, ckpt_every=2, log_every=2, variants=0, text_encoder="hash-test-32", warmup=1)
+    tuned = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / "ft", text_cache=None, log=lambda s: None)
+    before = {k: v.clone() for k, v in tuned.model.state_dict().items()}
+    tuned.init_weights(trained)
+    src = load_anyrig(trained).denoiser.state_dict()
+    for k, v in tuned.model.state_dict().items():
+        if k in ("feat_mean", "feat_std"):
+            assert torch.equal(v, before[k]), k  # this run's data's statistics
+        else:
+            assert torch.equal(v, src[k]) and torch.equal(tuned.ema.state_dict()[k], src[k]), k
+    assert tuned.cfg.init_from == str(trained)
+    other = AnyRigTrainer(
+        get_anyrig_config("anyrig-tiny", text_dim=32, layers=2),
+        tc,
+        creature_cache,
+        tmp_path / "o",
+        text_cache=None,
+        log=lambda s: None,
+    )
+    with pytest.raises(KinemaError, match="model config differs"):
+        other.init_weights(trained)
+
+
 def test_checkpoint_round_trip_gives_the_same_outputs(trained) -> None:
     a, b = load_anyrig(trained), load_anyrig(trained)
     rig = Rig.from_skeleton(quadruped())

@@ -30,6 +30,11 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int)
     p.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
+    p.add_argument(
+        "--init-from",
+        help="fine-tune: start from this any-rig model's weights (an exported model folder, a run, or "
+        "'creatures' for the shipped one); normalisation statistics come from --data",
+    )
     p.add_argument("--minutes", type=positive_float, help="stop cleanly after this many minutes (checkpoint written)")
     p.add_argument("--threads", type=positive_int, help="torch CPU threads (default chosen by kinema.runtime)")
     p.set_defaults(func=run)
@@ -46,6 +51,17 @@ def _settings(args: argparse.Namespace) -> dict:
         "seed": "seed",
     }
     return {k: getattr(args, a) for a, k in names.items() if getattr(args, a) is not None}
+
+
+def _model_path(name: str) -> Path:
+    """A model name shipped with kinema (``creatures``) or a folder path."""
+    from kinema.errors import KinemaError
+
+    shipped = Path(__file__).resolve().parents[1] / "assets" / "models" / name
+    path = shipped if shipped.is_dir() and not Path(name).exists() else Path(name)
+    if not path.exists():
+        raise KinemaError(f"--init-from {name}: no such model folder")
+    return path
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,8 +86,11 @@ def run(args: argparse.Namespace) -> int:
         text_cache=args.cache_dir,
         log=lambda s: print(s, flush=True),
     )
-    if args.resume:
-        trainer.resume()
+    if args.init_from:
+        trainer.cfg.init_from = str(args.init_from)
+    resumed = trainer.resume() if args.resume else False
+    if args.init_from and not resumed:
+        print(f"fine-tuning from {trainer.init_weights(_model_path(args.init_from))}", flush=True)
     ckpt = trainer.run(minutes=args.minutes)
     print(f"wrote {ckpt}")
     return 0

@@ -25,6 +25,7 @@ from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
 from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.anyrig.denoiser import AnyRigDenoiser
+from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.config import reject_unknown_keys
 from kinema.text import get_text_encoder
 from kinema.train.anyrig.data import AnyRigClips, Batch
@@ -53,6 +54,7 @@ class AnyRigTrainConfig:
     p_constrained: float = 0.5
     grad_clip: float = 1.0
     text_encoder: str = "minilm-l6-v2"
+    init_from: str | None = None
 
     @classmethod
     def from_dict(cls, d: dict) -> AnyRigTrainConfig:
@@ -129,6 +131,22 @@ class AnyRigTrainer:
         self.step, self.elapsed = int(info["step"]), float(info.get("elapsed_s", 0.0))
         self.log(f"resumed {ck['path']} at step {self.step} ({self.elapsed / 60:.1f} min trained)")
         return True
+
+    def init_weights(self, path: str | Path) -> Path:
+        """Fine-tuning: start the model and its EMA from a trained any-rig model's (EMA) weights. The
+        model config must match; the normalisation statistics stay this run's data's (a rebuilt dataset,
+        e.g. with travel recovered, moves the velocity channels' statistics). Returns the checkpoint."""
+        loaded = load_anyrig(path)
+        if loaded.config != self.model_config:
+            raise KinemaError(f"{loaded.path}: its model config differs from this run's ({self.model_config})")
+        keep = {"feat_mean", "feat_std"}
+        state = {k: v for k, v in loaded.denoiser.state_dict().items() if k not in keep}
+        missing, unexpected = self.model.load_state_dict(state, strict=False)
+        if set(missing) - keep or unexpected:
+            raise KinemaError(f"{loaded.path}: weights do not fit this model ({missing}, {unexpected})")
+        self.ema.load_state_dict(self.model.state_dict())
+        self.cfg.init_from = str(path)
+        return loaded.path
 
     # ------------------------------------------------------------------ one step
     def loss(self, model: AnyRigDenoiser, batch: Batch, gen: torch.Generator) -> torch.Tensor:
