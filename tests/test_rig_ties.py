@@ -11,7 +11,6 @@ import torch
 from kinema.io.gltf import read_gltf
 from kinema.motion.core import Motion
 from kinema.rig import Rig
-from kinema.rig.find import rest_positions
 from kinema.rig.ties import RigTies, find_ties, rest_ties, tie_ratios
 from kinema.skeleton import Skeleton
 
@@ -64,10 +63,13 @@ def test_ik_foot_and_pole_are_tied_to_the_chain_and_a_static_helper_is_fixed() -
 
 def test_rest_ties_tie_each_ik_bone_to_its_nearest_body_joint() -> None:
     m = _legged()
-    rest = rest_positions(m.skeleton)
-    ties = rest_ties(m.skeleton, 1, rest)
+    ties = rest_ties(m.skeleton, 1)
     names = m.skeleton.names
     assert {names[t.joint]: names[t.anchor] for t in ties.ties}["IKFoot"] == "Knee"
+    foot = next(t for t in ties.ties if names[t.joint] == "IKFoot")
+    assert foot.max_distance == pytest.approx(0.3) and foot.offset == pytest.approx((0.0, -0.3, 0.0))
+    half = ties.scaled(0.5).tie_for(4)
+    assert half.max_distance == pytest.approx(0.15) and half.offset == pytest.approx((0.0, -0.15, 0.0))
 
 
 @pytest.mark.parametrize(

@@ -42,6 +42,7 @@ from kinema.anyrig.post import (
 )
 from kinema.anyrig.sampling import sample_features
 from kinema.anyrig.targets import post_targets as make_post_targets
+from kinema.anyrig.tied import hold_ties, rig_clips, ties_for
 from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, single_plan
 from kinema.anyrig.world import generate_world, load_constraints_file
 from kinema.constraints.character import (
@@ -212,11 +213,19 @@ class AnyRigPipeline(MotionPipeline):
                                   segments=len(prompts), frames=T, seed=seed)
         t_sampled = time.perf_counter()
         _require_finite(feats)
-        motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report) for f in feats]
+        ties = self.rig_ties(rig, rig_m).scaled(scale)
+        motions = [self._finish(f, rep_n, rig_m, scale, constraints, postprocess, report, ties) for f in feats]
         report.seconds = time.perf_counter() - t0
         report.timings = {"sampling": t_sampled - t0, "postprocess": report.seconds - (t_sampled - t0)}
         report.guidance = (guide.w_text, guide.w_constr)
         return GenerationResult(motions, report)
+
+    def rig_ties(self, rig, rig_m: Rig):
+        """The joint ties of ``rig`` in its units (kinema.anyrig.tied): from its own clips when it is an
+        animated GLB/glTF or BVH file, stored in the checkpoint for a training rig id, else its rest pose."""
+        known = str(rig) in self.loaded.train_rigs and isinstance(rig, str | Path) and not Path(rig).is_file()
+        stored = self.loaded.info.get("rig_ties", {}).get(str(rig)) if known else None
+        return ties_for(rig_m, rig_clips(rig, self.fps), stored)
 
     def _normalised(self, rig_m: Rig) -> tuple[JointRepresentation, float]:
         """The representation of ``rig_m`` scaled to the model's units (rest pose 1 across) and that scale."""
@@ -266,7 +275,7 @@ class AnyRigPipeline(MotionPipeline):
         """The call's guidance (two weights keep the checkpoint's guidance mode)."""
         return Guidance.given(guidance, self.loaded.guidance)
 
-    def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report) -> Motion:
+    def _finish(self, f, rep_n, rig_m: Rig, scale: float, constraints, postprocess: bool, report, ties=None) -> Motion:
         """Features -> motion, post-processed in rig units (rest pose 1 across, so the human-tuned
         thresholds of kinema.postprocess mean the same on a fish and a T-rex), then scaled to metres.
         The motion is first put on the floor (kinema.anyrig.ground; not when a keyframe or a
@@ -296,7 +305,8 @@ class AnyRigPipeline(MotionPipeline):
                 report.reached_by_translation[name] = max(size, report.reached_by_translation.get(name, 0.0))
         if postprocess:
             m, locked = self._lock_feet(m, rep_n, targets, report)
-            report.foot_lock.append({**post.get("foot_lock", {}), **locked})
+            m, held = hold_ties(m, ties, rep_n.rig.root) if ties is not None else (m, {})  # kinema.anyrig.tied
+            report.foot_lock.append({**post.get("foot_lock", {}), **locked, **held})
         lt = None if m.local_translations is None else m.local_translations / scale
         motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
         if targets is not None:

@@ -38,8 +38,9 @@ of the clips; give one skeleton's clips, since files sharing a rig differ in pro
   ``tie_ratios(positions, ties)`` the same over each tie's ``max_distance`` (the foot-to-leg gap as a
   multiple of the rig's own clips' largest: > 1 is further than the rig ever holds it);
 - ``RigTies.to_dict(names)`` / ``RigTies.from_dict(d, names)``: JSON by joint name (checkpoints, caches);
-- ``rest_ties(skeleton, root, rest_positions)``: a fallback for a rig with no clips, from its rest pose
-  alone (anchor = nearest eligible joint at rest, ``max_distance`` = the rest distance).
+- ``rest_ties(skeleton, root)``: a fallback for a rig with no clips, from its rest pose alone (anchor =
+  nearest eligible joint at rest, ``max_distance`` = the rest distance);
+- ``RigTies.scaled(factor)``: the same ties in other units.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from dataclasses import dataclass, field
 import torch
 
 from kinema.geometry.rotations import quat_inverse, quat_rotate
+from kinema.kinematics import forward_kinematics
 from kinema.rig.find import helpers
 from kinema.skeleton import Skeleton
 
@@ -104,6 +106,21 @@ class RigTies:
     def derived(self) -> tuple[int, ...]:
         """Joints a generator must not produce freely (tied or fixed), sorted."""
         return tuple(sorted({t.joint for t in self.ties} | set(self.fixed)))
+
+    def scaled(self, factor: float) -> RigTies:
+        """The same ties with every length multiplied by ``factor`` (metres <-> rig units)."""
+        ties = [
+            Tie(
+                t.joint,
+                t.anchor,
+                t.max_distance * factor,
+                t.min_distance * factor,
+                None if t.offset is None else tuple(factor * x for x in t.offset),
+                None if t.spread is None else t.spread * factor,
+            )
+            for t in self.ties
+        ]
+        return RigTies(ties, self.fixed)
 
     def tie_for(self, joint: int) -> Tie | None:
         return next((t for t in self.ties if t.joint == joint), None)
@@ -218,10 +235,12 @@ def find_ties(
     return RigTies(ties, tuple(fixed))
 
 
-def rest_ties(skeleton: Skeleton, root: int, rest: torch.Tensor) -> RigTies:
-    """Ties from the rest pose alone (``rest (J, 3)`` joint positions), for a rig with no clips: each
+def rest_ties(skeleton: Skeleton, root: int) -> RigTies:
+    """Ties from the rest pose alone, for a rig with no clips (``root``: the rig's root joint): each
     candidate is tied to the nearest eligible joint at rest, ``max_distance`` = ``min_distance`` = that
-    distance; no candidate is fixed (nothing shows which ones move)."""
+    distance, ``offset`` its rest position in the anchor's frame (game rigs are posed with the IK solved:
+    the foot at the shin's end); no candidate is fixed (nothing shows which ones move)."""
+    G, rest = rest_transforms(skeleton)
     armature = rest_armature(skeleton, root, rest)
     cands = candidates(skeleton, root, armature)
     ties = []
@@ -229,10 +248,25 @@ def rest_ties(skeleton: Skeleton, root: int, rest: torch.Tensor) -> RigTies:
         anchors = _eligible_anchors(skeleton, armature, j, cands)
         if not anchors:
             continue
-        d = (rest[anchors].double() - rest[j].double()).norm(dim=-1)
+        d = (rest[anchors] - rest[j]).norm(dim=-1)
         k = int(d.argmin())
-        ties.append(Tie(j, anchors[k], float(d[k]), float(d[k])))
+        a = anchors[k]
+        loc = quat_rotate(quat_inverse(G[a]), rest[j] - rest[a])
+        ties.append(Tie(j, a, float(d[k]), float(d[k]), (float(loc[0]), float(loc[1]), float(loc[2])), 0.0))
     return RigTies(ties, ())
+
+
+def rest_transforms(skeleton: Skeleton) -> tuple[torch.Tensor, torch.Tensor]:
+    """Global rotations ``(J, 4)`` and positions ``(J, 3)`` of the rest pose (float64)."""
+    J = skeleton.num_joints
+    rots = skeleton.rest_rotations
+    if rots is None:
+        rots = torch.zeros(J, 4, dtype=torch.float64)
+        rots[:, 0] = 1.0
+    G, P = forward_kinematics(
+        rots.double()[None], torch.zeros(1, 3, dtype=torch.float64), skeleton.offsets.double(), skeleton.parents
+    )
+    return G[0], P[0]
 
 
 def tie_distances(positions: torch.Tensor, ties: Sequence[Tie]) -> torch.Tensor:
