@@ -23,6 +23,7 @@ from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.skeleton_codes import CodeBatch, SkeletonCodes, batch_codes, skeleton_codes
 from kinema.representation.joint import NUM_CHANNELS, POS, ROOT_HEADING, JointRepresentation
 from kinema.rig import Rig
+from kinema.rig.ties import find_ties
 from kinema.train.anyrig.augment import augment
 
 #: joint-count buckets (upper bounds, inclusive)
@@ -85,16 +86,22 @@ class AnyRigClips:
             raise DataError(f"{path}: clips are not all at the model's {config.fps:g} fps")
         gen = torch.Generator().manual_seed(seed)
         rigs: dict[str, Rig] = {}
+        first: dict[str, str | None] = {}
+        own: dict[str, list] = {}
         self.clips: list[Clip] = []
         for i, rec in enumerate(data.clips):
             m = data.motion(i)
             rig = rigs.setdefault(rec["rig"], Rig.from_skeleton(m.skeleton))
+            if first.setdefault(rec["rig"], rec.get("skeleton")) == rec.get("skeleton"):
+                own.setdefault(rec["rig"], []).append(m.global_transforms()[::-1])  # the stored skeleton's clips
             self.clips.append(make_clip(m, rig, config, rec["captions"], rec["rig"]))
             for _ in range(variants):
                 a = augment(m, gen, keep=(*rig.contacts, rig.root))
                 self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, rec["captions"], rec["rig"]))
         self.config = config
         self.rigs = rigs
+        #: rig id -> its joint ties (kinema.rig.ties) from the clips of the skeleton stored for it
+        self.ties = {rid: find_ties(r.skeleton, r.root, own.get(rid, [])) for rid, r in rigs.items()}
         self.buckets = self._bucket()
         log(
             f"{len(data)} clips on {len(rigs)} rigs (+{variants} augmented copies each): "

@@ -110,6 +110,7 @@ class AnyRigTrainer:
             "guidance": Guidance(w_text=2.0, w_constr=2.0).to_dict(),
             "data": self.data_path,
             "train_rigs": rigs,
+            "rig_ties": {rid: t.to_dict(self.clips.rigs[rid].skeleton.names) for rid, t in self.clips.ties.items()},
             "elapsed_s": round(self.elapsed, 1),
         }
 
