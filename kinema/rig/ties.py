@@ -158,12 +158,15 @@ def candidates(skeleton: Skeleton, root: int, armature: Sequence[int]) -> list[i
 def static_armature(
     skeleton: Skeleton, root: int, positions: torch.Tensor, rotations: torch.Tensor | None
 ) -> list[int]:
-    """The joints at the top of the path to ``root`` that stand still in the clips (``positions
-    (T, J, 3)``, ``rotations (T, J, 4)``): the armature / floor ``Root`` bones the body and the IK bones
-    hang from."""
+    """The joints at the top of the path to ``root`` that never turn in the clips and keep their place
+    relative to the top joint (``positions (T, J, 3)``, ``rotations (T, J, 4)``): the armature / floor
+    ``Root`` bones the body and the IK bones hang from. The top joint itself may travel (a clip given
+    root motion moves the whole armature: kinema.data.root_motion)."""
     out = []
-    for j in skeleton.path_from_root(root)[:-1]:
-        still = float((positions[:, j] - positions[0, j]).norm(dim=-1).max()) <= FIXED_TOL
+    path = skeleton.path_from_root(root)
+    for j in path[:-1]:
+        rel = positions[:, j] - positions[:, path[0]]
+        still = float((rel - rel[0]).norm(dim=-1).max()) <= FIXED_TOL
         if rotations is not None:
             still = still and float((rotations[:, j] * rotations[:1, j]).sum(-1).abs().min()) >= 1 - 1e-8
         if not still:
