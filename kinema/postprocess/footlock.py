@@ -58,7 +58,15 @@ from kinema.motion.contacts import contact_joints
 from kinema.motion.contacts import foot_contacts as estimate_contacts
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import smooth_time
-from kinema.postprocess.ik import check_chain, single_thread, solve_ik, spread_corrections
+from kinema.postprocess.ik import (
+    bend_fallback,
+    chain_end_position,
+    check_chain,
+    facing,
+    single_thread,
+    spread_corrections,
+    two_bone_ik_posed,
+)
 from kinema.rig import Rig
 
 PAD_SECONDS = 0.05
@@ -237,10 +245,15 @@ def _apply_locks(m: Motion, planted: torch.Tensor, locks: dict, radius: float,
                  legs: list[LegLock]) -> tuple[Motion, torch.Tensor]:
     """Move planted feet onto their lock points with leg IK. Returns the motion and, per frame, the
     mean horizontal ankle shortfall ``(T, 3)`` (metres, y = 0) over the legs planted on that frame:
-    how far the pelvis would have to move for the legs to reach their locks."""
-    T = m.num_frames
+    how far the pelvis would have to move for the legs to reach their locks.
+
+    One forward kinematics pass for all legs: a leg's IK turns only its own joints, so every other
+    leg's chain, the hips the facing is read from and the ankle each leg reaches
+    (kinema.postprocess.ik.chain_end_position) come out bit for bit as from FK of the updated pose."""
+    T, skel = m.num_frames, m.skeleton
     G, P = m.global_transforms()
-    out = m
+    L = m.local_rotations
+    fwd = facing(P, skel)
     shortfall = torch.zeros(T, 3, dtype=torch.float64)
     count = torch.zeros(T, dtype=torch.float64)
     for leg in legs:
@@ -267,8 +280,11 @@ def _apply_locks(m: Motion, planted: torch.Tensor, locks: dict, radius: float,
         turn, _ = spread_corrections(frames, quat_to_axis_angle(q[frames]), T, radius)
         target = pa + shift
         end_rot = quat_mul(axis_angle_to_quat(turn), Ga)
-        out = solve_ik(out, chain, target, weight=(env > 0).to(torch.float64), end_rotation=end_rot)
-        miss = torch.where(any_lock[:, None], target - out.positions[:, ankle], torch.zeros_like(target))
+        L = two_bone_ik_posed(L, G, P, skel, chain, target, (env > 0).to(torch.float64), None,
+                              bend_fallback(skel, chain, fwd), end_rot)
+        reached = chain_end_position(L, G, P, skel, chain)
+        miss = torch.where(any_lock[:, None], target - reached, torch.zeros_like(target))
         shortfall += miss * torch.tensor([1.0, 0.0, 1.0], dtype=torch.float64)
         count += any_lock.to(torch.float64)
+    out = Motion(skel, m.fps, m.root_translation, L, m.foot_contacts)
     return out, shortfall / count.clamp_min(1.0)[:, None]

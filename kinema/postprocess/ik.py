@@ -117,11 +117,32 @@ def two_bone_ik(
     Only the local rotations of ``a``, ``b`` and ``c`` change.
     """
     check_chain(skeleton, chain)
-    a, b, c = chain
-    dtype = local_rotations.dtype
     L = local_rotations.to(torch.float64)
-    T = L.shape[0]
     G, P = forward_kinematics(L, root_translation.to(torch.float64), skeleton.offsets, skeleton.parents)
+    out = two_bone_ik_posed(L, G, P, skeleton, chain, target, weight, pole, fallback_bend, end_rotation,
+                            keep_end_rotation)
+    return out.to(local_rotations.dtype)
+
+
+def two_bone_ik_posed(
+    L: torch.Tensor,
+    G: torch.Tensor,
+    P: torch.Tensor,
+    skeleton: Skeleton,
+    chain: Sequence[int],
+    target: torch.Tensor,
+    weight: torch.Tensor | None = None,
+    pole: torch.Tensor | None = None,
+    fallback_bend: torch.Tensor | None = None,
+    end_rotation: torch.Tensor | None = None,
+    keep_end_rotation: bool = True,
+) -> torch.Tensor:
+    """:func:`two_bone_ik` on a posed motion: float64 local rotations ``L (T, J, 4)`` with their global
+    rotations ``G`` and positions ``P`` already known (forward kinematics), for callers that solve several
+    chains on one pose (foot locking's legs: no leg moves another's joints). Returns the new float64 local
+    rotations (a copy)."""
+    a, b, c = chain
+    T = L.shape[0]
     pa, pb, pc = P[:, a], P[:, b], P[:, c]
     w = torch.ones(T, dtype=torch.float64) if weight is None else torch.as_tensor(weight).to(torch.float64)
     w = w.clamp(0.0, 1.0)
@@ -145,7 +166,21 @@ def two_bone_ik(
     Ga_new, Gb_new = quat_mul(q_a, G[:, a]), quat_mul(q_a, quat_mul(q_knee, G[:, b]))
     out = _chain_locals(L, G, skeleton.parents[a], chain, Ga_new, Gb_new, Gc_new)
     active = (w > 0)[:, None, None]
-    return torch.where(active, out, L).to(dtype)
+    return torch.where(active, out, L)
+
+
+def chain_end_position(L: torch.Tensor, G: torch.Tensor, P: torch.Tensor, skeleton: Skeleton,
+                       chain: Sequence[int]) -> torch.Tensor:
+    """Position ``(T, 3)`` of the chain's end joint ``c`` once the chain ``(a, b, c)`` has the local
+    rotations ``L``, the rest of the pose (``G``, ``P``: its parents) as before; the same arithmetic as
+    forward kinematics, so the result is bit for bit what FK of the whole new pose gives."""
+    a, b, c = chain
+    p = skeleton.parents[a]
+    offsets = skeleton.offsets.to(torch.float64)
+    Ga = L[:, a] if p < 0 else quat_mul(G[:, p], L[:, a])
+    pb = P[:, a] + quat_rotate(Ga, offsets[b].expand_as(P[:, a]))
+    Gb = quat_mul(Ga, L[:, b])
+    return pb + quat_rotate(Gb, offsets[c].expand_as(pb))
 
 
 def _bend_side(
@@ -218,13 +253,26 @@ def _chain_locals(
 def forward_direction(motion: Motion) -> torch.Tensor:
     """Per-frame facing direction ``(T, 3)`` from the hips (world +Z where the rig has no hip roles)."""
     roles = motion.skeleton.roles
-    T = motion.num_frames
     if "left_hip" not in roles or "right_hip" not in roles:
-        return torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).expand(T, 3)
-    P = motion.positions.to(torch.float64)
+        return torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).expand(motion.num_frames, 3)
+    return facing(motion.positions.to(torch.float64), motion.skeleton)
+
+
+def facing(P: torch.Tensor, skeleton: Skeleton) -> torch.Tensor:
+    """:func:`forward_direction` from joint positions ``P (T, J, 3)`` (float64)."""
+    roles = skeleton.roles
+    if "left_hip" not in roles or "right_hip" not in roles:
+        return torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64).expand(P.shape[0], 3)
     v = P[:, roles["right_hip"]] - P[:, roles["left_hip"]]
     fwd = torch.stack([v[:, 2], torch.zeros_like(v[:, 0]), -v[:, 0]], dim=-1)  # +Y cross (right - left)
     return _unit(fwd)
+
+
+def bend_fallback(skeleton: Skeleton, chain: Sequence[int], fwd: torch.Tensor) -> torch.Tensor:
+    """The side a straight limb bends to: forward (``fwd``, the facing) for knees, backward for elbows."""
+    hands = {skeleton.roles.get("left_hand"), skeleton.roles.get("right_hand")}
+    elbows = {skeleton.roles.get("left_elbow"), skeleton.roles.get("right_elbow")}
+    return -fwd if (chain[2] in hands or chain[1] in elbows) else fwd
 
 
 def solve_ik(
@@ -247,10 +295,7 @@ def solve_ik(
         chain = chain_for_joint(skel, joint_or_chain)
     else:
         chain = tuple(int(j) for j in joint_or_chain)
-    hands = {skel.roles.get("left_hand"), skel.roles.get("right_hand")}
-    elbows = {skel.roles.get("left_elbow"), skel.roles.get("right_elbow")}
-    fwd = forward_direction(motion)
-    fallback = -fwd if (chain[2] in hands or chain[1] in elbows) else fwd
+    fallback = bend_fallback(skel, chain, forward_direction(motion))
     rots = two_bone_ik(
         motion.local_rotations,
         motion.root_translation,

@@ -33,12 +33,15 @@ DEFAULT_ROT_SIGMA_SECONDS = 0.04  # local rotations, as post-processing applies 
 
 
 def continuous_quaternions(q: torch.Tensor) -> torch.Tensor:
-    """Flip signs of ``q (T, J, 4)`` so each frame is in the hemisphere of the previous one (same rotations)."""
-    out = q.clone()
-    for t in range(1, out.shape[0]):
-        flip = (out[t] * out[t - 1]).sum(-1, keepdim=True) < 0
-        out[t] = torch.where(flip, -out[t], out[t])
-    return out
+    """Flip signs of ``q (T, J, 4)`` so each frame is in the hemisphere of the previous one (same rotations).
+
+    Frame t's sign is the product of the flips between consecutive input frames up to t (a flip of
+    frame t - 1 flips its dot product with frame t too), so one cumulative product does it."""
+    if q.shape[0] < 2:
+        return q.clone()
+    flips = torch.where((q[1:] * q[:-1]).sum(-1, keepdim=True) < 0, -1.0, 1.0).to(q.dtype)
+    sign = torch.cat([torch.ones_like(flips[:1]), torch.cumprod(flips, dim=0)])
+    return q * sign
 
 
 def smooth_motion(
