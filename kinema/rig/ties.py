@@ -168,7 +168,7 @@ def static_armature(
         rel = positions[:, j] - positions[:, path[0]]
         still = float((rel - rel[0]).norm(dim=-1).max()) <= FIXED_TOL
         if rotations is not None:
-            still = still and float((rotations[:, j] * rotations[:1, j]).sum(-1).abs().min()) >= 1 - 1e-8
+            still = still and float((rotations[:, j] * rotations[:1, j]).sum(-1).abs().min()) >= 1 - 1e-6
         if not still:
             break
         out.append(j)
