@@ -149,9 +149,11 @@ def test_bad_commands_are_one_line_errors(model) -> None:
         open_stream(model, GenerationRequest(prompt=WALK, samples=2))
 
 
-def test_the_any_rig_model_is_refused_in_one_line() -> None:
-    with pytest.raises(KinemaError, match="human model only"):
+def test_a_stream_without_its_rig_or_with_a_foreign_one_is_one_line(model) -> None:
+    with pytest.raises(KinemaError, match="streams on a rig"):
         open_stream(load_model("creatures"))
+    with pytest.raises(KinemaError, match="its own skeleton"):
+        open_stream(model, GenerationRequest(rig="Fox.glb"))
 
 
 def test_script_lines_are_checked(tmp_path) -> None:

@@ -144,19 +144,24 @@ class AnyRigPipeline(MotionPipeline):
         own, world = self._constraints(r, rig, what, kw["seconds"])
         if not world:
             return self.sample_on_rig(what, rig=rig, constraints=own, samples=r.samples, **kw)
-        res, notes, _ = generate_world(self, what, rig=rig, constraints=world, samples=r.samples, **kw)
+        res, notes, _ = generate_world(self, what, rig=rig, constraints=world, extra=own, samples=r.samples, **kw)
         res.report.left_out = notes
         return res
 
     def _constraints(self, r: GenerationRequest, rig: Rig, what, seconds: float) -> tuple[list, list[dict]]:
-        """(any-rig constraint objects, world-frame JSON constraints) of a request."""
+        """(any-rig constraint objects, world-frame JSON constraints) of a request. A list may mix both
+        (a live stream's window: its context as keyframes and root motion, its steering and targets
+        as docs/constraints.md JSON)."""
         c = r.constraints
         if c is None:
             return [], []
-        if isinstance(c, list | tuple) and all(isinstance(o, Constraint) for o in c):
-            return list(c), []
-        return load_constraints_file(c, rig.skeleton, self.fps, self.frames(what, seconds),
-                                     source_fps=r.constraints_fps)
+        own = [o for o in c if isinstance(o, Constraint)] if isinstance(c, list | tuple) else []
+        if own and len(own) == len(c):
+            return own, []
+        rest = [o for o in c if not isinstance(o, Constraint)] if own else c
+        more, world = load_constraints_file(rest, rig.skeleton, self.fps, self.frames(what, seconds),
+                                            source_fps=r.constraints_fps)
+        return own + more, world
 
     def sample_on_rig(
         self,
@@ -286,6 +291,8 @@ class AnyRigPipeline(MotionPipeline):
         targets = None
         if postprocess:
             m, f = self._ground(m, f, rep_n, constraints, report)
+            if _leading_context(constraints):  # a stream's context is continued, not hit again (kinema.stream)
+                constraints = [c for c in constraints if not isinstance(c, (Keyframe, RootMotion))]
             moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
@@ -324,9 +331,12 @@ class AnyRigPipeline(MotionPipeline):
     def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:
         """``m`` with a steadied root height, put on the floor by its contact joints and settled onto its
         legs (kinema.anyrig.ground), unless a keyframe or a copied root motion decides where the
-        root is; and the features ``f`` (the translated feet's moved to keep their world heights)."""
+        root is (but not a leading context alone: `_leading_context`); and the features ``f`` (the
+        translated feet's moved to keep their world heights)."""
         rig = rep_n.rig
-        if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints):
+        context = _leading_context(constraints)
+        alone = context is not None and context[0] == context[1]
+        if any(isinstance(c, (Keyframe, RootMotion)) for c in constraints) and not alone:
             return m, f
         m, change = steady_height(m)
         report.height_smoothed = max(report.height_smoothed, change)
@@ -384,6 +394,21 @@ def _require_finite(feats: torch.Tensor) -> None:
     if not bool(torch.isfinite(feats).all()):
         raise KinemaError("sampling produced NaN or infinite values: an input far outside what the model can take "
                           "(a huge target, heading or weight?)")
+
+
+def _leading_context(constraints) -> tuple[int, int] | None:
+    """``(n, until)`` when the keyframes and root motions are one leading context: a keyframe on each
+    of frames ``0..n-1`` and one root motion over frames ``[0, until)``, ``until >= n`` (a live stream's
+    window continuing the frames before it, which were put on the floor; ``until > n`` while steered,
+    its root carried on along the path: kinema.stream); else None. The raw model's root height drifts
+    (a fox's body sank from 0.61 to 0.13 m over a 2-s window), so a context alone is put on the floor
+    like any other motion (the context frames, already standing, move little); the context is not
+    hit again by the exact pass (the stream cross-fades those frames)."""
+    keys = sorted(c.frame for c in constraints if isinstance(c, Keyframe))
+    untils = [c.until for c in constraints if isinstance(c, RootMotion)]
+    if keys and len(untils) == 1 and untils[0] >= len(keys) and keys == list(range(len(keys))):
+        return len(keys), untils[0]
+    return None
 
 
 def _waypoint_frames(constraints) -> list[int]:

@@ -172,14 +172,16 @@ def to_anyrig(
     return out, notes
 
 
-def generate_world(model, prompt, *, rig: Skeleton | Rig, constraints: list[dict], samples: int = 1, progress=None,
-                   **kw):
+def generate_world(model, prompt, *, rig: Skeleton | Rig, constraints: list[dict], extra: list[Constraint] = (),
+                   samples: int = 1, progress=None, **kw):
     """``model.sample_on_rig(prompt, rig=rig, ...)`` (kinema.anyrig.pipeline) for JSON-form world
-    ``constraints`` (see the module docstring): the result, the notes of what was left out, and the wall
-    time of both passes (s). ``progress(done, total)`` runs over both passes as one bar; ``kw`` goes to
-    ``sample_on_rig``."""
+    ``constraints`` (see the module docstring) and any-rig constraints ``extra`` (after them, so that
+    their root rows win where both set the root, e.g. a stream's context), the result, the notes of
+    what was left out, and the wall time of both passes (s). ``progress(done, total)`` runs over both
+    passes as one bar; ``kw`` goes to ``sample_on_rig``."""
     skeleton = rig.skeleton if isinstance(rig, Rig) else rig
     cons, notes = to_anyrig(constraints, skeleton, model.fps)
+    cons += list(extra)
     targets = [c for c in cons if isinstance(c, JointTarget)]
     if not targets:
         res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=progress, **kw)
@@ -189,7 +191,7 @@ def generate_world(model, prompt, *, rig: Skeleton | Rig, constraints: list[dict
                                 **first_kw)
     reference = first.motions[0]
     cons, _ = to_anyrig(constraints, skeleton, model.fps, reference=reference)
-    cons.append(RootMotion(motion=reference, until=max(t.frame for t in targets) + 1))
+    cons += [*extra, RootMotion(motion=reference, until=max(t.frame for t in targets) + 1)]
     res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=_pass(progress, 1),
                               **kw)
     return res, notes, first.report.seconds + res.report.seconds

@@ -104,7 +104,7 @@ def run_stream(model, seconds: float, threads: int, window_seconds: float, steps
 def _row(stream: MotionStream, threads: int, seconds: float, wall: float, cpu: float, kept: list,
          grounds: dict, memory: list[float]) -> StreamBenchRow:
     windows = stream.windows[1:]  # the first window starts from nothing
-    motion = frames_to_motion(kept, stream.model.skeleton)
+    motion = frames_to_motion(kept, stream.skeleton)
     joins = join_report(motion, [(lo, hi) for lo, hi in stream.seams() if hi + 3 < motion.num_frames])
     latencies = [c.latency_seconds for c in stream.commands]
     walls = [c.wall_seconds for c in stream.commands if c.wall_seconds is not None]

@@ -23,10 +23,13 @@ def register(sub) -> None:
     p.add_argument("--seconds", type=float, required=True, help="seconds of motion to stream")
     p.add_argument("--out", type=Path, required=True, help="the whole stream: .bvh, .bvh.gz, .npz, .glb or .json")
     p.add_argument("--log", type=Path, help="JSON log of latencies and window timings (default OUT.stream.json)")
-    p.add_argument("--model", default="default", help="'default' (shipped human model) or a model folder")
+    p.add_argument("--model", default="default", help="'default' (shipped human model), 'creatures' or a model folder")
+    p.add_argument("--rig", help="the character of an any-rig model (e.g. --model creatures): a GLB/glTF or BVH "
+                                 "file or a training rig id")
     p.add_argument("--threads", type=positive_int, help="CPU threads for torch (default: KINEMA_THREADS, else "
                                                          "1-2 by load)")
-    p.add_argument("--window-seconds", type=float, default=3.0, help="seconds of one generated window (default 3)")
+    p.add_argument("--window-seconds", type=float,
+                   help="seconds of one generated window (default 3, or the model's window if shorter: creatures 2)")
     p.add_argument("--lookahead", type=float, default=0.15,
                    help="seconds kept ahead of the played frames when a command arrives (default 0.15)")
     p.add_argument("--steps", type=positive_int, help="DDIM steps per window (default 10)")
@@ -66,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_path(log)
     threads = configure_threads(args.threads)
     model = load_model(args.model, text_cache=text_cache_dir())
-    request = GenerationRequest(seed=args.seed)
+    request = GenerationRequest(seed=args.seed, rig=args.rig)
     stream = open_stream(model, request, window_seconds=args.window_seconds, lookahead=args.lookahead,
                          steps=args.steps)
     played = run_script(stream, commands, args.seconds)

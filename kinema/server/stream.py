@@ -248,7 +248,7 @@ async def _serve(websocket: WebSocket, registry: ModelRegistry, config: ServerCo
                  executor: ThreadPoolExecutor) -> None:
     """One connection: the start message, then frames out and commands in until done or gone."""
     start = _start(await _receive_json(websocket, limits, limits.start_timeout_s), registry, config, limits)
-    skel = start.stream.model.skeleton
+    skel = start.stream.skeleton
     await websocket.send_json({"type": "ready", "fps": start.stream.fps, "joints": list(skel.names),
                                "parents": [int(p) for p in skel.parents], "offsets": skel.offsets.tolist(),
                                "seconds": start.seconds})

@@ -38,17 +38,9 @@ import torch
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
+from kinema.stream.bodies import HumanBody, RigBody
 from kinema.stream.controls import Controls, Steer, Target, WindowFrame
-from kinema.stream.frames import (
-    StreamFrames,
-    face_along,
-    facing,
-    ground_level,
-    shifted,
-    stitch,
-    turn_xz,
-    turned,
-)
+from kinema.stream.frames import StreamFrames, ground_level, shifted, stitch, turn_xz, turned
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
 WINDOW_SECONDS = 3.0
@@ -169,13 +161,13 @@ def _number(v) -> bool:
 class MotionStream:
     """An endless motion following its controls; create it with `open_stream`."""
 
-    def __init__(self, model, request, settings: StreamSettings):
+    def __init__(self, model, request, settings: StreamSettings, body: HumanBody | RigBody):
         self.model = model
         self.request = request
         self.settings = settings
+        self.body = body
         base_prompt = "" if request is None else request.prompt
         self.controls = Controls(prompt=base_prompt)
-        self.skeleton = None
         self.commands: list[CommandRecord] = []
         self.windows: list[WindowStats] = []
         self._motion: Motion | None = None  # stream frames [_offset, _offset + num_frames)
@@ -191,6 +183,11 @@ class MotionStream:
     @property
     def fps(self) -> float:
         return self.settings.fps
+
+    @property
+    def skeleton(self):
+        """The skeleton the frames are on: the human model's own, or the request's rig."""
+        return self.body.skeleton
 
     @property
     def frames_out(self) -> int:
@@ -230,7 +227,7 @@ class MotionStream:
 
     def target(self, joint: str, position) -> CommandRecord:
         """Put ``joint`` (a name or role, e.g. ``right_hand``) at world ``position`` (metres) and hold it."""
-        skel = self.model.skeleton
+        skel = self.skeleton
         t = Target.checked(joint, position, skel.names, skel.roles)
         self.controls.targets[t.joint] = t
         return self._command("target", {"joint": t.joint, "position": list(t.position)})
@@ -314,9 +311,8 @@ class MotionStream:
         """Where the window starts: the context's first smoothed root as origin, turned so that its last
         frame faces +Z (the model then always starts as most training clips do), and the smoothed
         root's speed."""
-        roles = context.skeleton.roles
-        origin = (float(smooth[0, 0]), float(smooth[0, 1]))
-        yaw = float(facing(context.positions[-1:], roles["left_hip"], roles["right_hip"])[0])
+        origin = self.body.origin(context, smooth)
+        yaw = float(self.body.facing(context.crop(context.num_frames - 1))[0])
         speed = float((smooth[-1] - smooth[0]).norm()) * self.fps / max(1, context.num_frames - 1)
         frame = WindowFrame(origin, yaw, (0.0, 0.0), 0.0, speed, self.fps)
         return replace(frame, root_xz=frame.local_xz(float(smooth[-1, 0]), float(smooth[-1, 1])))
@@ -333,11 +329,10 @@ class MotionStream:
     def _face_path(self, window: Motion) -> Motion:
         """With steering, the window turned to face along its path (kinema.stream.frames.face_along)."""
         path = self._path_headings
-        if path is None:
+        if path is None or not self.body.turns_to_path:
             return window
-        roles = window.skeleton.roles
         first = self.settings.context - 1
-        return face_along(window, path, first, roles["left_hip"], roles["right_hip"], FACING_SIGMA_SECONDS * self.fps)
+        return self.body.face_path(window, path, first, FACING_SIGMA_SECONDS * self.fps)
 
     def _generate(self, context: Motion | None, smooth: torch.Tensor | None,
                   frame: WindowFrame | None) -> tuple[Motion, dict]:
@@ -345,16 +340,17 @@ class MotionStream:
         s = self.settings
         fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
                                   "seed": (s.seed + self._window_index) % 2**63,
-                                  "postprocess": bool(self.controls.targets),
+                                  "postprocess": self.body.postprocess(bool(self.controls.targets)),
                                   "samples": 1}
         self._path_headings = None
         if context is not None and self._switch_windows > 0:
             fields["guidance"] = self._switch_guidance()
             self._switch_windows -= 1
         if context is not None:
-            fields["constraints"] = self.controls.window_constraints(frame, context, smooth, s.window)
+            controls = self.controls.window_constraints(frame, context.num_frames, s.window)
+            fields["constraints"] = self.body.window_constraints(context, smooth, controls)
             fields["heading"] = frame.heading
-            for c in fields["constraints"]:
+            for c in controls:
                 if c["type"] == "root2d":
                     vectors = torch.tensor(c["global_root_heading"])
                     self._path_headings = torch.atan2(vectors[:, 1], vectors[:, 0])
@@ -381,19 +377,31 @@ class MotionStream:
                 c.ready_wall = done
 
 
-def open_stream(model, request=None, *, window_seconds: float = WINDOW_SECONDS,
+def open_stream(model, request=None, *, window_seconds: float | None = None,
                 lookahead: float = LOOKAHEAD_SECONDS, steps: int | None = None) -> MotionStream:
     """A `MotionStream` of ``model`` (a loaded `MotionPipeline`); ``request`` (a `GenerationRequest`,
-    optional) gives the first prompt, seed, heading, guidance and grounding, its ``seconds``,
-    ``constraints`` and ``timeline`` are the stream's own. ``steps``: DDIM steps per window
-    (default `STREAM_STEPS`)."""
-    if getattr(model, "needs_rig", False):
-        raise KinemaError("streams drive the human model only for now: the any-rig model's constraints "
-                          "(kinema.anyrig) are not wired to stream windows yet")
+    optional) gives the first prompt, seed, heading, guidance and grounding, and for a model that
+    needs one (the any-rig model) the rig; its ``seconds``, ``constraints`` and ``timeline`` are the
+    stream's own. ``window_seconds``: default `WINDOW_SECONDS` or the model's window if shorter.
+    ``steps``: DDIM steps per window (default `STREAM_STEPS`)."""
     if request is not None and not hasattr(request, "replace"):
         raise KinemaError(f"open_stream: request must be a GenerationRequest, got {type(request).__name__}")
     if request is not None and request.samples != 1:
         raise KinemaError(f"a stream makes one motion: request.samples must be 1, got {request.samples}")
+    if getattr(model, "needs_rig", False):
+        if request is None or request.rig is None:
+            raise KinemaError("rig: the any-rig model streams on a rig: give the request's rig (a GLB/glTF or BVH "
+                              "file or a training rig id)")
+        rig = model.resolve_rig(request.rig)
+        request = request.replace(rig=rig)
+        body = RigBody(rig, float(model.fps))
+    else:
+        if request is not None and request.rig is not None:
+            raise KinemaError("rig: a stream of this model moves its own skeleton; retarget the written stream "
+                              "(kinema retarget) or stream an any-rig model (--model creatures) on the rig")
+        body = HumanBody(model.skeleton)
+    if window_seconds is None:
+        window_seconds = min(WINDOW_SECONDS, float(model.window_seconds))
     seed = 0 if request is None else int(request.seed)
-    return MotionStream(model, request, StreamSettings.checked(model, window_seconds, lookahead, steps, seed))
-
+    settings = StreamSettings.checked(model, window_seconds, lookahead, steps, seed)
+    return MotionStream(model, request, settings, body)

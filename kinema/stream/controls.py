@@ -2,8 +2,9 @@
 
 A window is generated in a local frame whose first context root stands over the origin (as training
 clips start), turned so that the context's last frame faces +Z; every position below is in that frame.
-A window of ``W`` frames starts with ``C`` context frames (the last generated ones, imposed as
-``fullbody`` keyframes, so it continues the motion); the controls constrain the free frames ``[C, W)``:
+A window of ``W`` frames starts with ``C`` context frames (the last generated ones, imposed by the
+stream's body: kinema.stream.bodies; for the human model `context_keyframes`), so it continues the
+motion; the controls constrain the free frames ``[C, W)``:
 
 - steering: a dense ``root2d`` path with headings that turns from the current facing towards
   ``direction_deg`` at most ``TURN_RATE_DEG`` per second and moves at ``speed`` m/s (reached over
@@ -86,15 +87,13 @@ class Controls:
     steer: Steer | None = None
     targets: dict[str, Target] = field(default_factory=dict)
 
-    def window_constraints(self, window: WindowFrame, context: Motion, smooth_root: torch.Tensor,
-                           num_frames: int) -> list[dict]:
-        """The constraints JSON of a ``num_frames`` window whose first frames are ``context`` with its
-        smoothed root x/z ``smooth_root (C, 2)`` (local frame)."""
-        out = [context_keyframes(context, smooth_root)]
-        C = context.num_frames
+    def window_constraints(self, window: WindowFrame, first: int, num_frames: int) -> list[dict]:
+        """The constraints JSON of the free frames ``[first, num_frames)`` of a window (the context, its
+        first ``first`` frames, is imposed by the stream's body: kinema.stream.bodies)."""
+        out = []
         if self.steer is not None:
-            out.append(steer_path(self.steer, window, C, num_frames))
-        reach = C + round(REACH_SECONDS * context.fps)
+            out.append(steer_path(self.steer, window, first, num_frames))
+        reach = first + round(REACH_SECONDS * window.fps)
         frames = list(range(min(reach, num_frames - 1), num_frames, 2))
         for t in self.targets.values():
             x, z = window.local_xz(t.position[0], t.position[2])

@@ -21,7 +21,9 @@ from kinema.motion.smoothing import smooth_time
 @dataclass(frozen=True)
 class StreamFrames:
     """Frames ``[start, start + n)`` of a stream: root translation ``(n, 3)``, local rotations
-    ``(n, J, 4)`` and global joint positions ``(n, J, 3)`` on ``joint_names``, at ``fps``."""
+    ``(n, J, 4)`` and global joint positions ``(n, J, 3)`` on ``joint_names``, at ``fps``; on rigs that
+    animate bone translations (the Quaternius rigs move the body and the IK feet so) also
+    ``local_translations (n, J, 3)``, else None."""
 
     start: int
     fps: float
@@ -29,11 +31,13 @@ class StreamFrames:
     root_translation: torch.Tensor
     local_rotations: torch.Tensor
     positions: torch.Tensor
+    local_translations: torch.Tensor | None = None
 
     @classmethod
     def of(cls, motion: Motion, start: int) -> StreamFrames:
+        lt = None if motion.local_translations is None else motion.local_translations.clone()
         return cls(start, motion.fps, tuple(motion.skeleton.names), motion.root_translation.clone(),
-                   motion.local_rotations.clone(), motion.positions)
+                   motion.local_rotations.clone(), motion.positions, lt)
 
     @property
     def num_frames(self) -> int:
@@ -49,17 +53,20 @@ class StreamFrames:
         def rounded(t: torch.Tensor) -> list:
             return torch.round(t.float(), decimals=decimals).tolist()
 
-        return {"start": self.start, "fps": self.fps, "root_translation": rounded(self.root_translation),
-                "local_rotations": rounded(self.local_rotations), "positions": rounded(self.positions)}
+        out = {"start": self.start, "fps": self.fps, "root_translation": rounded(self.root_translation),
+               "local_rotations": rounded(self.local_rotations), "positions": rounded(self.positions)}
+        if self.local_translations is not None:
+            out["local_translations"] = rounded(self.local_translations)
+        return out
 
 
 def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
     """The motion from stream frame ``s`` on, where ``old`` (the previous window's frames) and ``new``
     (the new window's) both start at frame ``s - 1``: ``skip`` frames of ``old``, then ``blend``
     frames cross-faded from ``old`` to ``new`` (weight of ``new`` rising as a raised cosine), then the
-    rest of ``new``. Rotations are slerped, root heights lerped; the root's ground position follows
-    the blended *velocity* from ``old``'s, and the rest of ``new`` is moved to continue from there, so a
-    window that lags or leads the previous one does not make the root jump."""
+    rest of ``new``. Rotations are slerped, root heights and bone translations lerped; the root's
+    ground position follows the blended *velocity* from ``old``'s, and the rest of ``new`` is moved to
+    continue from there, so a window that lags or leads the previous one does not make the root jump."""
     n = skip + blend
     if old.num_frames < n + 1 or new.num_frames < n + 1:
         raise ValueError(f"stitch: needs {n + 1} frames of each motion, got {old.num_frames} and {new.num_frames}")
@@ -77,7 +84,12 @@ def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
     if old.foot_contacts is not None and new.foot_contacts is not None:
         later = new.foot_contacts[1 : n + 1].to(old.dtype)
         contacts = torch.where(w[:, None] < 0.5, old.foot_contacts[1 : n + 1], later)
-    out = Motion(new.skeleton, new.fps, root, rots, contacts)
+    trans = None
+    if old.local_translations is not None or new.local_translations is not None:
+        ta = old.translations_or_offsets()[1 : n + 1]
+        tb = new.translations_or_offsets()[1 : n + 1].to(old.dtype)
+        trans = (1 - w[:, None, None]) * ta + w[:, None, None] * tb
+    out = Motion(new.skeleton, new.fps, root, rots, contacts, trans)
     if new.num_frames == n + 1:
         return out
     rest = new.crop(n + 1).to(old.dtype)

@@ -25,7 +25,10 @@ def frames_to_motion(parts: list[StreamFrames], skeleton) -> Motion:
     """Consecutive `StreamFrames` as one `Motion` on ``skeleton``."""
     root = torch.cat([p.root_translation for p in parts])
     rots = torch.cat([p.local_rotations for p in parts])
-    return Motion(skeleton, parts[0].fps, root, rots)
+    lt = None
+    if parts[0].local_translations is not None:
+        lt = torch.cat([p.local_translations for p in parts])
+    return Motion(skeleton, parts[0].fps, root, rots, None, lt)
 
 
 def pelvis_speed(motion: Motion) -> torch.Tensor:

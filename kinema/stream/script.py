@@ -139,4 +139,4 @@ def run_script(stream: MotionStream, commands: list[ScriptCommand], seconds: flo
         n = min(chunk, total - stream.frames_out, max(1, upcoming - stream.frames_out))
         parts.append(stream.next_frames(n))
         wall += time.perf_counter() - t0
-    return ScriptRun(frames_to_motion(parts, stream.model.skeleton), stream, wall)
+    return ScriptRun(frames_to_motion(parts, stream.skeleton), stream, wall)
