@@ -45,17 +45,23 @@ HELPER_NAME = re.compile(r"pole|target|ctrl|control", re.I)
 EFFECTOR_ROLES = ("head", "left_hand", "right_hand", "left_ankle", "right_ankle")
 
 
-def rest_positions(skeleton: Skeleton) -> torch.Tensor:
-    """Joint positions ``(J, 3)`` of the rest pose (the skeleton's rest rotations, else identity)."""
+def rest_transforms(skeleton: Skeleton) -> tuple[torch.Tensor, torch.Tensor]:
+    """Global rotations ``(J, 4)`` and positions ``(J, 3)`` of the rest pose (the skeleton's rest
+    rotations, else identity; float64)."""
     J = skeleton.num_joints
     rots = skeleton.rest_rotations
     if rots is None:
         rots = torch.zeros(J, 4, dtype=torch.float64)
         rots[:, 0] = 1.0
-    _, P = forward_kinematics(
-        rots.double()[None], torch.zeros(1, 3, dtype=torch.float64), skeleton.offsets, skeleton.parents
+    G, P = forward_kinematics(
+        rots.double()[None], torch.zeros(1, 3, dtype=torch.float64), skeleton.offsets.double(), skeleton.parents
     )
-    return P[0]
+    return G[0], P[0]
+
+
+def rest_positions(skeleton: Skeleton) -> torch.Tensor:
+    """Joint positions ``(J, 3)`` of the rest pose (the skeleton's rest rotations, else identity)."""
+    return rest_transforms(skeleton)[1]
 
 
 def named_contacts(skeleton: Skeleton) -> tuple[int, ...] | None:

@@ -51,8 +51,7 @@ from dataclasses import dataclass, field
 import torch
 
 from kinema.geometry.rotations import quat_inverse, quat_rotate
-from kinema.kinematics import forward_kinematics
-from kinema.rig.find import helpers
+from kinema.rig.find import helpers, rest_transforms
 from kinema.skeleton import Skeleton
 
 #: a candidate whose distance to its parent varies less than this (x rig size) in the clips is fixed
@@ -257,19 +256,6 @@ def rest_ties(skeleton: Skeleton, root: int) -> RigTies:
         loc = quat_rotate(quat_inverse(G[a]), rest[j] - rest[a])
         ties.append(Tie(j, a, float(d[k]), float(d[k]), (float(loc[0]), float(loc[1]), float(loc[2])), 0.0))
     return RigTies(ties, ())
-
-
-def rest_transforms(skeleton: Skeleton) -> tuple[torch.Tensor, torch.Tensor]:
-    """Global rotations ``(J, 4)`` and positions ``(J, 3)`` of the rest pose (float64)."""
-    J = skeleton.num_joints
-    rots = skeleton.rest_rotations
-    if rots is None:
-        rots = torch.zeros(J, 4, dtype=torch.float64)
-        rots[:, 0] = 1.0
-    G, P = forward_kinematics(
-        rots.double()[None], torch.zeros(1, 3, dtype=torch.float64), skeleton.offsets.double(), skeleton.parents
-    )
-    return G[0], P[0]
 
 
 def tie_distances(positions: torch.Tensor, ties: Sequence[Tie]) -> torch.Tensor:
