@@ -22,6 +22,7 @@ import torch
 
 from kinema.constraints.character import Keyframe, RootMotion
 from kinema.motion.core import Motion
+from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.joint import JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
@@ -51,6 +52,15 @@ class HumanBody:
         """A window's constraints (window frame): ``context`` as fullbody keyframes on its first frames,
         then the ``controls`` (kinema.stream.controls JSON) as they are."""
         return [context_keyframes(context, smooth_root), *controls]
+
+    def root_path(self, window: Motion, first: int) -> dict:
+        """``window``'s own root path over its free frames ``[first - 1, T)`` as a dense ``root2d``
+        constraint: its smoothed root (the representation's 0.5-s Gaussian) and its hips' facing."""
+        xz = smooth_time(window.root_translation[:, [0, 2]].float(), DEFAULT_ROOT_SIGMA_SECONDS * window.fps)
+        psi = self.facing(window).float()
+        frames = list(range(first - 1, window.num_frames))
+        return {"type": "root2d", "frame_indices": frames, "smooth_root_2d": xz[frames].tolist(),
+                "global_root_heading": torch.stack([psi.cos(), psi.sin()], -1)[frames].tolist()}
 
     @staticmethod
     def postprocess(targets_held: bool) -> bool:

@@ -68,6 +68,11 @@ FACING_SIGMA_SECONDS = 0.3
 #: the old behaviour outweigh the new text at the model's (2, 2) (walk -> bow, seeds 0/1, 10 steps:
 #: trunk lean 30/35 degrees; with (4, 2): 40/39, lone bows 41)
 SWITCH_GUIDANCE = (4.0, 2.0)
+#: whether the first window after a prompt switch takes its root path from a first pass at the
+#: model's own guidance (human model, not while steering): with `SWITCH_GUIDANCE` alone a jog after a
+#: wave burst from 0 to 6.1-6.5 m/s within the window (the model's guidance: 4.3-4.4 m/s), since the
+#: stronger text weight exaggerates the root's speed as much as the pose
+ROOT_FROM_FIRST_PASS = True
 #: largest height correction of one window, metres (kinema.stream.frames.ground_level)
 FLOOR_STEP = 0.02
 #: most frames one ``next_frames`` call may ask for
@@ -336,25 +341,42 @@ class MotionStream:
 
     def _generate(self, context: Motion | None, smooth: torch.Tensor | None,
                   frame: WindowFrame | None) -> tuple[Motion, dict]:
-        """One window (local frame) and the pipeline's timings."""
+        """One window (local frame) and the pipeline's timings. The first window after a prompt switch
+        is made twice when not steered and the body can take a root path (the human model): with the
+        model's guidance, whose root path is then imposed on the window made with the stronger
+        `SWITCH_GUIDANCE` (`ROOT_FROM_FIRST_PASS`)."""
         s = self.settings
         fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
                                   "seed": (s.seed + self._window_index) % 2**63,
                                   "postprocess": self.body.postprocess(bool(self.controls.targets)),
                                   "samples": 1}
         self._path_headings = None
-        if context is not None and self._switch_windows > 0:
-            fields["guidance"] = self._switch_guidance()
-            self._switch_windows -= 1
-        if context is not None:
-            controls = self.controls.window_constraints(frame, context.num_frames, s.window)
-            fields["constraints"] = self.body.window_constraints(context, smooth, controls)
-            fields["heading"] = frame.heading
-            for c in controls:
-                if c["type"] == "root2d":
-                    vectors = torch.tensor(c["global_root_heading"])
-                    self._path_headings = torch.atan2(vectors[:, 1], vectors[:, 0])
         self._window_index += 1
+        if context is None:
+            return self._run(fields)
+        controls = self.controls.window_constraints(frame, context.num_frames, s.window)
+        fields["constraints"] = self.body.window_constraints(context, smooth, controls)
+        fields["heading"] = frame.heading
+        for c in controls:
+            if c["type"] == "root2d":
+                vectors = torch.tensor(c["global_root_heading"])
+                self._path_headings = torch.atan2(vectors[:, 1], vectors[:, 0])
+        if self._switch_windows <= 0:
+            return self._run(fields)
+        self._switch_windows -= 1
+        first_pass = None
+        if ROOT_FROM_FIRST_PASS and self._path_headings is None and hasattr(self.body, "root_path"):
+            first_pass, first_timings = self._run(fields)
+            path = self.body.root_path(first_pass, context.num_frames)
+            fields["constraints"] = [*fields["constraints"], path]
+        window, timings = self._run(fields | {"guidance": self._switch_guidance()})
+        if first_pass is not None:
+            timings = {k: float(timings.get(k, 0.0)) + float(first_timings.get(k, 0.0))
+                       for k in set(timings) | set(first_timings)}
+        return window, timings
+
+    def _run(self, fields: dict) -> tuple[Motion, dict]:
+        """The pipeline's one motion for a window's request ``fields``, and its timings."""
         if self.request is None:
             result = self.model.generate(**fields)
         else:
