@@ -138,3 +138,23 @@ def test_cli_errors(tmp_path, capsys) -> None:
         assert main(["data", "build", "quaternius", "--root", str(root), "--out", str(tmp_path / "o"), "--quiet"]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and msg in err
+
+
+def test_a_rig_whose_walk_goes_against_its_forward_axis_stays_on_the_spot(quaternius_root, tmp_path) -> None:
+    """The mech Mike's contact joints (found by the rig layer) are its knees: the walk they imply goes
+    backwards along its forward axis, so the build trusts none of its feet and keeps its clips in place;
+    the T-rex walks along +Z and travels."""
+    root = tmp_path / "two"
+    for rel in ("mech_pack/Mike.glb", "dinosaurs_pack/Trex.glb"):
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).symlink_to(quaternius_root / rel)
+    meta, messages = build_quaternius(root, tmp_path / "out", fps=20, progress=False)
+    assert (
+        meta["forward_check"]["mech_pack/Mike.glb"] < -0.9 and meta["forward_check"]["dinosaurs_pack/Trex.glb"] > 0.99
+    )
+    assert any(m.startswith("mech_pack/Mike.glb: the walk read from its contact joints") for m in messages)
+    clips = MotionCache(tmp_path / "out").clips
+    mike = [r for r in clips if r["path"] == "mech_pack/Mike.glb" and r["content"] in ("walk", "run")]
+    trex = [r for r in clips if r["path"] == "dinosaurs_pack/Trex.glb" and r["content"] in ("walk", "run")]
+    assert mike and all(r["flags"] == ["in_place"] and r["travel"] < 0.1 for r in mike)
+    assert trex and all(r["flags"] == ["travel_recovered"] and r["travel"] > 0.3 for r in trex)
