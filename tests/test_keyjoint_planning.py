@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import subprocess
 import sys
+from functools import partial
 
 import pytest
 import torch
@@ -150,7 +151,7 @@ def test_two_stage_meets_far_sparse_targets_better_than_single_stage(model) -> N
         )
 
     kw = {"seconds": 5.0, "constraints": cons, "steps": 20, "postprocess": False}
-    one = model.generate(PROMPT, **kw)[0]
+    one = model.generate(PROMPT, keyjoint_model="none", **kw)[0]
     calls = []
     two = model.generate(PROMPT, keyjoint_model="default", progress=lambda d, n: calls.append((d, n)), **kw)[0]
     assert error(two) < 0.3 and error(one) > 3 * error(two)
@@ -226,3 +227,29 @@ def test_bench_keyjoint_planning_times_both_rows(model, tmp_path) -> None:
     rows = json.loads(out.read_text())["rows"]
     assert [x["row"] for x in rows] == ["direct", "keyjoint-planned"] and all(x["raw_s"] > 0 for x in rows)
     assert "| 3 | keyjoint-planned |" in r.stdout
+
+
+def test_sparse_joint_targets_are_keyjoint_planned_by_default(model) -> None:
+    """Issue 37: sparse joint targets alone get the shipped planner without asking; a root path (or a
+    smoothed root given with a target) keeps the call direct, and ``"none"`` turns planning off."""
+    from kinema.constraints import load_constraints
+    from kinema.human.keyjoint_planning import plans_by_default
+
+    sk = model.skeleton
+    idx = keyjoint_indices(sk)
+    hand = {"type": "end-effector", "joint": sk.names[idx[3]], "frame_indices": [30], "positions": [[0.9, 0.85, 1.5]]}
+    kw = {"seconds": 2.0, "constraints": [hand], "steps": 4, "postprocess": False, "seed": 1}
+    auto = model.generate(PROMPT, **kw)[0]
+    planned = model.generate(PROMPT, keyjoint_model="default", **kw)[0]
+    direct = model.generate(PROMPT, keyjoint_model="none", **kw)[0]
+    assert torch.equal(auto.positions, planned.positions)
+    assert not torch.equal(auto.positions, direct.positions)
+    path = {"type": "root2d", "frame_indices": [10, 39], "smooth_root_2d": [[0.0, 0.5], [0.2, 1.5]]}
+    with_root = dict(hand, smooth_root_2d=[[0.5, 1.4]])
+    load = partial(load_constraints, skeleton=sk, fps=model.fps, num_frames=40)
+    assert plans_by_default(load([hand]), sk)
+    assert not plans_by_default(load([hand, path]), sk) and not plans_by_default(load([with_root]), sk)
+    assert not plans_by_default([], sk)
+    kw["constraints"] = [hand, path]
+    assert torch.equal(model.generate(PROMPT, **kw)[0].positions,
+                       model.generate(PROMPT, keyjoint_model="none", **kw)[0].positions)

@@ -51,7 +51,7 @@ def bench_keyjoint_planning(model, planner, seconds: float, steps_list, repeats:
     model.generate(PROMPT, seconds=1.0, steps=2, keyjoint_model=planner)  # warm-up: text, allocator
     rows = []
     for steps in steps_list:
-        for name, kj in (("direct", None), ("keyjoint-planned", planner)):
+        for name, kj in (("direct", "none"), ("keyjoint-planned", planner)):
             raw_s, post_s, errs = [], [], []
             for r in range(repeats):
                 kw = {"seconds": seconds, "constraints": cons, "steps": steps, "seed": r, "keyjoint_model": kj}

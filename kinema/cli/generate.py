@@ -101,7 +101,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
         raise KinemaError(f"{args.constraints}: no such constraints file")
     if args.constraints is not None:
         load_objectives(args.constraints)  # objective syntax errors before the model loads
-    if args.keyjoint_model is not None:
+    if args.keyjoint_model not in (None, "none"):
         KeyjointPlanner.check(args.keyjoint_model)
     if args.timeline is not None:
         if args.timeline.suffix.lower() != ".json":

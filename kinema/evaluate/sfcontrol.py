@@ -124,7 +124,7 @@ def evaluate_sparse(
                 postprocess=False,
                 objectives=objs,
                 objective_steps=objective_steps if objs else None,
-                keyjoint_model=keyjoint if row == "keyjoint-planned" else None,
+                keyjoint_model=keyjoint if row == "keyjoint-planned" else "none",
             )[0]
             out[row]["scores"].append(score(m, case, time.perf_counter() - t0))
             out[row]["motions"].append(m)

@@ -52,7 +52,7 @@ def evaluate_suite_ee(
                 seed=seed * 100003 + i,
                 postprocess=False,
                 heading=case["heading"],
-                keyjoint_model=planner if row == "keyjoint-planned" else None,
+                keyjoint_model=planner if row == "keyjoint-planned" else "none",
             )[0]
             seconds = time.perf_counter() - t0
             metrics, _ = score_motion(motion, targets)

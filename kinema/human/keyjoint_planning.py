@@ -29,12 +29,15 @@ from pathlib import Path
 
 import torch
 
+from kinema.constraints import EndEffectorConstraint
+from kinema.constraints.types import resolve_joint
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.errors import KinemaError
 from kinema.human.keyjoints import KeyjointTargets, gaussian_spread
 from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
 from kinema.model.denoiser import Denoiser
 from kinema.model.keyjoint import KeyjointDenoiser, load_keyjoint_model
+from kinema.model.precision import set_precision
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
 from kinema.representation.keyjoint import HEADING, KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices
@@ -59,6 +62,35 @@ FINAL_SIGMA_SECONDS = 0.15
 #: suite end-effector cases 9.45 -> 6.67 cm (1 pass); each pass costs one more stage-2 run.
 REFINE_PASSES = 1
 REFINE_SIGMA_SECONDS = 0.15
+#: share of the DDIM steps a refinement pass runs: it starts from the previous pass's motion re-noised to
+#: that level (as a timeline's join windows do), not from pure noise (docs/speed.md, "Keyjoint planning
+#: by default")
+REFINE_STRENGTH = 1.0
+#: share of the DDIM steps the first body pass runs when a refinement pass follows: that pass only
+#: measures the body's miss, which the refinement then aims past
+FIRST_PASS_SHARE = 1.0
+
+
+def plans_by_default(constraints, skeleton) -> bool:
+    """Whether a call with these constraint objects is keyjoint-planned when it names no keyjoint model:
+    every constraint is an end-effector target with positions and without a smoothed root, and one at
+    least is on a keyjoint (pelvis, head, hands, ankles). A root path, a keyframe, foot contacts or a
+    smoothed root given with a target leave the call direct (SFControl's setting is sparse joint targets
+    alone; issue 37)."""
+    if not constraints:
+        return False
+    keys = set(keyjoint_indices(skeleton))
+    on_key = False
+    for c in constraints:
+        if not isinstance(c, EndEffectorConstraint) or c.positions is None or c.smooth_root_2d is not None:
+            return False
+        on_key = on_key or resolve_joint(skeleton, c.joint) in keys
+    return on_key
+
+
+def shipped_planner() -> bool:
+    """Whether this install ships the default keyjoint model (kinema/assets/models/keyjoint)."""
+    return (Path(str(files("kinema") / "assets" / "models" / "keyjoint")) / "keyjoint.json").is_file()
 
 
 class KeyjointPlanTargets:
@@ -250,6 +282,8 @@ class KeyjointPlanner:
     info: dict
     steps: int = KEYJOINT_STEPS
     refine: int = REFINE_PASSES
+    refine_strength: float = REFINE_STRENGTH
+    first_pass_share: float = FIRST_PASS_SHARE
 
     @staticmethod
     def check(name_or_path: str | Path) -> Path:
@@ -267,11 +301,12 @@ class KeyjointPlanner:
         return path
 
     @classmethod
-    def load(cls, name_or_path: str | Path) -> KeyjointPlanner:
+    def load(cls, name_or_path: str | Path, precision: str = "fp32") -> KeyjointPlanner:
         """``"default"`` (the keyjoint model shipped in kinema/assets/models/keyjoint) or a model folder
-        written by ``python -m kinema.train.keyjoint`` (its ``export``)."""
+        written by ``python -m kinema.train.keyjoint`` (its ``export``); ``precision`` as the body model's
+        (kinema.model.precision)."""
         model, info = load_keyjoint_model(cls.check(name_or_path))
-        return cls(model, DDIMSampler(), info)
+        return cls(set_precision(model, precision), DDIMSampler(), info)
 
 
 def sample_with_keyjoint_plan(
@@ -304,19 +339,26 @@ def sample_with_keyjoint_plan(
     )
     noise = None if generator is None else generator.get_state()
     passes, count = 1 + planner.refine, kwargs.pop("on_step", None)
+    refine = replace(settings, strength=planner.refine_strength)
 
-    def run(full: SampleTargets, k: int) -> torch.Tensor:
+    def run(full: SampleTargets, k: int, how: SampleSettings) -> torch.Tensor:
         step = None if count is None else (lambda d, n: count(k * n + d, passes * n))
         if noise is not None:  # every pass starts from the same noise
             generator.set_state(noise)
-        return sample_features(
-            denoiser, sampler, rep, text_emb, full, settings, generator=generator, on_step=step, **kwargs
-        )
+        return sample_features(denoiser, sampler, rep, text_emb, full, how, generator=generator, on_step=step,
+                               **kwargs)
 
-    feats = run(with_keyjoint_plan(targets, keys, plan, rep), 0)
+    first = settings
+    if planner.refine and planner.first_pass_share < 1:
+        steps = settings.steps or sampler.num_inference_steps
+        first = replace(settings, steps=max(1, round(steps * planner.first_pass_share)))
+    feats = run(with_keyjoint_plan(targets, keys, plan, rep), 0, first)
     idx, aim = keyjoint_indices(rep.skeleton), keys.clone()
     for k in range(1, passes):
         miss = keys[..., : 3 * NUM_KEYJOINTS] - rep.pose(feats)[:, :, idx].flatten(-2).to(keys)
         aim[..., : 3 * NUM_KEYJOINTS] += smooth_time(miss, REFINE_SIGMA_SECONDS * rep.fps)
-        feats = run(with_keyjoint_plan(targets, aim, plan, rep, override=True), k)
+        full = with_keyjoint_plan(targets, aim, plan, rep, override=True)
+        if refine.strength < 1:  # re-noise the previous pass's motion instead of starting from pure noise
+            full = replace(full, start=feats)
+        feats = run(full, k, refine if refine.strength < 1 else settings)
     return feats

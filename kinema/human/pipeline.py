@@ -20,7 +20,7 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
-from kinema.human.keyjoint_planning import KeyjointPlanner, sample_with_keyjoint_plan
+from kinema.human.keyjoint_planning import KeyjointPlanner, plans_by_default, sample_with_keyjoint_plan, shipped_planner
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
 from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
@@ -194,15 +194,31 @@ class HumanPipeline(MotionPipeline):
 
     # ------------------------------------------------------------------ internals
     def _planner(self, keyjoint_model, plan: SegmentPlan, bound) -> KeyjointPlanner | None:
-        """The keyjoint planner of a keyjoint-planned call (None for direct), checked against the call."""
-        if keyjoint_model is None:
+        """The keyjoint planner of a keyjoint-planned call (None for direct), checked against the call.
+        Unset (None): the shipped planner when the call's constraints are sparse joint targets alone
+        (:func:`kinema.human.keyjoint_planning.plans_by_default`) in one segment without objectives;
+        ``"none"``: never."""
+        if keyjoint_model == "none":
             return None
+        if keyjoint_model is None:
+            if bound or len(plan.segments) > 1 or not plans_by_default(plan.constraints, self.skeleton):
+                return None
+            return self._default_planner()
         if bound:
             raise KinemaError("keyjoint_model (keyjoint planning) cannot be combined with objectives")
         if len(plan.segments) > 1:
             raise KinemaError(f"keyjoint_model (keyjoint planning) plans one segment of up to "
                               f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
-        return keyjoint_model if isinstance(keyjoint_model, KeyjointPlanner) else KeyjointPlanner.load(keyjoint_model)
+        if isinstance(keyjoint_model, KeyjointPlanner):
+            return keyjoint_model
+        return self._default_planner() if keyjoint_model == "default" else KeyjointPlanner.load(keyjoint_model,
+                                                                                               self.precision)
+
+    def _default_planner(self) -> KeyjointPlanner | None:
+        """The shipped keyjoint planner at the model's precision, loaded once (None when not shipped)."""
+        if not hasattr(self, "_shipped_planner"):
+            self._shipped_planner = KeyjointPlanner.load("default", self.precision) if shipped_planner() else None
+        return self._shipped_planner
 
     def _check_counts(self, samples, steps, seed) -> tuple[int, int, int]:
         """Validated ``samples``, ``steps`` (the saved default filled in) and ``seed``."""

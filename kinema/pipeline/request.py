@@ -131,7 +131,8 @@ class GenerationRequest:
                                                  help="softmax temperature of grounding (default: the model's)")
     keyjoint_model: str | None = option(None, metavar="MODEL", objects=True,
                                         help="plan pelvis, head, hands and feet from sparse targets first "
-                                             "('default' or a keyjoint model folder; docs/constraints.md)")
+                                             "('default' or a keyjoint model folder; 'none' = off; unset: "
+                                             "'default' for sparse joint targets alone; docs/constraints.md)")
     rig: Any = option(None, kind="json", metavar="RIG",
                       help="the character: a GLB/BVH file, a training rig id, or inline {format, data}")
     robot: str | None = option(None, metavar="ROBOT",

@@ -154,8 +154,9 @@ def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> 
         "constraints": (Annotated[list[ConstraintSpec], Field(max_length=limits.max_constraints)] | None,
                         Field(None, description="kinema constraint objects, inline (docs/constraints.md)")),
         "objectives": (SkipJsonSchema[Any], Field(None, exclude=True)),
-        "keyjoint_model": (Literal["default"] | None, Field(None, description="'default': plan pelvis, head, "
-                                                                              "hands and feet first")),
+        "keyjoint_model": (Literal["default", "none"] | None,
+                           Field(None, description="'default': plan pelvis, head, hands and feet first; 'none': "
+                                                   "never; unset: 'default' for sparse joint targets alone")),
         "rig": (Annotated[str, Field(max_length=200)] | InlineRig | None,
                 Field(None, description="a rig id from GET /v1/models, or a character inline {format, data}")),
         "format": (Format, Field("bvh", description="bvh (text), npz or glb (base64), json (arrays); with a robot "
