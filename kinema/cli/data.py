@@ -2,6 +2,7 @@
 
     kinema data build bandai-namco --root PATH --out DIR [--fps 20] [--limit N] [--workers 2] [--no-mirror]
     kinema data build quaternius --root PATH --out DIR [--fps 20] [--limit N]
+    kinema data build quaternius-humanoids --root PATH --base BANDAI_BUILD --out DIR
     kinema data build folder --root DIR --out DIR [--fps 20] [--units m|cm|mm|auto] [--skip-uncaptioned]
     kinema data stats DIR|MANIFEST.json
     kinema data manifest --out MANIFEST.json DIR [DIR ...]
@@ -18,7 +19,7 @@ from kinema.cli import data_multirig
 from kinema.cli._args import positive_int
 from kinema.errors import DataError
 
-DATASETS = ("bandai-namco", "quaternius", "folder")
+DATASETS = ("bandai-namco", "quaternius", "quaternius-humanoids", "folder")
 
 
 def register(sub) -> None:
@@ -32,7 +33,8 @@ def register(sub) -> None:
 
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
     b.add_argument(
-        "dataset", choices=DATASETS, help="bandai-namco, quaternius, or folder (your own BVH/GLB files with captions)"
+        "dataset", choices=DATASETS, help="bandai-namco, quaternius, quaternius-humanoids (their humanoid actions on "
+        "the human skeleton, added to a bandai-namco --base build), or folder (your own BVH/GLB files with captions)"
     )
     b.add_argument("--root", required=True, help="folder holding the unpacked dataset(s)")
     b.add_argument("--out", required=True, help="output folder (replaced only once the build succeeds)")
@@ -66,6 +68,11 @@ def register(sub) -> None:
         help="quaternius / folder: rig ids never held out (quaternius default: parasaurolophus, the biped "
         "dinosaur; give the flag with no names for the plain hash split)",
     )
+    b.add_argument(
+        "--base",
+        default=None,
+        help="quaternius-humanoids: the bandai-namco build the humanoid clips are added to (its skeleton, fps, clips)",
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=_build)
 
@@ -86,6 +93,10 @@ _positive_int = positive_int
 def _build(args) -> int:
     from kinema.data.build import build_dataset
 
+    if args.dataset == "quaternius-humanoids":
+        return _build_humanoids(args)
+    if args.base is not None:
+        raise DataError("--base is for quaternius-humanoids builds")
     if args.dataset != "bandai-namco":
         return data_multirig.build(args)
     if args.train_rigs is not None:
@@ -105,6 +116,25 @@ def _build(args) -> int:
         f"wrote {args.out}: {c['clips']} clips ({c['source_clips']} source), {c['frames']} frames, "
         f"{c['hours']:.2f} h at {meta['fps']:g} fps, D = {meta['layout']['dim']} "
         f"in {time.time() - t0:.0f} s"
+    )
+    return 0
+
+
+def _build_humanoids(args) -> int:
+    from kinema.data.humanoid_build import build_humanoids
+
+    if args.base is None:
+        raise DataError("quaternius-humanoids needs --base BUILD (a `kinema data build bandai-namco` folder)")
+    t0 = time.time()
+    meta, report = build_humanoids(args.root, args.base, args.out, fps=args.fps)
+    h = meta["humanoids"]
+    for line in report.messages:
+        print(line)
+    print(
+        f"wrote {args.out}: {meta['counts']['clips']} clips, of which {h['clips']} humanoid "
+        f"({h['source_clips']} source clips, {h['seconds']:.0f} s, from {len(h['files'])} files; "
+        f"{len(report.duplicates)} duplicates dropped, "
+        f"{len(report.limited)} left out of limited rigs) in {time.time() - t0:.0f} s"
     )
     return 0
 

@@ -20,6 +20,7 @@ def register(sub) -> None:
     p.add_argument("--steps", type=int, help="total optimisation steps (both phases)")
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float)
+    p.add_argument("--warmup", type=int, help="learning-rate warm-up steps (default 500; fewer for a short fine-tune)")
     p.add_argument("--optimizer", choices=["adamw", "adam-atan2"])
     p.add_argument("--phase1-fraction", type=float, help="share of steps in text-only phase 1 (default 0.5)")
     p.add_argument("--content-balance", type=float,
@@ -82,6 +83,7 @@ def _config_from_args(args: argparse.Namespace):
 
     overrides = {
         "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
+        "warmup": args.warmup,
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),

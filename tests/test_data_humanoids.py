@@ -1,0 +1,118 @@
+"""`kinema data build quaternius-humanoids`: Quaternius humanoid actions retargeted onto the human skeleton
+and added to a Bandai Namco build (kinema.data.humanoid_build).
+
+Real data: the shared Quaternius cyberpunk character and flying drone (skipped without them) on top of the
+six-clip Bandai build of conftest; about 15 s."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from kinema.cli import main
+from kinema.data.humanoid_actions import HELD_OUT_PROMPTS, HUMANOID_ACTIONS, humanoid_captions
+from kinema.model.actions import actions_in
+from kinema.representation.kimodo_features import features_to_motion
+from kinema.skeleton import Skeleton
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("KINEMA_DATASETS") or REPO.parent / "shared/datasets") / "quaternius"
+FILES = ("cyberpunk_pack/Character.glb", "cyberpunk_pack/Enemy_Flying.glb")
+
+
+@pytest.fixture(scope="module")
+def humanoid_build(tiny_data, tmp_path_factory) -> Path:
+    if not all((SHARED / f).is_file() for f in FILES):
+        pytest.skip("needs the shared Quaternius data (../shared/datasets/quaternius)")
+    root = tmp_path_factory.mktemp("quat")
+    for f in FILES:
+        (root / f).parent.mkdir(parents=True, exist_ok=True)
+        (root / f).symlink_to(SHARED / f)
+    out = tmp_path_factory.mktemp("h") / "bandai6h"
+    assert main(["data", "build", "quaternius-humanoids", "--root", str(root), "--base", str(tiny_data),
+                 "--out", str(out)]) == 0
+    return out
+
+
+def _clips(build: Path) -> list[dict]:
+    return json.loads((build / "clips.json").read_text())
+
+
+def _motion(build: Path, rec: dict):
+    feats = load_file(str(build / "features.safetensors"))["features"]
+    skel = Skeleton.from_dict(json.loads((build / "skeleton.json").read_text()))
+    return features_to_motion(feats[rec["start"] : rec["start"] + rec["length"]].double(), skel, rec["fps"])
+
+
+def test_base_clips_kept_and_humanoid_actions_added(humanoid_build, tiny_data):
+    base, clips = _clips(tiny_data), _clips(humanoid_build)
+    assert clips[: len(base)] == base  # same rows, same splits
+    base_feats = load_file(str(tiny_data / "features.safetensors"))["features"]
+    feats = load_file(str(humanoid_build / "features.safetensors"))["features"]
+    assert torch.equal(feats[: base_feats.shape[0]], base_feats)
+    new = clips[len(base) :]
+    assert {r["content"] for r in new} == {
+        "kick-left", "kick-right", "punch-left", "punch-right", "roll", "fall-backward"
+    }
+    assert all(r["split"] == "train" and r["style"] == "game-animation" for r in new)
+    assert sum(r["mirrored"] for r in new) == len(new) // 2
+    meta = json.loads((humanoid_build / "meta.json").read_text())
+    assert list(meta["humanoids"]["files"]) == ["cyberpunk_pack/Character.glb"]  # the drone is excluded
+    assert meta["humanoids"]["excluded"][0].startswith("cyberpunk_pack/Enemy_Flying.glb")
+    assert "CC0" in meta["licence"] and "CC BY-NC" in meta["licence"]
+
+
+def test_a_kick_lifts_the_foot_its_caption_names_also_mirrored(humanoid_build):
+    names = None
+    for rec in _clips(humanoid_build):
+        if not rec["content"].startswith("kick-"):
+            continue
+        side = rec["content"].split("-")[1]
+        m = _motion(humanoid_build, rec)
+        names = list(m.skeleton.names)
+        P = m.positions
+        kick, other = (names.index(f"Foot_{s[0].upper()}") for s in (side, "right" if side == "left" else "left"))
+        hips = float(P[:, names.index("Hips"), 1].max())
+        assert float(P[:, kick, 1].max()) > hips, rec["clip_id"]  # the named foot above hip height
+        assert float(P[:, other, 1].max()) < 0.5 * hips, rec["clip_id"]  # the other stays down
+        assert all(side in c and ("left" if side == "right" else "right") not in c for c in rec["captions"])
+    assert names is not None
+
+
+def test_clips_stand_on_the_floor_before_and_after_the_action(humanoid_build):
+    from kinema.data.humanoid_build import SINK_M
+    from kinema.retarget.align import rest_frames
+
+    skel = Skeleton.from_dict(json.loads((humanoid_build / "skeleton.json").read_text()))
+    names = list(skel.names)
+    # where the base build's rest pose (a standing capture) has its toes: 0.047 m on the full build
+    standing = float(rest_frames(skel)[1][[names.index("Toes_L"), names.index("Toes_R")], 1].min())
+    for rec in _clips(humanoid_build):
+        if rec["dataset"] != "quaternius-humanoids":
+            continue
+        m = _motion(humanoid_build, rec)
+        toes = m.positions[:, [names.index("Toes_L"), names.index("Toes_R")], 1]
+        ends = (0,) if rec["content"].startswith("fall") else (0, -1)  # a fall ends lying down
+        for frame in ends:  # standing in the idle: toes where the standing rest pose has them
+            assert float(toes[frame].min()) == pytest.approx(standing, abs=0.01), rec["clip_id"]
+        assert rec["min_toe_height"] > standing - SINK_M
+        assert rec["duration_s"] > 2.0  # one second of idle on either side
+
+
+def test_captions_name_their_action_and_held_out_prompts_are_no_caption():
+    captions = set()
+    for action, _chain in HUMANOID_ACTIONS.values():
+        side = {"foot": "left", "hand": "right", "fall": "forward"}.get(action.sided)
+        for mirrored in (False, True):
+            for c in humanoid_captions(action, side, mirrored=mirrored):
+                assert actions_in(c), c
+                captions.add(c)
+    for content, prompts in HELD_OUT_PROMPTS.items():
+        for p in prompts:
+            assert p not in captions
+            assert actions_in(p) == {content.split("-")[0]}, p
