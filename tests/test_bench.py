@@ -122,3 +122,19 @@ def test_train_modes_fp32_vs_bf16(tiny_data):
     assert rows[0].speedup == 1.0 and rows[0].loss_rel_diff == 0.0
     assert 0 <= rows[1].loss_rel_diff < 0.5
     assert "x fp32" in format_modes(rows, 2)
+
+
+def test_speed_section_peak_share_and_table(tiny_model):
+    """Issue 37's section: the denoiser's matmul FLOPs are counted (the fused eval path hides them from
+    torch's counter, so they are counted in training mode) and the table has a column per precision."""
+    import torch
+
+    from kinema.bench.precision import ROWS, denoiser_gflops, format_speed, matmul_peak
+
+    denoiser = tiny_model.loaded.denoiser
+    gflop, rate = denoiser_gflops(denoiser, rows=2, frames=20, seconds=0.05)
+    assert gflop > 0 and rate > 0 and not denoiser.training
+    assert matmul_peak(torch.float32, size=128, seconds=0.05) > 0
+    one = {key: 0.5 for key, _, _ in ROWS} | {"samples_1": 1.0, "samples_4": 0.4, "samples_gain": 2.5}
+    text = format_speed({"rounds": 3, "samples": [1, 4], "fp32": one, "bf16": one})
+    assert "| samples=1 / samples=4 per motion | 2.50 | 2.50 |" in text and "fp32 | bf16" in text

@@ -6,14 +6,17 @@ to write every table into report.md / report.json. Sections (each optional):
 - ``steps``: seconds per motion vs DDIM steps, with/without constraints and post-processing;
 - ``sweeps``: samples per call (1/4/16) and durations (5/10/20/40 s);
 - ``threads``: 1 vs 2 threads interleaved, quiet and under ``load`` busy-loop processes;
-- ``cold``: the first `kinema generate` of a fresh process (cold and warm) and its phases.
+- ``cold``: the first `kinema generate` of a fresh process (cold and warm) and its phases;
+- ``speed``: fp32 vs bf16 interleaved: post-processing share, constrained vs prompt-only cost, samples
+  per motion, sparse targets planned by default, the denoiser's share of the matmul peak
+  (kinema.bench.precision).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-SECTIONS = ("steps", "sweeps", "threads", "cold")
+SECTIONS = ("steps", "sweeps", "threads", "cold", "speed")
 
 
 @dataclass
@@ -47,7 +50,7 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
     from kinema.bench.threads import bench_threads
 
     out: dict = {"seconds": opts.seconds, "generate": [], "sweeps": [], "threads": [], "cli": None,
-                 "phases": None, "options": asdict(opts)}
+                 "phases": None, "speed": None, "options": asdict(opts)}
 
     def say(msg: str) -> None:
         if progress:
@@ -72,6 +75,11 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
             model.generate("A person walks forward.", seconds=opts.seconds, seed=0)
 
         out["threads"] = [asdict(r) for r in bench_threads(one, opts.threads, opts.loads, opts.thread_repeats)]
+    if "speed" in opts.sections:
+        from kinema.bench.precision import bench_speed
+
+        say(f"fp32 vs bf16, post-processing share, samples {list(opts.samples)}, sparse targets (interleaved)")
+        out["speed"] = bench_speed(opts.model, opts.seconds, rounds=max(opts.repeats, 1), samples=opts.samples)
     if "cold" in opts.sections:
         say("first `kinema generate` in a fresh process (cold, warm, phases)")
         out["cli"] = cli_times(opts.model, opts.seconds)
@@ -96,6 +104,11 @@ def format_generate_suite(result: dict, fence: bool = False) -> str:
     if result.get("threads"):
         blocks.append(("Torch threads, quiet and under load (interleaved; load = busy-loop processes)",
                        format_threads([ThreadsRow(**r) for r in result["threads"]], f"{seconds:g}-s motion")))
+    if result.get("speed"):
+        from kinema.bench.precision import format_speed
+
+        blocks.append(("fp32 vs bf16: post-processing, samples, sparse targets, matmul peak (issue 37)",
+                       format_speed(result["speed"])))
     if result.get("cli") or result.get("phases"):
         blocks.append(("First `kinema generate` in a fresh process", format_cold(result.get("cli"),
                                                                                   result.get("phases"))))
