@@ -15,6 +15,7 @@ from kinema.app.camera import CameraFollow, character_extent
 from kinema.app.constraint_panel import ConstraintPanel
 from kinema.app.document import Settings, added_prompt, check_timeline, default_document, load_document
 from kinema.app.files_panel import FilesPanel
+from kinema.app.live_panel import LivePanel
 from kinema.app.markers import Markers, contact_flags_at
 from kinema.app.mesh_view import MeshView, SkinPool
 from kinema.app.playback import Player
@@ -55,7 +56,7 @@ class Session:
         self.lock = threading.Lock()
         scene, gui = client.scene, client.gui
         scene.set_up_direction("+y")
-        scene.add_grid(
+        self.ground = scene.add_grid(
             "/ground",
             width=24,
             height=24,
@@ -83,6 +84,7 @@ class Session:
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
         self.rig_panel = RigPanel(gui, self)
+        self.live = LivePanel(gui, self)
         self.show_motions(self.motions, report=None, source=f"rig {self.rig.name}" if self.rig.clips else None)
         self._length_changed()
         self._say_if_playback_only()
@@ -406,6 +408,7 @@ class Session:
     def close(self) -> None:
         """The tab closed: its generation stops at the next step, its clock stops."""
         self.closed = True
+        self.live.close()
         self.stop_job("Tab closed")
         self.player.close()
 

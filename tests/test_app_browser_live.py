@@ -1,0 +1,114 @@
+"""`kinema app` live mode in headless Chromium (Playwright, Debian's chromium-headless-shell, software
+WebGL): Start live makes the character move on its own; the arrow keys (and WASD), pressed on the page,
+steer it through the panel's key script instead of moving viser's camera; the prompt box with Enter
+switches what it does; the readout shows each command's latency. Real streams of the shipped human
+model at the stream's 10 steps. Skipped without Playwright or the browser, like the other app tests."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+import kinema
+from tests.browser import button, chromium_path, launch, row_input
+
+if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
+    import viser  # noqa: F401
+    from playwright import sync_api
+
+    assert chromium_path() is not None, "chromium-headless-shell is missing (see .ci/run)"
+else:
+    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright (see .ci/run)")
+    pytest.importorskip("viser", reason="pip install 'kinema[app]'")
+    if chromium_path() is None:
+        pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
+
+from kinema.app.server import AppServer  # noqa: E402
+from tests.test_app_browser import _free_port, wait_for  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def live_tab():
+    """(page, session, log) of a tab with live mode started."""
+    server = AppServer(kinema.load_model("default"), port=_free_port(), steps=4)
+    log = {"errors": [], "requests": []}
+    with sync_api.sync_playwright() as p:
+        browser = launch(p)
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.on("console", lambda m: log["errors"].append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: log["errors"].append(str(e)))
+        page.on("request", lambda r: log["requests"].append(r.url))
+        page.goto(server.url)
+        page.get_by_text("Add prompt").wait_for(timeout=90000)
+        session = wait_for(lambda: next(iter(server.sessions.values()), None), what="a session")
+        page.get_by_text("Live", exact=True).click()  # the folder starts closed
+        button(page, "Start live").click()
+        wait_for(lambda: session.live.run is not None and session.live.run.drawn > 20, timeout=120,
+                 what="live frames drawn")
+        yield page, session, log
+        session.live.stop()
+        browser.close()
+    server.stop()
+
+
+def _root(run) -> np.ndarray:
+    return np.asarray(run.view.positions[0, 0], dtype=np.float64)
+
+
+def test_live_mode_moves_the_character_on_its_own(live_tab):
+    page, session, log = live_tab
+    run = session.live.run
+    a, frame_a = _root(run), run.drawn
+    wait_for(lambda: run.drawn > frame_a + 40, timeout=120, what="40 more live frames")
+    b = _root(run)
+    assert float(np.linalg.norm((b - a)[[0, 2]])) > 0.5  # it walks on while nobody does anything
+    assert button(page, "Stop live").is_visible() and session.gen_btn.disabled
+    assert not log["errors"], log["errors"]
+    assert all(u.startswith(("http://127.0.0.1", "ws://127.0.0.1", "data:", "blob:")) for u in log["requests"])
+
+
+def test_arrow_keys_steer_instead_of_moving_the_camera(live_tab):
+    page, session, _ = live_tab
+    run = session.live.run
+    page.evaluate("document.activeElement && document.activeElement.blur()")  # keys go to the page, not a button
+    turn = session.client.camera.wxyz
+    before = len(run.stream.commands)
+    facing = run.facing_deg()
+    page.keyboard.press("ArrowLeft")
+    wait_for(lambda: len(run.stream.commands) > before, what="the steer command")
+    first = run.stream.commands[before]
+    assert first.kind == "steer" and abs(_wrap(first.value["direction_deg"] - facing - 30.0)) < 1e-6
+    page.keyboard.press("KeyW")  # W: faster, as the up arrow
+    wait_for(lambda: len(run.stream.commands) > before + 1, what="the second steer command")
+    second = run.stream.commands[before + 1]
+    assert second.kind == "steer" and second.value["speed"] == 1.4
+    time.sleep(0.5)
+    assert np.allclose(session.client.camera.wxyz, turn, atol=1e-3)  # viser's camera did not turn with the key
+    goal = second.value["direction_deg"]
+    drawn = run.drawn
+    wait_for(lambda: run.drawn > drawn + 60, timeout=120, what="3 s of steered frames")
+    assert abs(_wrap(run.facing_deg() - goal)) < 25, (run.facing_deg(), goal)
+    wait_for(lambda: "Last command:" in session.live.status.content, what="the latency readout")
+    page.get_by_text("Last command:").first.wait_for(timeout=30000)
+    motion, wall = run.latencies[-1]
+    assert motion <= 0.5 and 0 < wall < 30
+
+
+def test_prompt_box_enter_switches_what_it_does(live_tab):
+    page, session, _ = live_tab
+    run = session.live.run
+    before = len(run.stream.commands)
+    box = row_input(page, "Live prompt")
+    box.fill("A person bows.")
+    box.press("Enter")
+    wait_for(lambda: any(c.kind == "prompt" for c in run.stream.commands[before:]), what="the prompt switch")
+    record = next(c for c in run.stream.commands[before:] if c.kind == "prompt")
+    assert record.value == "A person bows." and record.latency_seconds <= 0.5
+    assert not any(c.kind == "steer" for c in run.stream.commands[before:])  # typing W/S/A/D did not steer
+
+
+def _wrap(deg: float) -> float:
+    return (deg + 180.0) % 360.0 - 180.0
