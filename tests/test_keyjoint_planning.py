@@ -246,9 +246,11 @@ def test_sparse_joint_targets_are_keyjoint_planned_by_default(model) -> None:
     assert not torch.equal(auto.positions, direct.positions)
     path = {"type": "root2d", "frame_indices": [10, 39], "smooth_root_2d": [[0.0, 0.5], [0.2, 1.5]]}
     with_root = dict(hand, smooth_root_2d=[[0.5, 1.4]])
+    with_rotation = dict(hand, rotations=[[0.0, 0.0, 1.0]])
     load = partial(load_constraints, skeleton=sk, fps=model.fps, num_frames=40)
     assert plans_by_default(load([hand]), sk)
     assert not plans_by_default(load([hand, path]), sk) and not plans_by_default(load([with_root]), sk)
+    assert not plans_by_default(load([with_rotation]), sk)
     assert not plans_by_default([], sk)
     kw["constraints"] = [hand, path]
     assert torch.equal(model.generate(PROMPT, **kw)[0].positions,
