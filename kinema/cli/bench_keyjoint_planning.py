@@ -38,9 +38,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         check_output_path(args.out)
-    planner = KeyjointPlanner.load(args.keyjoint_model)
+    KeyjointPlanner.check(args.keyjoint_model)
     threads = configure_threads(args.threads)
     model = load_model("default", text_cache=text_cache_dir())
+    planner = KeyjointPlanner.load(args.keyjoint_model, model.precision)  # the body model's precision
     print(f"sparse control, {args.seconds:g}-s walk, {args.repeats} seed(s), {threads} thread(s)")
     print(HEADER)
     rows = bench_keyjoint_planning(model, planner, args.seconds, args.steps, args.repeats)

@@ -85,7 +85,7 @@ def _sparse(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
 
     rows, kj = list(args.sparse_rows), None
     if args.keyjoint_model is not None:
-        kj = KeyjointPlanner.load(args.keyjoint_model)
+        kj = KeyjointPlanner.load(args.keyjoint_model, model.precision)  # the body model's precision
     else:
         rows = [r for r in rows if not r.startswith("keyjoint-planned")]
     cases = S.sparse_cases(args.data, args.cases, seed=args.seed)
@@ -124,7 +124,7 @@ def _ee(args: argparse.Namespace, model) -> tuple[dict, list[str]]:
         cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed)
         if args.suite is not None:
             save_suite(cases, args.suite)
-    kj = None if args.keyjoint_model is None else KeyjointPlanner.load(args.keyjoint_model)
+    kj = None if args.keyjoint_model is None else KeyjointPlanner.load(args.keyjoint_model, model.precision)
     per_case = E.evaluate_suite_ee(model, cases, planner=kj, steps=args.steps, seed=args.seed)
     res = E.summarize_suite(per_case)
     title = f"Suite end-effector cases ({len(cases)}-case suite, {args.split} split, seed {args.seed}, raw)"
