@@ -29,30 +29,15 @@ def forward_kinematics(
 
     ``G_j = G_parent @ L_j`` and ``p_j = p_parent + G_parent @ offset_j``; the root sits at
     ``root_translation`` with rotation ``L_root``. All joints of one depth are done in one batched
-    quaternion product (a 21-joint human: 8 levels instead of 21 joints), with the same arithmetic per
+    quaternion product (a 21-joint human: 7 levels instead of 21 joints), with the same arithmetic per
     element as joint by joint, so the results are bit for bit those of a per-joint loop.
     """
-    offsets = offsets.to(dtype=local_rotations.dtype, device=local_rotations.device)
-    order, levels = depth_levels(tuple(int(p) for p in parents))
-    dim = local_rotations.dim() - 2
-    roots = levels[0][0]
-    rots = [local_rotations.index_select(dim, roots)]
-    root = root_translation.to(local_rotations.dtype).unsqueeze(-2)
-    pos = [root.expand(*root.shape[:-2], len(roots), 3)]
-    G_done, P_done = rots[0], pos[0]
-    for joints, parent_slots in levels[1:]:
-        Gp, Pp = G_done.index_select(dim, parent_slots), P_done.index_select(dim, parent_slots)
-        rots.append(quat_mul(Gp, local_rotations.index_select(dim, joints)))
-        pos.append(Pp + quat_rotate(Gp, offsets.index_select(offsets.dim() - 2, joints).expand_as(Pp)))
-        G_done, P_done = torch.cat(rots, dim=-2), torch.cat(pos, dim=-2)
-    if order is None:
-        return G_done, P_done
-    return G_done.index_select(dim, order), P_done.index_select(dim, order)
+    return _by_depth(local_rotations, root_translation, offsets, parents, 1, quat_mul,
+                     lambda G, offset: quat_rotate(G, offset))
 
 
 def matmul3(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """``a @ b`` for stacks of 3x3 matrices ``(..., 3, 3)`` as one broadcast product and sum: for many tiny
-    float64 matrices (and their gradients) far cheaper than a batched matrix multiply."""
+    """``a @ b`` for stacks of 3x3 matrices ``(..., 3, 3)``."""
     return a @ b
 
 
@@ -65,19 +50,26 @@ def forward_kinematics_matrices(
     """:func:`forward_kinematics` on rotation matrices: local ``(..., J, 3, 3)`` -> global rotations
     ``(..., J, 3, 3)`` and positions ``(..., J, 3)``. One matrix product per depth level: the cheapest
     differentiable FK for an optimisation that runs it (and its backward pass) many times."""
-    offsets = offsets.to(dtype=local_rotmats.dtype, device=local_rotmats.device)
+    return _by_depth(local_rotmats, root_translation, offsets, parents, 2, matmul3,
+                     lambda G, offset: (G * offset.unsqueeze(-2)).sum(-1))
+
+
+def _by_depth(local, root_translation, offsets, parents, rot_dims: int, compose, rotate):
+    """FK over depth levels for rotations with ``rot_dims`` trailing dimensions (quaternions 1, matrices
+    2): ``compose(G_parent, L)`` and ``rotate(G_parent, offset)`` on all joints of a level at once."""
+    offsets = offsets.to(dtype=local.dtype, device=local.device)
     order, levels = depth_levels(tuple(int(p) for p in parents))
-    dim = local_rotmats.dim() - 3
+    dim = local.dim() - 1 - rot_dims  # the joint axis (also of the positions)
     roots = levels[0][0]
-    rots = [local_rotmats.index_select(dim, roots)]
-    root = root_translation.to(local_rotmats.dtype).unsqueeze(-2)
+    rots = [local.index_select(dim, roots)]
+    root = root_translation.to(local.dtype).unsqueeze(-2)
     pos = [root.expand(*root.shape[:-2], len(roots), 3)]
     G_done, P_done = rots[0], pos[0]
     for joints, parent_slots in levels[1:]:
         Gp, Pp = G_done.index_select(dim, parent_slots), P_done.index_select(dim, parent_slots)
-        rots.append(matmul3(Gp, local_rotmats.index_select(dim, joints)))
-        pos.append(Pp + (Gp * offsets.index_select(offsets.dim() - 2, joints).unsqueeze(-2)).sum(-1))
-        G_done, P_done = torch.cat(rots, dim=-3), torch.cat(pos, dim=-2)
+        rots.append(compose(Gp, local.index_select(dim, joints)))
+        pos.append(Pp + rotate(Gp, offsets.index_select(offsets.dim() - 2, joints).expand_as(Pp)))
+        G_done, P_done = torch.cat(rots, dim=dim), torch.cat(pos, dim=dim)
     if order is None:
         return G_done, P_done
     return G_done.index_select(dim, order), P_done.index_select(dim, order)
