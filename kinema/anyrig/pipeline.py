@@ -31,6 +31,7 @@ from kinema.anyrig.feet import (
     with_floor_translations,
 )
 from kinema.anyrig.ground import ground_motion, leg_ends, settle_offsets, steady_height
+from kinema.anyrig.heading import heading_from_rate
 from kinema.anyrig.post import (
     dejitter,
     pin_root,
@@ -213,7 +214,7 @@ class AnyRigPipeline(MotionPipeline):
             plan=plan,
         )
         if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
-            feats = _face(feats, rig_n.root, heading)
+            feats = _face(heading_from_rate(feats, rig_n.root, self.fps), rig_n.root, heading)
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
                                   segments=len(prompts), frames=T, seed=seed)
         t_sampled = time.perf_counter()
