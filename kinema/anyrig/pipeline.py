@@ -34,6 +34,8 @@ from kinema.anyrig.ground import ground_motion, leg_ends, settle_offsets, steady
 from kinema.anyrig.heading import heading_from_rate
 from kinema.anyrig.post import (
     dejitter,
+    exact_in_character_frame,
+    lift_problem,
     pin_root,
     reach_by_translation,
     root_pins,
@@ -290,43 +292,78 @@ class AnyRigPipeline(MotionPipeline):
         (kinema.anyrig.feet)."""
         m = rep_n.to_motion(f)
         targets = None
+        moved = floor_root_children(m.skeleton)
         if postprocess:
             m, f = self._ground(m, f, rep_n, constraints, report)
             if _leading_context(constraints):  # a stream's context is continued, not hit again (kinema.stream)
                 constraints = [c for c in constraints if not isinstance(c, (Keyframe, RootMotion))]
-            moved = floor_root_children(m.skeleton)
             targets = make_post_targets(constraints, m, rep_n, scale, moved) if constraints else None
             before, root = m, rep_n.rig.root
             m, smoothed, warned = dejitter(m)
-            m, post = run_postprocess(m, targets, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0, raw=before)
+            m, post = run_postprocess(m, None, rig=rep_n.rig, smooth=0.0, smooth_rotations=0.0, raw=before)
             post["smooth"] = smoothed
             report.warnings += [w for w in warned if w not in report.warnings]
+            if targets is not None:
+                m, targets = self._hit(m, before, constraints, rep_n, scale, moved, post, report)
             m = pin_root(m, root_pins(targets, root, _waypoint_frames(constraints), before, m), root)
             # unmet constraints are said once, measured on the finished motion in metres (below)
             news = [w for w in post.get("warnings", []) if not w.startswith("constraint not met")]
             report.warnings += [w for w in news if w not in report.warnings]
         m = with_floor_translations(m, f, rep_n)
         if targets is not None:
-            fixed = any(isinstance(c, (Keyframe, RootPath, RootMotion)) for c in constraints)
-            m, moved = reach_by_translation(m, targets, translatable_bones(m.skeleton, rep_n.rig.root, fixed))
-            for name, size in moved.items():
-                report.reached_by_translation[name] = max(size, report.reached_by_translation.get(name, 0.0))
+            reached, shifts = reach_by_translation(m, targets, translatable_bones(m.skeleton, rep_n.rig.root))
+            m = self._unless_lifted(m, reached, rep_n.rig.root, "reaching targets by translation", report)
+            if m is reached:
+                for name, size in shifts.items():
+                    report.reached_by_translation[name] = max(size, report.reached_by_translation.get(name, 0.0))
         if postprocess:
             m, locked = self._lock_feet(m, rep_n, targets, report)
             m, held = hold_ties(m, ties, rep_n.rig.root) if ties is not None else (m, {})  # kinema.anyrig.tied
             report.foot_lock.append({**post.get("foot_lock", {}), **locked, **held})
         lt = None if m.local_translations is None else m.local_translations / scale
         motion = Motion(rig_m.skeleton, self.fps, m.root_translation / scale, m.local_rotations, m.foot_contacts, lt)
-        if targets is not None:
-            P, worst = motion.positions, []
-            for j, (frames, pos) in targets.joint_positions.items():
-                err = 100 * (P[frames, j] - pos / scale).norm(dim=-1)
-                report.residuals_cm += err.tolist()
-                k = int(err.argmax())
-                worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
-            report.warnings += unmet_warnings(worst, self.fps, report.warnings)
-            report.residuals_deg += rotation_errors_deg(motion, targets)
+        if any(isinstance(c, (JointTarget, Keyframe)) for c in constraints):
+            self._measure(motion, constraints, rig_m, moved, postprocess, report)
         return motion
+
+    def _hit(self, m: Motion, raw: Motion, constraints, rep_n, scale: float, moved, post: dict, report):
+        """The exact pass on the joint targets and keyframes, in the character frame of the motion it
+        edits (kinema.anyrig.post.exact_in_character_frame), undone when it lifts the body. Returns the
+        motion and the world targets it aimed at (those of its input when undone)."""
+        def placed(x: Motion):
+            return make_post_targets(constraints, x, rep_n, scale, moved)
+
+        world = any(isinstance(c, RootMotion) for c in constraints)  # targets read in a copied root's frame
+        hit, exact, targets = exact_in_character_frame(m, raw, placed, rep_n, lean=world)
+        post["exact"] = exact.get("exact", {})
+        post["warnings"] = post.get("warnings", []) + exact.get("warnings", [])
+        kept = self._unless_lifted(m, hit, rep_n.rig.root, "the exact constraint pass", report)
+        return kept, (targets if kept is hit else placed(m))
+
+    @staticmethod
+    def _unless_lifted(old: Motion, new: Motion, root: int, stage: str, report) -> Motion:
+        """``new``, or ``old`` with a warning when ``stage`` lifted the body (kinema.anyrig.post.lift_problem;
+        rig units)."""
+        problem = lift_problem(old, new, root, 1.0, stage)
+        if problem is None:
+            return new
+        report.warnings.append(problem)
+        return old
+
+    def _measure(self, motion: Motion, constraints, rig_m: Rig, moved, post: bool, report) -> None:
+        """Residuals of the joint targets and keyframes on the finished ``motion`` (metres), in *its*
+        character frame (its own root and heading at each target frame: what a character-frame target
+        asks for), and one warning naming the targets left unmet."""
+        final = make_post_targets(constraints, motion.to(torch.float64), JointRepresentation(rig_m, self.fps), 1.0,
+                                  moved)
+        P, worst = motion.positions.to(torch.float64), []
+        for j, (frames, pos) in final.joint_positions.items():
+            err = 100 * (P[frames, j] - pos).norm(dim=-1)
+            report.residuals_cm += err.tolist()
+            k = int(err.argmax())
+            worst.append((float(err[k]), rig_m.skeleton.names[j], int(frames[k])))
+        report.warnings += unmet_warnings(worst, self.fps, report.warnings, post=post)
+        report.residuals_deg += rotation_errors_deg(motion, final)
 
     @staticmethod
     def _ground(m: Motion, f, rep_n, constraints, report) -> tuple[Motion, torch.Tensor]:

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import torch
 
-from kinema.constraints.character import Constraint, JointTarget, Keyframe
+from kinema.constraints.character import Constraint, JointTarget, Keyframe, RootMotion
 from kinema.geometry.rotations import quat_mul, quat_rotate
 from kinema.motion.core import Motion
 from kinema.postprocess.targets import PostTargets
@@ -23,12 +23,20 @@ def post_targets(
 ) -> PostTargets:
     """World-frame targets of the joint and keyframe constraints (given in metres) on a generated
     ``motion`` in units of ``scale`` per metre on the same skeleton: the character frame is placed at
-    the motion's own root and heading. A keyframe's pose keeps its bone translations only on the
+    the motion's own root and heading, except that a joint target on a frame a `RootMotion` covers is
+    read in that copied motion's frame (its root and heading: world targets read in a first pass's
+    frame stay where they were, kinema.anyrig.world). A keyframe's pose keeps its bone translations only on the
     ``translated`` joints (those generation moves by translation); elsewhere its bones have their rest
     lengths, as the generated motion has: the pose the rig can take, not one it cannot."""
     G, P = motion.global_transforms()
     psi = rep.heading(G)
     root = rep.rig.root
+    copied = [c for c in constraints if isinstance(c, RootMotion)]
+    frame_root, frame_psi = P[:, root].clone(), psi.clone()
+    for c in copied:  # later ones win, as in encoding
+        Gc, Pc = c.motion.to(P.dtype).global_transforms()
+        n = min(c.until, motion.num_frames, c.motion.num_frames)
+        frame_root[:n], frame_psi[:n] = Pc[:n, root] * scale, rep.heading(Gc)[:n]
     positions: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
     rotations: dict[int, tuple[list[int], list[torch.Tensor]]] = {}
 
@@ -38,10 +46,10 @@ def post_targets(
 
     for c in constraints:
         if isinstance(c, JointTarget):
-            j, turn = rep.joint_index(c.joint), yaw_quat(psi[c.frame])
+            j, turn = rep.joint_index(c.joint), yaw_quat(frame_psi[c.frame])
             if c.position is not None:
                 local = torch.as_tensor(c.position, dtype=torch.float64) * scale
-                add(positions, j, c.frame, P[c.frame, root] + quat_rotate(turn, local))
+                add(positions, j, c.frame, frame_root[c.frame] + quat_rotate(turn, local))
             if c.rotation is not None:
                 add(rotations, j, c.frame, quat_mul(turn, c.unit_rotation()))
         elif isinstance(c, Keyframe):  # the pose, turned to the generated heading and put at the generated root
