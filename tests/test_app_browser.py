@@ -276,6 +276,9 @@ def test_session_saves_and_loads_back(tab, tmp_path):
         button(page, "Load session").click()
     fc.value.set_files(bad)
     page.get_by_text("Upload failed").wait_for(timeout=10000)  # an error is a notification, not a dead page
+    # viser's own "File uploaded successfully." (before the app read the file) is replaced (kinema.app.page_script)
+    page.get_by_text("Received; kinema reads it now").first.wait_for(state="attached", timeout=10000)
+    assert page.get_by_text("File uploaded successfully.").count() == 0
     with page.expect_file_chooser() as fc:
         button(page, "Load session").click()
     fc.value.set_files(path)

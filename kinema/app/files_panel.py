@@ -104,3 +104,4 @@ class FilesPanel:
         skeleton, fps = self.host.skeleton, self.host.model.fps
         motion = clip_on_model(name, content, skeleton=skeleton, fps=fps, scale=UNITS[self.units.value])
         self.host.show_motions([motion], report=None, source=f"clip {name}")
+        self.host.notify("Clip loaded", f"{name}: {motion.num_frames} frames")

@@ -9,10 +9,9 @@ seconds of motion until the first frame that obeys it, and wall seconds from the
 frame was drawn, and the stream's real-time factor.
 
 Keys: viser (1.1) sends no key events to Python, and its own client moves the camera with WASD and
-the arrow keys. While live mode runs, a small script in the panel (`KEY_SCRIPT`, loaded by an HTML
-element's image) catches those keys first (window, capture phase), so they no longer move the camera,
-and clicks the matching steer button: up / W faster, down / S slower, left / A and right / D turn. They
-move the camera again once live mode stops, and never while a text box has focus.
+the arrow keys. While live mode runs, the page script (kinema.app.page_script) catches those keys
+first and clicks the matching steer button (`BUTTONS`): up / W faster, down / S slower, left / A and
+right / D turn. They move the camera again once live mode stops, and never while a text box has focus.
 
 Threads: one makes frames (it owns the stream and applies queued commands between ``next_frames``
 calls: a stream is not thread-safe) and keeps `AHEAD_SECONDS` drawn ahead; one draws them at the
@@ -55,28 +54,6 @@ RIG_PROMPT = "An animal walks."
 
 BUTTONS = {"faster": "Faster", "slower": "Slower", "left": "Turn left", "right": "Turn right"}
 START, STOP, SWITCH = "Start live", "Stop live", "Switch prompt"
-
-#: keys -> steer button labels; the script clicks them (see the module docstring)
-KEY_SCRIPT = (
-    "if(!window.kinemaLiveKeys){window.kinemaLiveKeys=1;"
-    "var M={ArrowUp:'Faster',KeyW:'Faster',ArrowDown:'Slower',KeyS:'Slower',ArrowLeft:'Turn left',"
-    "KeyA:'Turn left',ArrowRight:'Turn right',KeyD:'Turn right'};"
-    "var B=function(t){var b=document.querySelectorAll('button');for(var i=0;i<b.length;i++)"
-    "{if(b[i].textContent.trim()===t)return b[i];}return null;};"
-    "var L=function(){return B('Stop live')!==null;};"
-    "var F=function(t){return t&&(t.tagName==='INPUT'||t.tagName==='TEXTAREA'||t.isContentEditable);};"
-    "window.addEventListener('keydown',function(e){"
-    "if(F(e.target)){if(e.key==='Enter'&&L()){var r=e.target.closest('.mantine-Flex-root');"
-    "if(r&&r.textContent.indexOf('Live prompt')>=0){var s=B('Switch prompt');if(s)s.click();}}return;}"
-    "var n=M[e.code];if(!n||!L())return;e.preventDefault();e.stopImmediatePropagation();"
-    "if(!e.repeat){var b=B(n);if(b)b.click();}},true);"
-    "window.addEventListener('keyup',function(e){if(M[e.code]&&L()&&!F(e.target))e.stopImmediatePropagation();},true);}"
-)
-#: a 1x1 transparent GIF: its onload runs the key script once the panel is drawn (viser draws HTML with
-#: innerHTML, where script elements do not run)
-PIXEL = "data:image/gif;base64,R0lGODlhAQABAIAAAAAAAP///yH5BAEAAAAALAAAAAABAAEAAAIBRAA7"
-KEY_HTML = f'<img alt="" width="1" height="1" src="{PIXEL}" onload="{KEY_SCRIPT}">'
-
 
 @dataclass
 class Steering:
@@ -266,7 +243,6 @@ class LivePanel:
             }
             self.status = gui.add_markdown("Press **Start live**: arrow keys or WASD steer, the prompt box "
                                            "switches what it does.")
-            gui.add_html(KEY_HTML)
         self.start_btn.on_click(lambda _: self.start())
         self.stop_btn.on_click(lambda _: self.stop())
         self.switch_btn.on_click(lambda _: self.switch())

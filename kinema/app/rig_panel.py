@@ -69,3 +69,4 @@ class RigPanel:
             self.host.notify("Upload failed", str(err), error=True)
             return
         self.host.set_rig(rig)
+        self.host.notify("Rig loaded", f"{name}: {rig.skeleton.num_joints} joints")

@@ -18,6 +18,7 @@ from kinema.app.files_panel import FilesPanel
 from kinema.app.live_panel import LivePanel
 from kinema.app.markers import Markers, contact_flags_at
 from kinema.app.mesh_view import MeshView, SkinPool
+from kinema.app.page_script import PAGE_HTML
 from kinema.app.playback import Player
 from kinema.app.rig_panel import RigPanel
 from kinema.app.rigs import AppRig, skeleton_size
@@ -68,6 +69,7 @@ class Session:
         )
         gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         gui.main_panel.dock_right()
+        gui.add_html(PAGE_HTML)  # live keys and viser's upload notice (kinema.app.page_script)
         self.views: list[list[CharacterView]] = []
         self.skins = SkinPool(scene)
         self.markers = Markers(scene, self.skeleton, self.model.fps)
