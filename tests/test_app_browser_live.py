@@ -6,28 +6,18 @@ model at the stream's 10 steps. Skipped without Playwright or the browser, like 
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 import pytest
 
+# importing the page tests' module first skips this one too when Playwright, viser or the browser is missing
+from tests.test_app_browser import _free_port, sync_api, wait_for
+
+# isort: split
 import kinema
-from tests.browser import button, chromium_path, launch, row_input
-
-if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
-    import viser  # noqa: F401
-    from playwright import sync_api
-
-    assert chromium_path() is not None, "chromium-headless-shell is missing (see .ci/run)"
-else:
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright (see .ci/run)")
-    pytest.importorskip("viser", reason="pip install 'kinema[app]'")
-    if chromium_path() is None:
-        pytest.skip("no chromium-headless-shell (apt-get install chromium-headless-shell)", allow_module_level=True)
-
-from kinema.app.server import AppServer  # noqa: E402
-from tests.test_app_browser import _free_port, wait_for  # noqa: E402
+from kinema.app.server import AppServer
+from tests.browser import button, launch, row_input
 
 
 @pytest.fixture(scope="module")

@@ -97,3 +97,31 @@ def test_cli_streams_the_fox_script_to_its_glb(tmp_path) -> None:
     r = subprocess.run([sys.executable, "-m", "kinema", "stream", "--model", "creatures", "--script", str(SCRIPT),
                         "--seconds", "4", "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "streams on a rig" in r.stderr
+
+
+def test_the_websocket_start_takes_a_training_rig_id() -> None:
+    """``/v1/stream``'s start message (kinema.server.stream._start) on the any-rig model: a training rig
+    id streams (the ready message's skeleton is the rig's, frames carry its bone translations); a
+    missing or unknown rig, or a rig for the human model, closes with 1008 and the reason."""
+    from types import SimpleNamespace
+
+    from kinema.server.stream import StreamClosed, StreamLimits, _start
+
+    def registry(model):
+        served = SimpleNamespace(model=model, max_steps=lambda cap: 50)
+        return SimpleNamespace(models={"m": served}, names=["m"])
+
+    config = SimpleNamespace(limits=SimpleNamespace(max_prompt_chars=2000, max_steps=50))
+    creatures = registry(load_model("creatures"))
+    start = _start({"type": "start", "prompt": "A fox walks.", "rig": "fox", "seconds": 2}, creatures, config,
+                   StreamLimits())
+    assert start.stream.skeleton.names[0] == "AnimalArmature" and start.stream.settings.window == 40
+    frames = start.stream.next_frames(5).to_json()
+    assert len(frames["local_translations"]) == 5 and len(frames["local_translations"][0]) == 48
+    bad = [({"type": "start"}, "training rigs"), ({"type": "start", "rig": "Fox.glb"}, "got 'Fox.glb'")]
+    for message, reason in bad:
+        with pytest.raises(StreamClosed, match=reason) as err:
+            _start(message, creatures, config, StreamLimits())
+        assert err.value.code == 1008
+    with pytest.raises(StreamClosed, match="its own skeleton"):
+        _start({"type": "start", "rig": "fox"}, registry(load_model("default")), config, StreamLimits())

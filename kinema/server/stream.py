@@ -6,7 +6,8 @@ Protocol (JSON text messages). The client opens ``/v1/stream`` (with the API key
     {"type": "start", "prompt": "A person walks forward.", "model": "default", "seed": 0, "steps": 10,
      "window_seconds": 3, "lookahead": 0.15, "seconds": 60, "chunk_frames": 10, "realtime": true}
 
-(every field but ``type`` optional). The server answers ``{"type": "ready", "fps", "joints", "parents",
+(every field but ``type`` optional; an any-rig model also needs ``"rig"``, one of its training rig
+ids: the server reads no rig file a client names). The server answers ``{"type": "ready", "fps", "joints", "parents",
 "offsets", "seconds"}`` (the skeleton: joint names, parent indices, bone offsets in metres) and then
 sends ``{"type": "frames", "start", "fps", "root_translation", "local_rotations", "positions"}``
 (quaternions w, x, y, z; metres), paced at the playback rate with ``REALTIME_AHEAD_SECONDS`` sent ahead
@@ -46,7 +47,7 @@ from kinema.stream import MotionStream, open_stream
 #: seconds of frames sent ahead of real time when pacing (what a client buffers)
 REALTIME_AHEAD_SECONDS = 0.5
 START_KEYS = {"type", "prompt", "model", "seed", "steps", "window_seconds", "lookahead", "seconds",
-              "chunk_frames", "realtime"}
+              "chunk_frames", "realtime", "rig"}
 COMMAND_KEYS = {"prompt": {"text"}, "steer": {"direction_deg", "speed"}, "target": {"joint", "position"},
                 "clear": set(), "stop": set()}
 
@@ -202,9 +203,10 @@ def _start(message: dict, registry: ModelRegistry, config: ServerConfig, limits:
     if not isinstance(prompt, str) or len(prompt) > config.limits.max_prompt_chars:
         raise StreamClosed(1008, f"start: 'prompt' must be a string of at most {config.limits.max_prompt_chars} chars")
     steps = _number(message, "steps", None, 1, served.max_steps(config.limits.max_steps), int)
+    rig = _rig(message, served.model)
     try:
-        request = GenerationRequest(prompt=prompt, seed=_number(message, "seed", 0, 0, 2**63 - 1, int))
-        stream = open_stream(served.model, request, window_seconds=_number(message, "window_seconds", 3.0, 0, 60),
+        request = GenerationRequest(prompt=prompt, seed=_number(message, "seed", 0, 0, 2**63 - 1, int), rig=rig)
+        stream = open_stream(served.model, request, window_seconds=_number(message, "window_seconds", None, 0, 60),
                              lookahead=_number(message, "lookahead", 0.15, 0, 10), steps=steps)
     except KinemaError as err:
         raise StreamClosed(1008, f"start: {err}") from None
@@ -214,6 +216,21 @@ def _start(message: dict, registry: ModelRegistry, config: ServerConfig, limits:
     if not isinstance(realtime, bool):
         raise StreamClosed(1008, "start: 'realtime' must be true or false")
     return StreamStart(stream, seconds, chunk, realtime)
+
+
+def _rig(message: dict, model) -> str | None:
+    """The ``rig`` of a start message: one of an any-rig model's training rigs, by id (a server reads no
+    rig files a client names); None for a model with a skeleton of its own."""
+    rig = message.get("rig")
+    if not getattr(model, "needs_rig", False):
+        if rig is not None:
+            raise StreamClosed(1008, "start: 'rig' is for an any-rig model; this model moves its own skeleton")
+        return None
+    known = [r.name for r in model.rigs()]
+    if not isinstance(rig, str) or rig not in known:
+        raise StreamClosed(1008, f"start: 'rig' must be one of the model's training rigs "
+                                 f"({', '.join(known[:6])}{', ...' if len(known) > 6 else ''}), got {rig!r}")
+    return rig
 
 
 def _check_command(message: dict) -> dict:
