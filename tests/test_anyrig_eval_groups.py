@@ -105,7 +105,8 @@ def test_evaluate_split_classifies_held_out_rigs(trained, creature_cache) -> Non
     shapes = training_shapes(model.loaded.train_rigs)
     rows = []
     for split in ("val", "test"):
-        rows += evaluate_split(model, creature_cache, split, clips=2, steps=2, train_shapes=shapes, log=lambda s: None)
+        rows += evaluate_split(model, creature_cache, split, clips=2, steps=2, train_shapes=shapes, probe_seconds=1.0,
+                               log=lambda s: None)
     assert rows
     for r in rows:  # the held-out rigs are renamed copies of the training shapes
         assert r["similarity"] == "same topology" and r["nearest"] in model.loaded.train_rigs

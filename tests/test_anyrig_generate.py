@@ -262,7 +262,7 @@ def test_per_rig_evaluation_rows(trained, creature_cache) -> None:
     from kinema.evaluate.anyrig.suite import evaluate_split
 
     model = _model(trained)
-    rows = evaluate_split(model, creature_cache, "train", clips=1, steps=2, log=lambda s: None)
+    rows = evaluate_split(model, creature_cache, "train", clips=1, steps=2, probe_seconds=1.0, log=lambda s: None)
     assert rows and {r["split"] for r in rows} == {"train"}
     for r in rows:
         assert r["motions"] == 1 and r["stretch"] < 1e-6  # FK of rotations: bones never stretch

@@ -25,7 +25,16 @@ rest pose 1 across, so numbers compare across rigs) and each is compared with th
   when the clip nearest to it by `motion_descriptor` has that caption; chance = the share of clips
   with it (1 / clips when the captions differ). Only for rigs with two or more distinct captions;
 - ``similarity`` / ``nearest`` (held-out splits, with ``train_shapes``): the rig's class against the
-  training rigs (kinema.evaluate.anyrig.groups).
+  training rigs (kinema.evaluate.anyrig.groups);
+- locomotion (kinema.evaluate.anyrig.locomotion; with ``probe_seconds`` > 0): one motion of
+  ``probe_seconds`` per action the rig's own clips show (idle, walk, run or gallop), generated from
+  that action's caption (a walk asked to go forward); ``gap_ratio``: the largest foot-to-leg gap (tied
+  joint to its anchor, kinema.rig.ties) of every generated motion over the largest of the rig's own
+  clips; ``<action>_speed`` / ``<action>_speed_ref``: ground speed (body sizes/s) of the probe and of
+  the rig's own clips of that action; ``walk_forward_share``, ``walk_net_turn_deg``,
+  ``walk_total_turn_deg`` of the walk probe; ``idle_drift`` (body sizes) of the idle probe;
+  ``run_walk_ratio`` / ``run_walk_ratio_ref``: run (or gallop) ground speed over walk ground speed,
+  generated and own clips.
 """
 
 from __future__ import annotations
@@ -39,6 +48,13 @@ from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_roo
 from kinema.anyrig.targets import post_targets
 from kinema.data.multirig import MultiRigData
 from kinema.evaluate.anyrig.groups import RigShape, classify, rig_shape
+from kinema.evaluate.anyrig.locomotion import (
+    clip_speeds,
+    foot_gap_ratio,
+    ground_measures,
+    probe_prompts,
+    rig_ties,
+)
 from kinema.evaluate.distribution import coverage_novelty_auc
 from kinema.evaluate.metrics import position_jerk
 from kinema.geometry.rotations import sixd_to_quat
@@ -158,10 +174,54 @@ def _mean(xs: list[float | None]) -> float | None:
     return sum(xs) / len(xs) if xs else None
 
 
-def evaluate_rig(
-    model: AnyRigModel, rig_id: str, motions: list[Motion], captions: list[str], *, steps: int, seed: int = 0
+def locomotion(
+    model: AnyRigModel, rig: Rig, gen: list[Motion], own: list[tuple[Motion, str, str]], *, seconds: float,
+    steps: int, seed: int = 0
 ) -> dict:
-    """Metrics of one rig (see the module docstring); ``motions`` are its clips, ``captions`` one per clip."""
+    """The locomotion columns of one rig (see the module docstring): ``gen`` the motions generated so
+    far, ``own`` the rig's own clips as (motion, content, first caption), all on one skeleton."""
+    rep = JointRepresentation(rig, model.fps)
+    clips = [m for m, _, _ in own]
+    contents = [c for _, c, _ in own]
+    prompts = probe_prompts(contents, [cap for _, _, cap in own]) if seconds > 0 else {}
+    out: dict = {}
+    probes = {}
+    for k, (action, prompt) in enumerate(sorted(prompts.items())):
+        probes[action] = model.generate(prompt, rig=rig, seconds=seconds, steps=steps, seed=seed + k)[0]
+        measured = ground_measures(probes[action], rep)
+        out[f"{action}_speed"] = measured["speed"]
+        if action == "walk":
+            out["walk_prompt"] = prompt
+            for key in ("forward_share", "net_turn_deg", "total_turn_deg"):
+                out[f"walk_{key}"] = measured[key]
+        if action == "idle":
+            out["idle_drift"] = measured["drift"]
+    for action, speed in clip_speeds(clips, contents, rep).items():
+        out[f"{action}_speed_ref"] = speed
+    for suffix in ("", "_ref"):
+        walk, run = out.get(f"walk_speed{suffix}"), out.get(f"run_speed{suffix}")
+        out[f"run_walk_ratio{suffix}"] = run / walk if walk and run is not None else None
+    ties = rig_ties(rep, clips)
+    gaps = [foot_gap_ratio(m, ties) for m in [*gen, *probes.values()]]
+    out["ties"] = len(ties.ties)
+    out["gap_ratio"] = max((g for g in gaps if g is not None), default=None)
+    return out
+
+
+def evaluate_rig(
+    model: AnyRigModel,
+    rig_id: str,
+    motions: list[Motion],
+    captions: list[str],
+    *,
+    steps: int,
+    seed: int = 0,
+    own: list[tuple[Motion, str, str]] | None = None,
+    probe_seconds: float = 4.0,
+) -> dict:
+    """Metrics of one rig (see the module docstring); ``motions`` are its clips, ``captions`` one per
+    clip; ``own``: all its clips on that skeleton as (motion, content, first caption), for the
+    locomotion columns (default: ``motions`` with no contents, so no probes)."""
     rig = Rig.from_skeleton(motions[0].skeleton)
     rep = JointRepresentation(rig, model.fps)
     gen, cons, degs, t0 = [], [], [], time.perf_counter()
@@ -198,6 +258,8 @@ def evaluate_rig(
         "coverage": None if cn is None else cn.coverage_auc,
         "novelty": None if cn is None else cn.novelty_auc,
         **caption_retrieval(gen, motions, captions, rep),
+        **locomotion(model, rig, gen, own if own is not None else [(m, "", c) for m, c in zip(motions, captions,
+                     strict=True)], seconds=probe_seconds, steps=steps, seed=seed),
         "seconds": time.perf_counter() - t0,
     }
 
@@ -211,6 +273,7 @@ def evaluate_split(
     steps: int = 20,
     rigs: list[str] | None = None,
     train_shapes: list[RigShape] | None = None,
+    probe_seconds: float = 4.0,
     log=print,
 ) -> list[dict]:
     """`evaluate_rig` for every rig of ``split`` (or the named ``rigs``), up to ``clips`` clips each,
@@ -227,7 +290,10 @@ def evaluate_split(
         pick = _pick(idx, [d.clips[i]["captions"][0] for i in idx], clips)
         motions = [d.motion(i).to(torch.float32) for i in pick]
         caps = [d.clips[i]["captions"][0] for i in pick]
-        row = evaluate_rig(model, rid, motions, caps, steps=steps)
+        same = [i for i in idx if d.clips[i].get("skeleton") == d.clips[pick[0]].get("skeleton")]
+        own = [(d.motion(i), d.clips[i].get("content", ""), d.clips[i]["captions"][0]) for i in same]  # as stored: ties
+        # are found at 1e-4 rig sizes (kinema.rig.ties), which float32 rounding of a standing armature exceeds
+        row = evaluate_rig(model, rid, motions, caps, steps=steps, own=own, probe_seconds=probe_seconds)
         row["split"] = split
         if train_shapes is not None and split != "train":
             row["similarity"], row["nearest"] = classify(rig_shape(rid, motions[0].skeleton), train_shapes)
@@ -267,6 +333,24 @@ def format_row(r: dict) -> str:
         f"| {r['stretch']:.1e} | {_f(r['constraint_cm'])} | {_f(r.get('constraint_deg'))} | {_f(r.get('keyframe_cm'))} "
         f"| {_f(r['coverage'])} | {_f(r['novelty'])} | {retrieval} |"
     )
+
+
+def format_locomotion_row(r: dict) -> str:
+    """One row of the locomotion table (`LOCOMOTION_HEADER`)."""
+    speeds = " | ".join(f"{_f(r.get(f'{a}_speed'))} ({_f(r.get(f'{a}_speed_ref'))})" for a in ("idle", "walk", "run"))
+    return (
+        f"| {r['rig']} | {r['split']} | {r['contacts']} | {_f(r.get('gap_ratio'))} | {_f(r.get('walk_forward_share'))} "
+        f"| {_f(r.get('walk_net_turn_deg'), 0)} | {_f(r.get('walk_total_turn_deg'), 0)} | {_f(r.get('idle_drift'))} "
+        f"| {speeds} | {_f(r.get('run_walk_ratio'))} ({_f(r.get('run_walk_ratio_ref'))}) "
+        f"| {_f(r['skate_ratio'])} | {_f(r['jerk'] / r['jerk_ref'] if r.get('jerk_ref') else None)} |"
+    )
+
+
+LOCOMOTION_HEADER = (
+    "| rig | split | contacts | foot-to-leg gap (x own max) | walk forward share | walk net turn deg "
+    "| walk summed turn deg | idle drift (body sizes) | idle speed (own clips) | walk speed (own clips) "
+    "| run/gallop speed (own clips) | run / walk (own clips) | skate ratio | jerk ratio |\n|" + "---|" * 14
+)
 
 
 TABLE_HEADER = (
