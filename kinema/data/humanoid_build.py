@@ -17,7 +17,8 @@ Each clip and its left/right mirror (content label and captions mirrored with it
 clips) become feature rows in the human layout. A clip whose retargeted motion repeats one already kept
 (same content, every joint within `DUPLICATE_M` on every frame: three of the four astronauts carry the
 same animations as the first on the same proportions) is dropped and listed. Files the humanoid test
-passes that are no humanoid body are `EXCLUDED` (the cyberpunk flying drones).
+passes that are no humanoid body, or whose trunk comes out folded, are `EXCLUDED` (the cyberpunk flying
+drones; the four space-pack mechs).
 
 Rigs with `LIMITED` entries give only the actions listed there, for the reason given: the mechs' legs
 come out bent on the human (their pelvis 0.5-0.6 m up against the captures' 0.93 m), so their kicks
@@ -67,7 +68,13 @@ LIMITED: dict[str, tuple[tuple[str, ...], str]] = {
 }
 #: files the humanoid test passes that are no humanoid body (file -> why)
 _DRONE = "a flying drone with arms, found by the rest-pose geometry test (docs/retarget.md)"
-EXCLUDED = {"cyberpunk_pack/Enemy_Flying.glb": _DRONE, "cyberpunk_pack/Enemy_Flying_Gun.glb": _DRONE}
+_FOLDED = "the trunk comes out folded (spine -> chest 86 degrees from vertical when standing)"
+EXCLUDED = {
+    "cyberpunk_pack/Enemy_Flying.glb": _DRONE,
+    "cyberpunk_pack/Enemy_Flying_Gun.glb": _DRONE,
+    **{f"ultimate_space_pack/Mech_{n}-transformed.glb": _FOLDED
+       for n in ("BarbaraTheBee", "FernandoTheFlamingo", "FinnTheFrog", "RaeTheRedPanda")},
+}
 
 
 @dataclass

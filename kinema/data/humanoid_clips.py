@@ -10,7 +10,8 @@ and bone translations lerped). Looping clips (dance) are repeated to `LOOP_SECON
 
 The padded clip is then retargeted onto the human skeleton (kinema.retarget: humanoid slots, rest-pose
 alignment, leg-length scale, planted feet held) as one motion, so a jump that ends in the air in its
-take-off clip lands again, and put on the floor by its standing idle (`on_the_floor`).
+take-off clip lands again; the pelvis is straightened against the spine (`upright_pelvis`), and the clip
+is put on the floor by its standing idle (`on_the_floor`).
 
 Root motion: the file's root is kept (kinema.data.humanoid_build says why no travel is recovered).
 """
@@ -24,7 +25,7 @@ import torch
 
 from kinema.data.creature_captions import clean_clip_name
 from kinema.data.humanoid_actions import HUMANOID_ACTIONS, IDLE_NAMES, HumanoidAction
-from kinema.geometry.rotations import quat_normalize, quat_slerp
+from kinema.geometry.rotations import quat_between, quat_inverse, quat_mul, quat_normalize, quat_slerp
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
@@ -148,6 +149,56 @@ def on_the_floor(motion: Motion, standing: int) -> Motion:
     return Motion(motion.skeleton, motion.fps, root, motion.local_rotations)
 
 
+def upright_pelvis(motion: Motion) -> Motion:
+    """``motion`` (on the human skeleton) with the pelvis turned, per frame, so that its bone to the spine
+    continues the spine's bone to the chest; the children of the pelvis keep their world rotations.
+
+    Why: a Quaternius trunk starts with short ``Body`` / ``Hips`` bones that bend against the rest of the
+    spine, and the human's pelvis follows them. Measured on the first (standing) frame: pelvis -> spine
+    40-70 degrees from vertical while spine -> chest is within 0-13 (the captures: 2-5 and 1-3), a kink at
+    the waist that put the pelvis rotation channel 35-60 standard deviations away from every capture's."""
+    names = list(motion.skeleton.names)
+    hips, spine, chest = (names.index(n) for n in ("Hips", "Spine", "Chest"))
+    G, P = (x.double() for x in motion.global_transforms())
+    low, high = P[:, spine] - P[:, hips], P[:, chest] - P[:, spine]
+    swing = quat_between(low / low.norm(dim=-1, keepdim=True), high / high.norm(dim=-1, keepdim=True))
+    pelvis = quat_normalize(quat_mul(swing, G[:, hips]))
+    local = motion.local_rotations.double().clone()
+    local[:, hips] = pelvis
+    for child in motion.skeleton.children[hips]:
+        local[:, child] = quat_normalize(quat_mul(quat_inverse(pelvis), G[:, child]))
+    return Motion(motion.skeleton, motion.fps, motion.root_translation, local.to(motion.dtype))
+
+
+def spine_mapping(character: Skeleton, human: Skeleton) -> dict[str, str]:
+    """``{human spine: character joint}`` when the character's detected spine hangs *below* its hips.
+
+    Quaternius rigs have ``Root -> Body -> Hips -> Abdomen -> Torso``: detection takes ``Body`` (where
+    the legs and the chest meet) as the hips and the next joint towards the chest, Quaternius' ``Hips``,
+    which points down from ``Body``, as the spine. The human's pelvis then follows that downward bone:
+    retargeted this way its pelvis came out turned 141 degrees about the hip axis from every capture
+    (the pelvis rotation channel 120-140 standard deviations off the captures') with the trunk folded
+    at the waist (the head 0.1-0.3 m low). The human's spine is therefore mapped to the first joint
+    on the way to the chest that sits above the hips at rest (``Abdomen``); empty when the spine is
+    already above the hips."""
+    from kinema.retarget import find_humanoid
+    from kinema.retarget.align import rest_frames
+
+    slots = find_humanoid(character).slots
+    hips, spine, chest = slots.get("hips"), slots.get("spine"), slots.get("chest")
+    if None in (hips, spine, chest):
+        return {}
+    _, rest = rest_frames(character)
+    if float(rest[spine, 1]) > float(rest[hips, 1]):
+        return {}
+    path = character.path_from_root(chest)
+    above = [j for j in path[path.index(hips) + 1 :] if float(rest[j, 1]) > float(rest[hips, 1]) and j != chest]
+    human_spine = find_humanoid(human).slots.get("spine")
+    if not above or human_spine is None:
+        return {}
+    return {human.names[human_spine]: character.names[above[0]]}
+
+
 def find_idle(clips: dict[str, Motion]) -> Motion | None:
     """The character's idle clip (`IDLE_NAMES`, first found), or None."""
     by_name = {clean_clip_name(n): m for n, m in clips.items()}
@@ -162,13 +213,14 @@ def action_clips(rel: str, clips: dict[str, Motion], human: Skeleton) -> list[Hu
 
     by_name = {clean_clip_name(n): n for n in clips}
     idle = find_idle(clips)
+    mapping = spine_mapping(next(iter(clips.values())).skeleton, human) or None
     out = []
     for key, (action, chain) in HUMANOID_ACTIONS.items():
         if key not in by_name:
             continue
         names = [by_name[c] for c in chain if c in by_name]
         padded, frames = pad_action([clips[n] for n in names], idle, loop=action.loop, after=action.after)
-        motion = on_the_floor(retarget(padded, human), frames[0])
+        motion = on_the_floor(upright_pelvis(retarget(padded, human, mapping)), frames[0])
         out.append(HumanoidClip(rel, names[0], tuple(names), action, measured_side(action, motion, frames), motion,
                                 frames))
     return out
