@@ -216,7 +216,8 @@ class AnyRigPipeline(MotionPipeline):
             plan=plan,
         )
         if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
-            feats = _face(heading_from_rate(feats, rig_n.root, self.fps), rig_n.root, heading)
+            steady = heading_from_rate(feats, rig_n.root, self.fps) if len(prompts) == 1 else feats  # not across joins
+            feats = _face(steady, rig_n.root, heading)
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
                                   segments=len(prompts), frames=T, seed=seed)
         t_sampled = time.perf_counter()
