@@ -61,31 +61,22 @@ def _blend(a: Motion, b: Motion, overlap: int) -> Motion:
     trans = ta * (1 - w[:, None, None]) + tb * w[:, None, None]
     mid = Motion(a.skeleton, a.fps, root, rots, None, trans)
     head = a.crop(0, a.num_frames - overlap) if a.num_frames > overlap else None
-    out = mid if head is None else _cat(head, mid)
-    return _cat(out, b.crop(overlap)) if b.num_frames > overlap else out
+    out = mid if head is None else _concat(head, mid)
+    return _concat(out, b.crop(overlap)) if b.num_frames > overlap else out
 
 
-def _cat(a: Motion, b: Motion) -> Motion:
-    """Concatenation that keeps bone translations when either part has them (no contacts: they are
-    estimated again after retargeting)."""
-    trans = None
-    if a.local_translations is not None or b.local_translations is not None:
-        trans = torch.cat([a.translations_or_offsets(), b.translations_or_offsets().to(a.dtype)])
-    return Motion(
-        a.skeleton,
-        a.fps,
-        torch.cat([a.root_translation, b.root_translation.to(a.dtype)]),
-        torch.cat([a.local_rotations, b.local_rotations.to(a.dtype)]),
-        None,
-        trans,
-    )
+def _concat(a: Motion, b: Motion) -> Motion:
+    """``a`` then ``b`` (Motion.concatenate; contacts dropped: they are estimated again after retargeting)."""
+    out = a.concatenate(b)
+    out.foot_contacts = None
+    return out
 
 
 def _repeat_to(motion: Motion, frames: int) -> Motion:
     """``motion`` played again and again until it has ``frames`` frames (the last repeat cut short)."""
     out = motion
     while out.num_frames < frames:
-        out = _cat(out, motion)
+        out = _concat(out, motion)
     return out.crop(0, frames) if out.num_frames > frames else out
 
 
@@ -101,7 +92,7 @@ def pad_action(clips: list[Motion], idle: Motion | None, *, loop: bool, after: s
     fps = clips[0].fps
     action = clips[0]
     for c in clips[1:]:
-        action = _cat(action, c)
+        action = _concat(action, c)
     if loop:
         action = _repeat_to(action, round(LOOP_SECONDS * fps))
     pad, blend = round(PAD_SECONDS * fps), round(BLEND_SECONDS * fps)
