@@ -16,6 +16,11 @@ from pathlib import Path
 
 import pytest
 
+# One precision for the whole suite on every CPU: `auto` would run the denoisers in bf16 on a CPU with bf16
+# instructions and in fp32 elsewhere (CI), so thresholds measured in fp32 would meet other numbers here.
+# tests/test_precision.py tests bf16 and the `auto` choice explicitly (issue 37).
+os.environ.setdefault("KINEMA_PRECISION", "fp32")
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_BANDAI = REPO.parent / "shared/datasets/bandai-namco"
 #: The clip that several tests use (a straight 9 s walk; the synthetic data has one of the same name).
