@@ -95,7 +95,7 @@ _DANCE = HumanoidAction(
 _PICKUP = HumanoidAction(
     "pick-up",
     ("A person picks something up from the ground.", "Someone bends down and picks up an object.",
-     "A person picks an item up off the floor.", "A person crouches and picks something up."),
+     "A person picks an item up off the floor.", "A person bends over and picks something up."),
 )
 _FALL = HumanoidAction(
     "fall-{side}",  # side here is the direction of the fall: forward / backward (measured)
