@@ -175,7 +175,8 @@ def test_bvh_clip_upload_works_with_the_creatures_model(model, rig, tmp_path):
     walk = rig.clips["Walk"]
     walk.save(tmp_path / "walk.bvh", scale=100.0)  # centimetres: the panel's default units
     panel._guard(lambda: panel._clip("walk.bvh", (tmp_path / "walk.bvh").read_bytes()))
-    assert not host.notes, host.notes
+    assert host.notes == [f"Clip loaded: walk.bvh: {walk.num_frames} frames"], host.notes  # the app's own answer
+    host.notes.clear()
     (motion,), source = host.shown[-1]
     assert source == "clip walk.bvh" and motion.skeleton.same_topology(rig.skeleton)
     assert motion.num_frames == walk.num_frames

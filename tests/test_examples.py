@@ -27,7 +27,8 @@ EXAMPLES = REPO / "examples"
 CONSTRAINT_FILES = sorted((EXAMPLES / "constraints").glob("*.json"))
 TIMELINES = sorted((EXAMPLES / "timelines").glob("*.json"))
 OBJECTIVE_FILES = sorted((EXAMPLES / "objectives").glob("*.json"))
-STREAM_SCRIPTS = sorted((EXAMPLES / "streams").glob("*.jsonl"))  # played in tests/test_stream.py
+STREAM_SCRIPTS = sorted((EXAMPLES / "streams").rglob("*.jsonl"))  # played in tests/test_stream.py,
+#: streams/creatures/ in tests/test_stream_anyrig.py
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 
 #: a prompt that fits each constraints file (a file asking for a walk's path gets a walk, ...)

@@ -211,13 +211,27 @@ class HumanPipeline(MotionPipeline):
                               f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
         if isinstance(keyjoint_model, KeyjointPlanner):
             return keyjoint_model
-        return self._default_planner() if keyjoint_model == "default" else KeyjointPlanner.load(keyjoint_model,
-                                                                                               self.precision)
+        if keyjoint_model != "default":
+            return KeyjointPlanner.load(keyjoint_model, self.precision)
+        planner = self._default_planner()
+        if planner is None:
+            KeyjointPlanner.check("default")  # not shipped: says so
+            raise KinemaError(f"keyjoint_model 'default': the shipped keyjoint model was trained for the default "
+                              f"model's text encoder and frame rate, not this model's ({self.text_encoder_id}, "
+                              f"{self.fps:g} fps)")
+        return planner
 
     def _default_planner(self) -> KeyjointPlanner | None:
-        """The shipped keyjoint planner at the model's precision, loaded once (None when not shipped)."""
+        """The shipped keyjoint planner at the model's precision, loaded once; None when it is not shipped
+        or was not trained for this model (another text encoder or frame rate: a model of your own)."""
         if not hasattr(self, "_shipped_planner"):
-            self._shipped_planner = KeyjointPlanner.load("default", self.precision) if shipped_planner() else None
+            planner = KeyjointPlanner.load("default", self.precision) if shipped_planner() else None
+            fits = planner is not None and (
+                planner.model.config.text_dim == self.loaded.denoiser.config.text_dim
+                and planner.info.get("text_encoder") == self.text_encoder_id
+                and float(planner.info.get("fps", self.fps)) == float(self.fps)
+            )
+            self._shipped_planner = planner if fits else None
         return self._shipped_planner
 
     def _check_counts(self, samples, steps, seed) -> tuple[int, int, int]:
