@@ -15,9 +15,11 @@ Maya's, Mixamo's, Autodesk's) arrives in kinema's frame. What is read:
 - ``animation``: the first animation stack sampled at ``fps`` (default the file's frame rate, else
   30) into a `Motion` on that skeleton, from the joints' world transforms.
 
-ufbx frees a scene's objects with the scene: everything is copied into numpy inside one function
-while the scene is open, so no ufbx object outlives it. Unreadable files raise a one-line
-`KinemaError` naming the file.
+Everything is copied into numpy inside one function while the scene is open. The scene itself is
+never freed: with ufbx 0.0.5, freeing a scene (``with scene:`` leaving) crashed the process now and
+then (a segmentation fault in the free, once in about six full test runs), so each FBX read keeps
+its scene and the wrappers it touched (`_KEPT`) until the process ends: memory of the order of the
+file's size per read. Unreadable files raise a one-line `KinemaError` naming the file.
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
 
+#: every scene read, with the wrappers it handed out, kept until the process ends (module docstring)
+_KEPT: list = []
+
+
 @dataclass(frozen=True)
 class FbxAsset:
     """A rig (with its skin) and its first animation (None without one) read from an FBX file."""
@@ -49,7 +55,7 @@ class FbxAsset:
 class _Held:
     """Holds every ufbx object touched while a scene is open. ufbx 0.0.5 hands out cached wrappers:
     one freed early and asked for again is used after free (a crash), so none may die before the
-    scene; :meth:`release` drops them all at once, just before the scene is freed."""
+    scene (which kinema keeps, with them, in `_KEPT`)."""
 
     def __init__(self):
         self.objects: list = []
@@ -262,8 +268,5 @@ def read_fbx(path: str | Path, *, fps: float | None = None) -> FbxAsset:
     except ufbx.UfbxError as err:
         raise KinemaError(f"{path}: not a readable FBX file ({str(err).splitlines()[0]})") from None
     held = _Held()
-    with scene:
-        try:
-            return _read(scene, path, fps, held)
-        finally:
-            held.release()
+    _KEPT.append((scene, held))  # never freed: see the module docstring
+    return _read(scene, path, fps, held)
