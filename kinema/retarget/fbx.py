@@ -18,12 +18,14 @@ Maya's, Mixamo's, Autodesk's) arrives in kinema's frame. What is read:
 Everything is copied into numpy inside one function while the scene is open. The scene itself is
 never freed: with ufbx 0.0.5, freeing a scene (``with scene:`` leaving) crashed the process now and
 then (a segmentation fault in the free, once in about six full test runs), so each FBX read keeps
-its scene and the wrappers it touched (`_KEPT`) until the process ends: memory of the order of the
+its scene and the wrappers it touched (`_KEPT`, with an extra reference so that not even the
+interpreter's exit frees them) until the process ends: memory of the order of the
 file's size per read. Unreadable files raise a one-line `KinemaError` naming the file.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -269,4 +271,6 @@ def read_fbx(path: str | Path, *, fps: float | None = None) -> FbxAsset:
         raise KinemaError(f"{path}: not a readable FBX file ({str(err).splitlines()[0]})") from None
     held = _Held()
     _KEPT.append((scene, held))  # never freed: see the module docstring
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(scene))  # not even when the interpreter clears modules at exit
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(held))
     return _read(scene, path, fps, held)
