@@ -86,16 +86,23 @@ def browser():
 @pytest.fixture(scope="module")
 def tab(app, browser):
     """(page, session, log): one tab, its server-side Session, and what the page logged / requested."""
+    page, session, log = open_tab(browser, app, accept_downloads=True)
+    yield page, session, log
+    page.close()
+
+
+def open_tab(browser, app, **page_options):
+    """(page, session, log) of a new tab on ``app`` once its panel is built: the tab's server-side
+    Session and what the page logs (console errors, page errors) and requests."""
     log = {"errors": [], "requests": []}
-    page = browser.new_page(viewport={"width": 1400, "height": 900}, accept_downloads=True)
+    page = browser.new_page(viewport={"width": 1400, "height": 900}, **page_options)
     page.on("console", lambda m: log["errors"].append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: log["errors"].append(str(e)))
     page.on("request", lambda r: log["requests"].append(r.url))
     page.goto(app.url)
     page.get_by_text("Add prompt").wait_for(timeout=90000)
     session = wait_for(lambda: next(iter(app.sessions.values()), None), what="a session")
-    yield page, session, log
-    page.close()
+    return page, session, log
 
 
 def generate(page, session) -> None:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 # importing the page tests' module first skips this one too when Playwright, viser or the browser is missing
-from tests.test_app_browser import _free_port, sync_api, wait_for
+from tests.test_app_browser import _free_port, open_tab, sync_api, wait_for
 
 # isort: split
 import kinema
@@ -24,16 +24,9 @@ from tests.browser import button, launch, row_input
 def live_tab():
     """(page, session, log) of a tab with live mode started."""
     server = AppServer(kinema.load_model("default"), port=_free_port(), steps=4)
-    log = {"errors": [], "requests": []}
     with sync_api.sync_playwright() as p:
         browser = launch(p)
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.on("console", lambda m: log["errors"].append(m.text) if m.type == "error" else None)
-        page.on("pageerror", lambda e: log["errors"].append(str(e)))
-        page.on("request", lambda r: log["requests"].append(r.url))
-        page.goto(server.url)
-        page.get_by_text("Add prompt").wait_for(timeout=90000)
-        session = wait_for(lambda: next(iter(server.sessions.values()), None), what="a session")
+        page, session, log = open_tab(browser, server)
         page.get_by_text("Live", exact=True).click()  # the folder starts closed
         button(page, "Start live").click()
         wait_for(lambda: session.live.run is not None and session.live.run.drawn > 20, timeout=120,
