@@ -159,6 +159,20 @@ def test_landmarks_guessed_from_body_names(bow):
     assert rep.range_overshoot == 0.0 and rep.lowest_sole > -0.02 and rep.planted_slide < 0.15
 
 
+def test_name_guess_prefers_the_exact_word():
+    """MuJoCo's own humanoid.xml lists 'waist_lower' before 'pelvis': the body called pelvis is the pelvis
+    (the first match of any pelvis word used to win, putting the robot's root 16 cm too high)."""
+    from kinema.robot.mapping import resolve_mapping
+
+    names = ["world", "torso", "head", "waist_lower", "pelvis", "thigh_right", "shin_right", "foot_right",
+             "thigh_left", "shin_left", "foot_left", "upper_arm_right", "lower_arm_right", "hand_right",
+             "upper_arm_left", "lower_arm_left", "hand_left"]  # fmt: skip
+    points = {key: p.body for key, p in resolve_mapping(names, None, False, "humanoid.xml").items()}
+    assert points["pelvis"] == "pelvis" and points["torso"] == "torso" and points["head"] == "head"
+    assert points["left_hip"] == "thigh_left" and points["right_foot"] == "foot_right"
+    assert points["left_shoulder"] == "upper_arm_left" and points["right_hand"] == "hand_right"
+
+
 @pytest.mark.parametrize(
     ("xml", "message"),
     [

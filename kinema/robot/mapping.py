@@ -88,20 +88,22 @@ class BodyPoint:
 
 
 def _guess(key: str, body_names: list[str]) -> str | None:
-    """The body whose name names ``key`` (``left_knee`` -> a body with 'left' and 'knee'), or None."""
+    """The body whose name names ``key`` (``left_knee`` -> a body with 'left' and 'knee'), or None. Words
+    are tried in their order in ``_WORDS``: a body called 'pelvis' wins over an earlier 'waist_lower'."""
     side, _, part = key.partition("_") if key.startswith(("left_", "right_")) else (None, "", key)
-    matches = []
+    sided = []
     for name in body_names:
         low = name.lower()
         if side is not None and not _SIDE[side].search(low):
             continue
         if side is None and (_SIDE["left"].search(low) or _SIDE["right"].search(low)):
             continue
-        if any(word in low for word in _WORDS[part]):
-            matches.append(name)
-    if not matches:
-        return None
-    return matches[-1] if part in _LAST_WINS else matches[0]
+        sided.append(name)
+    for word in _WORDS[part]:
+        matches = [name for name in sided if word in name.lower()]
+        if matches:
+            return matches[-1] if part in _LAST_WINS else matches[0]
+    return None
 
 
 def _read_entry(key: str, value, where: str) -> BodyPoint:
