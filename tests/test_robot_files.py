@@ -205,3 +205,15 @@ def test_commands_in_robot_docs_parse():
     for words in commands:
         args = parser.parse_args(words[1:])
         assert args.command in ("generate", "robot", "render")
+
+
+def test_render_of_an_npz_whose_robot_file_is_not_here(bow, tmp_path, capsys):
+    """A robot npz names its MJCF as it was given (a relative path): from elsewhere, render says to pass --robot."""
+    import dataclasses
+
+    _, rm = bow
+    path = dataclasses.replace(rm, robot="elsewhere/robot.xml").save(tmp_path / "bow.npz")
+    assert main(["render", str(path), "--out", str(tmp_path / "x.png"), "--frames", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "names robot 'elsewhere/robot.xml'" in err and "--robot" in err and len(err.strip().splitlines()) == 1
+    assert main(["render", str(path), "--robot", "g1", "--out", str(tmp_path / "x.png"), "--frames", "2"]) == 0

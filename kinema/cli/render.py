@@ -95,11 +95,21 @@ def run(args: argparse.Namespace) -> int:
 
 def robot_drawing(path: Path, robot: str | None, mapping: Path | None):
     """A robot motion file as a kinema Motion of the robot's body frames (kinema.robot.drawing)."""
+    from kinema.errors import KinemaError
     from kinema.robot import load_robot, load_robot_motion
     from kinema.robot.drawing import robot_motion_for_drawing
 
     robot_motion = load_robot_motion(path, robot)
-    return robot_motion_for_drawing(robot_motion, load_robot(robot_motion.robot, mapping=mapping))
+    try:
+        description = load_robot(robot_motion.robot, mapping=mapping)
+    except KinemaError as err:
+        if robot is not None:
+            raise
+        raise KinemaError(
+            f"{path} names robot {robot_motion.robot!r}, which cannot be loaded from here ({err}); "
+            "give it with --robot g1|path/to/robot.xml"
+        ) from None
+    return robot_motion_for_drawing(robot_motion, description)
 
 
 def constraint_targets(path: Path, motion) -> list[tuple]:
