@@ -70,7 +70,7 @@ from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.pipeline.timeline import parse_timeline, segment_bounds
 from kinema.postprocess import postprocess as run_postprocess
 from kinema.postprocess.guard import plausibility, violations
-from kinema.representation.joint import ROOT_HEADING, ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation
+from kinema.representation.joint import ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -460,8 +460,7 @@ def _face(feats: torch.Tensor, root: int, heading: float) -> torch.Tensor:
     """Turn every sample so that its heading at frame 0 is ``heading`` (features are heading-invariant
     except the root's cos/sin of the heading)."""
     out = feats.clone()
-    cs = out[:, :, root, ROOT_HEADING]
-    psi = torch.atan2(cs[..., 1], cs[..., 0])
+    psi = torch.atan2(out[:, :, root, ROOT_HEADING_SIN], out[:, :, root, ROOT_HEADING_COS])
     psi = psi - psi[:, :1] + heading
     out[:, :, root, ROOT_HEADING_COS], out[:, :, root, ROOT_HEADING_SIN] = torch.cos(psi), torch.sin(psi)
     return out

@@ -40,7 +40,14 @@ from kinema.model.keyjoint import KeyjointDenoiser, load_keyjoint_model
 from kinema.model.precision import set_precision
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
-from kinema.representation.keyjoint import HEADING, KEYJOINT_DIM, NUM_KEYJOINTS, keyjoint_indices
+from kinema.representation.keyjoint import (
+    HEADING,
+    KEYJOINT_DIM,
+    NUM_KEYJOINTS,
+    POSITIONS,
+    keyjoint_indices,
+    keyjoint_positions,
+)
 
 #: DDIM steps of the keyjoint stage (20 measured as good as 50 on the sparse protocol: 8.79 vs 8.78 cm)
 KEYJOINT_STEPS = 20
@@ -122,8 +129,8 @@ class KeyjointPlanTargets:
         idx = keyjoint_indices(rep.skeleton)
         known = keys.mask[:, :, idx].amin(-1) > 0  # (B, T, 6)
         m = known[..., None].expand(B, T, NUM_KEYJOINTS, 3).float()
-        self.k_tgt[..., : 3 * NUM_KEYJOINTS] = (keys.pos[:, :, idx].float() * m).flatten(-2)
-        self.k_mask[..., : 3 * NUM_KEYJOINTS] = m.flatten(-2)
+        self.k_tgt[..., POSITIONS] = (keys.pos[:, :, idx].float() * m).flatten(-2)
+        self.k_mask[..., POSITIONS] = m.flatten(-2)
         rx, rz = rep.root_xz
         self.root = x_tgt[..., [rx, rz]]
         self.root_mask = (mask[..., rx] > 0) & (mask[..., rz] > 0)
@@ -155,9 +162,9 @@ def displace_keyjoints(
     where a root target exists, else the targeted joints' mean x/z miss; piecewise-linear between target
     frames, held beyond them), so a far target moves the whole body, not one joint; then each joint's
     remaining miss is spread over neighbouring frames with a Gaussian of ``sigma_frames``."""
-    P = k[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3))
-    G = plan.k_tgt[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3)).to(k)
-    M = plan.k_mask[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3))[..., 0] > 0  # (B, T, 6)
+    P = keyjoint_positions(k)
+    G = keyjoint_positions(plan.k_tgt).to(k)
+    M = keyjoint_positions(plan.k_mask)[..., 0] > 0  # (B, T, 6)
     cnt = M.sum(-1)
     res = ((G - P) * M[..., None])[..., [0, 2]].sum(2) / cnt.clamp_min(1)[..., None]  # (B, T, 2)
     root_miss = plan.root.to(k) - smooth_time(P[..., 0, [0, 2]], root_sigma_frames)
@@ -165,7 +172,7 @@ def displace_keyjoints(
     shift = _hold_interp(res, (cnt > 0) | plan.root_mask)
     P = P + torch.stack([shift[..., 0], torch.zeros_like(shift[..., 0]), shift[..., 1]], dim=-1)[:, :, None]
     P = P + gaussian_spread((G - P) * M[..., None], M, sigma_frames)
-    return torch.cat([P.flatten(-2), k[..., 3 * NUM_KEYJOINTS :]], dim=-1)
+    return torch.cat([P.flatten(-2), k[..., HEADING]], dim=-1)
 
 
 @torch.no_grad()
@@ -252,7 +259,7 @@ def with_keyjoint_plan(
     J = rep.num_joints
     wxz = torch.zeros(B, T, J, 2) if targets.world_xz is None else targets.world_xz.float().clone()
     wm = torch.zeros(B, T, J) if targets.world_mask is None else targets.world_mask.float().clone()
-    P = keys[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3)).float()
+    P = keyjoint_positions(keys).float()
     rxz = rep.root_xz
     root = smooth_time(P[..., 0, [0, 2]], DEFAULT_ROOT_SIGMA_SECONDS * rep.fps)
     free = (mask[..., rxz] == 0).all(-1, keepdim=True)
@@ -264,7 +271,7 @@ def with_keyjoint_plan(
     x_tgt[..., rep.heading] = torch.where(hfree, heading, x_tgt[..., rep.heading])
     mask[..., rep.heading] = torch.where(hfree, 1.0, mask[..., rep.heading])
     ix, iy = rep.joint_pos_axis(0).tolist(), rep.joint_pos_axis(1).tolist()
-    planned = plan.k_mask[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3)).amax(dim=(1, 3)) > 0  # (B, 6)
+    planned = keyjoint_positions(plan.k_mask).amax(dim=(1, 3)) > 0  # (B, 6)
     iz = rep.joint_pos_axis(2).tolist()
     for c, j in enumerate(keyjoint_indices(rep.skeleton)):
         jfree = (mask[..., iy[j]] == 0) & (mask[..., ix[j]] == 0) & (wm[..., j] == 0) & planned[:, c, None]
@@ -362,8 +369,8 @@ def sample_with_keyjoint_plan(
     feats = run(with_keyjoint_plan(targets, keys, plan, rep), 0, first)
     idx, aim = keyjoint_indices(rep.skeleton), keys.clone()
     for k in range(1, passes):
-        miss = keys[..., : 3 * NUM_KEYJOINTS] - rep.pose(feats)[:, :, idx].flatten(-2).to(keys)
-        aim[..., : 3 * NUM_KEYJOINTS] += smooth_time(miss, REFINE_SIGMA_SECONDS * rep.fps)
+        miss = keys[..., POSITIONS] - rep.pose(feats)[:, :, idx].flatten(-2).to(keys)
+        aim[..., POSITIONS] += smooth_time(miss, REFINE_SIGMA_SECONDS * rep.fps)
         full = with_keyjoint_plan(targets, aim, plan, rep, override=True)
         if refine.strength < 1:  # re-noise the previous pass's motion instead of starting from pure noise
             full = replace(full, start=feats)

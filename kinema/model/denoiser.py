@@ -34,7 +34,7 @@ from kinema.diffusion.guidance import Guidance, combine, split_branches, stack_b
 from kinema.model.config import ModelConfig
 from kinema.model.layers import StageTransformer
 from kinema.representation.kimodo_features import global_to_local_root
-from kinema.representation.layout import LOCAL_ROOT_DIM, ROOT_DIM
+from kinema.representation.layout import LOCAL_ROOT_DIM, LOCAL_ROOT_HEIGHT, LOCAL_ROOT_RATES, ROOT_DIM
 from kinema.representation.stats import NormStats
 
 
@@ -60,11 +60,11 @@ def padded_local_root(root: torch.Tensor, pad_mask: torch.Tensor | None, fps: fl
     # pair_ok[i]: frames i and i+1 both valid, so the forward difference at i is meaningful.
     pair_ok = torch.cat([valid[:, 1:] & valid[:, :-1], torch.zeros_like(valid[:, :1])], dim=1)
     prev_ok = torch.cat([torch.zeros_like(pair_ok[:, :1]), pair_ok[:, :-1]], dim=1)
-    vel = local[..., :3]
+    vel = local[..., LOCAL_ROOT_RATES]
     prev_vel = torch.cat([vel[:, :1], vel[:, :-1]], dim=1)
     fallback = torch.where(prev_ok[..., None], prev_vel, torch.zeros_like(vel))
     vel = torch.where(pair_ok[..., None], vel, fallback)
-    local = torch.cat([vel, local[..., 3:]], dim=-1)
+    local = torch.cat([vel, local[..., LOCAL_ROOT_HEIGHT]], dim=-1)
     return torch.where(valid[..., None], local, torch.zeros_like(local))
 
 

@@ -24,6 +24,8 @@ from kinema.skeleton import Skeleton
 KEYJOINT_ROLES = ("pelvis", "head", "left_hand", "right_hand", "left_ankle", "right_ankle")
 NUM_KEYJOINTS = len(KEYJOINT_ROLES)
 KEYJOINT_DIM = 3 * NUM_KEYJOINTS + 2
+#: the keyjoint frame's channels: the six positions (flattened), then the heading
+POSITIONS = slice(0, 3 * NUM_KEYJOINTS)
 HEADING = slice(3 * NUM_KEYJOINTS, KEYJOINT_DIM)
 #: the paper's frame intervals and probabilities for the cross scheme
 CROSS_INTERVALS = (1, 2, 5, 10, 20, 30, 60)
@@ -45,10 +47,15 @@ def keyjoints_from_features(features: torch.Tensor, rep: FlatRepresentation, idx
     return torch.cat([jp.flatten(-2), features[..., rep.heading]], dim=-1)
 
 
+def keyjoint_positions(k: torch.Tensor) -> torch.Tensor:
+    """The positions ``(..., T, 6, 3)`` of keyjoint frames or of their targets/masks ``(..., T, 20)`` (a view)."""
+    return k[..., POSITIONS].unflatten(-1, (NUM_KEYJOINTS, 3))
+
+
 def rotate_keyjoints(k: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
     """Keyjoints turned by ``angle (...)`` radians about +Y through the origin (heading gains ``angle``)."""
     c, s = torch.cos(angle)[..., None, None], torch.sin(angle)[..., None, None]
-    p = k[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3))
+    p = keyjoint_positions(k)
     x, y, z = p.unbind(-1)
     p = torch.stack([c * x + s * z, y, -s * x + c * z], dim=-1)
     hc, hs = k[..., HEADING].unbind(-1)
@@ -60,7 +67,7 @@ def canonicalize_keyjoints(k: torch.Tensor, root_xz0: torch.Tensor, angle: torch
     """Shift so the smoothed root of frame 0 (``root_xz0 (..., 2)``) is at the origin, then turn so that
     frame 0 faces ``angle`` radians (the body model's training convention)."""
     out = k.clone()
-    p = out[..., : 3 * NUM_KEYJOINTS].unflatten(-1, (NUM_KEYJOINTS, 3))
+    p = keyjoint_positions(out)
     p[..., 0] -= root_xz0[..., 0, None, None]
     p[..., 2] -= root_xz0[..., 1, None, None]
     hc, hs = k[..., 0, HEADING].unbind(-1)

@@ -15,6 +15,9 @@ import torch
 
 ROOT_DIM = 5
 LOCAL_ROOT_DIM = 4
+#: the local root (kimodo_features.global_to_local_root): heading rate, lateral and forward velocity, then height
+LOCAL_ROOT_RATES = slice(0, 3)
+LOCAL_ROOT_HEIGHT = slice(3, LOCAL_ROOT_DIM)
 CONTACT_DIM = 4
 #: channels per joint in each per-joint group
 JOINT_WIDTHS = {"joint_pos": 3, "joint_vel": 3, "joint_rot": 6}
