@@ -79,6 +79,14 @@ PIPELINE_RULES = {
     **{pkg: ("kinema.human", "kinema.anyrig", "kinema.generate", "kinema.pipeline", *FACES)
        for pkg in ("constraints", "diffusion", "postprocess", "model", "representation", "rig", "motion", "io",
                    "retarget", "robot")},
+    # the vocabulary sits below the representation that encodes it, the engine below the vocabulary
+    **{pkg: ("kinema.representation", "kinema.model", "kinema.human", "kinema.anyrig", "kinema.generate",
+             "kinema.pipeline", *FACES) for pkg in ("constraints", "objectives")},
+    **{pkg: ("kinema.constraints", "kinema.objectives", "kinema.representation", "kinema.model", "kinema.human",
+             "kinema.anyrig", "kinema.generate", "kinema.pipeline", *FACES) for pkg in ("diffusion", "postprocess")},
+    # faces never import one another; only the command line starts them (kinema serve, batch, app, ...)
+    **{pkg: tuple(f for f in (*FACES, "kinema.bench", "kinema.evaluate") if f != f"kinema.{pkg}")
+       for pkg in ("app", "bench", "evaluate")},
 }
 
 
@@ -121,3 +129,29 @@ def test_no_module_is_named_anyrig_prefix() -> None:
 def test_drawing_reads_no_file_format(module) -> None:
     """Drawing works on motions, not files: a face reads the file and hands the motion over."""
     assert not [m for m, _ in _imports(KINEMA / module) if m == "kinema.io" or m.startswith("kinema.io.")]
+
+
+#: packages where feature tensors flow: their channels are named by kinema.representation (issue 32)
+FEATURE_USERS = ("human", "anyrig", "model", "pipeline", "generate", "stream", "objectives", "constraints",
+                 "diffusion", "postprocess", "train", "evaluate")
+
+
+def _channel_slices(path: Path) -> list[str]:
+    """``x[..., a:b]`` subscripts whose bounds are written with integer literals (``:3``, ``3:9``,
+    ``: 3 * NUM_KEYJOINTS``): index arithmetic on the last (channel) axis."""
+    def literal(node) -> bool:
+        return node is not None and any(isinstance(n, ast.Constant) and type(n.value) is int for n in ast.walk(node))
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Tuple):
+            *head, last = node.slice.elts
+            ellipsis = any(isinstance(e, ast.Constant) and e.value is Ellipsis for e in head)
+            if ellipsis and isinstance(last, ast.Slice) and (literal(last.lower) or literal(last.upper)):
+                out.append(f"{path.relative_to(KINEMA)}:{node.lineno} {ast.unparse(node)}")
+    return out
+
+
+def test_no_feature_channel_slices_outside_representation() -> None:
+    found = [s for pkg in FEATURE_USERS for path in sorted((KINEMA / pkg).rglob("*.py")) for s in _channel_slices(path)]
+    assert not found, f"name the channels in kinema.representation instead: {found}"

@@ -5,7 +5,7 @@
 number, pairs, booleans); a face passes ``overrides`` only for the fields whose JSON shape is its own
 (the server's typed inline constraints, a batch line's file names) and ``extra`` for keys that are
 not part of a request (``model``, a batch line's ``id``). A field added to the request therefore shows up
-in both schemas without touching them (tests/test_request.py adds one and looks).
+in both schemas without touching them (tests/test_pipeline.py adds one and looks).
 """
 
 from __future__ import annotations
