@@ -28,6 +28,7 @@ from kinema.retarget import (
     retarget_report,
     save_character_motion,
 )
+from kinema.retarget.align import rest_frames
 from kinema.retarget.core import retarget_with_map, source_planted
 from kinema.retarget.quality import direction_errors
 
@@ -58,7 +59,8 @@ def _checks(source: Motion, out: Motion, target, direction_deg: float = 3.0) -> 
     assert r["skate_target_cm_s"] <= r["skate_source_cm_s"] + 0.5, r  # no added foot sliding
     err = direction_errors(source, out, jm)
     names = target.names
-    bones = [(p, c) for c, p in jm.chain_parent.items() if p in jm.pairs]
+    feet = {g.foot for g in jm.legs}  # feet keep their own rest pitch: not in direction_errors
+    bones = [(p, c) for c, p in jm.chain_parent.items() if p in jm.pairs and p not in feet]
     for k, (p, c) in enumerate(bones):
         if "Arm" in names[p] or "arm" in names[p] or "Spine" in names[p] or "spine" in names[p]:
             assert float(err[:, k].max()) < 1.0, (names[p], names[c])  # arms and spine follow exactly
@@ -196,8 +198,27 @@ def test_a_hand_target_on_the_character_is_met_and_blended():
 def test_a_motion_onto_its_own_skeleton_is_unchanged(tmp_path):
     """Retargeting is the identity between identical rigs: a walk on a Mixamo-named character,
     retargeted onto that same character again, keeps every joint where it was (the second source is
-    a standing rest pose, unlike the Bandai one; its contacts are estimated from the clip)."""
+    a standing rest pose, unlike the Bandai one; its contacts are estimated from the clip, so a held
+    foot may settle a few millimetres elsewhere on a frame: 2.4 mm at most here)."""
     rig = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.1)
     once = retarget(source_walk(), rig)
     twice = retarget(once, rig)
-    assert float((twice.positions - once.positions).norm(dim=-1).max()) < 2e-3
+    assert float((twice.positions - once.positions).norm(dim=-1).max()) < 3e-3
+
+
+def test_a_flatter_foot_stands_at_its_rest_height_and_pitch():
+    """The Mixamo rig's foot (ankle -> ball 27 degrees down) under the default model's steeper one (39):
+    while the source stands, the character's foot keeps its own rest pitch and its ankle its rest height
+    (copying the source's foot direction stood it on its toes, the ankle 4-5 cm up)."""
+    source = kinema.load_model().generate("A person raises their left hand.", seconds=2, steps=10, seed=1)[0]
+    rig = build_rig(MIXAMO, prefix="mixamorig:", a_pose=True, legs=1.1)
+    out = retarget(source, rig)
+    P, names = out.positions.double(), out.skeleton.names
+    _, P0 = rest_frames(rig)
+    for side in ("Left", "Right"):
+        foot, toes = names.index(f"mixamorig:{side}Foot"), names.index(f"mixamorig:{side}ToeBase")
+        d, d0 = P[:, toes] - P[:, foot], P0[toes] - P0[foot]
+        pitch = torch.rad2deg(torch.atan2(-d[:, 1], d[:, [0, 2]].norm(dim=-1))).median()
+        rest_pitch = torch.rad2deg(torch.atan2(-d0[1], d0[[0, 2]].norm()))
+        assert abs(float(pitch - rest_pitch)) < 3.0, (side, float(pitch), float(rest_pitch))
+        assert abs(float(P[:, foot, 1].median() - P0[foot, 1])) < 0.015, side  # metres

@@ -36,6 +36,7 @@ from kinema.retarget.mapping import JointMap, build_joint_map
 from kinema.retarget.proportions import (
     body_scale,
     floor_shift,
+    foot_pitch_turns,
     ground_root,
     lowest_rest_height,
     placed_positions,
@@ -142,10 +143,12 @@ def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
     Gs, Ps = (x.double() for x in motion.global_transforms())
     s = body_scale(jm)
     R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames, dict(jm.primary))
+    planted = source_planted(motion)
+    for j, turn in foot_pitch_turns(jm, Gs, R, planted).items():
+        R[j] = quat_mul(R[j], turn)
     G = transfer_rotations(Gs, jm.target, jm.source, dict(jm.pairs), R)
     placed = placed_positions(jm, Ps, moving_joints(motion), s)
     P = positions_from_globals(jm.target, G, placed)
-    planted = source_planted(motion)
     if jm.legs:
         _solve_legs(G, P, placed, jm, Ps, planted, s, motion.fps)
         fixed = set(jm.pairs) | {f for fs in jm.followers.values() for f in fs}

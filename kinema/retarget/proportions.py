@@ -20,6 +20,7 @@ from __future__ import annotations
 import torch
 
 from kinema.errors import KinemaError
+from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
 from kinema.retarget.align import rest_frames
 from kinema.retarget.mapping import JointMap, Leg
 from kinema.rig.find import helpers
@@ -115,16 +116,67 @@ def standing_height(positions: torch.Tensor, joint: int, planted: torch.Tensor |
     return float(y.min()) - floor
 
 
+def rest_stands(skeleton: Skeleton, hips: int, leg: tuple[int, int, int]) -> bool:
+    """Whether the rest pose stands: the hips above the foot of ``leg`` (upper, lower, foot) by more
+    than half the leg's length (Bandai's rest pose lies along +X and does not)."""
+    _, P0 = rest_frames(skeleton)
+    return float(P0[hips, 1] - P0[leg[2], 1]) > 0.5 * _chain_length(skeleton, list(leg))
+
+
 def source_foot_height(jm: JointMap, leg: Leg, positions: torch.Tensor, heel: torch.Tensor) -> float:
     """How high the source's foot joint sits above its floor when standing: from its rest pose when
-    that pose stands (hips above the foot by more than half the leg), else from the clip
-    (:func:`standing_height`; Bandai's rest pose lies along +X)."""
+    that pose stands (:func:`rest_stands`), else from the clip (:func:`standing_height`)."""
     _, P0 = rest_frames(jm.source)
     body = source_body(jm)
-    leg_length = _chain_length(jm.source, [leg.source_upper, leg.source_lower, leg.source_foot])
-    if float(P0[jm.hips[1], 1] - P0[leg.source_foot, 1]) > 0.5 * leg_length:
+    if rest_stands(jm.source, jm.hips[1], (leg.source_upper, leg.source_lower, leg.source_foot)):
         return float(P0[leg.source_foot, 1]) - lowest_rest_height(jm.source, body)
     return standing_height(positions, leg.source_foot, heel, body)
+
+
+def _pitch(v: torch.Tensor) -> torch.Tensor:
+    """Angle (radians) of ``v (..., 3)`` below the horizontal."""
+    return torch.atan2(-v[..., 1], v[..., [0, 2]].norm(dim=-1))
+
+
+def _standing_turns(jm: JointMap, leg: Leg, source_globals: torch.Tensor, R: torch.Tensor, planted: dict) -> torch.Tensor:
+    """(K, 4) world rotations ``Q R_b`` the transfer gives the target foot while the source stands: its
+    rest pose when that pose stands (``R_b`` alone: identical rigs are left unchanged), else the frames
+    its heel is planted (all frames when it never is)."""
+    if rest_stands(jm.source, jm.hips[1], (leg.source_upper, leg.source_lower, leg.source_foot)):
+        return R[leg.foot][None]
+    G0s, _ = rest_frames(jm.source)
+    a, T = jm.pairs[leg.foot], source_globals.shape[0]
+    M = quat_mul(source_globals[:, a].double(), quat_mul(quat_inverse(G0s[a]), R[leg.foot]).expand(T, 4))
+    on = planted.get(leg.source_foot)
+    return M[on] if on is not None and bool(on.any()) else M
+
+
+def foot_pitch_turns(
+    jm: JointMap, source_globals: torch.Tensor, R: torch.Tensor, planted: dict
+) -> dict[int, torch.Tensor]:
+    """{target foot and toes: (4,) world rotation ``C``} applied after the rest alignment (``R_b C``) so
+    that, over the frames the source's heel is planted (all frames when it never is), the target's
+    foot (ankle -> toes) has its own rest pitch. Copying the source's world direction instead stands a
+    flatter foot (a Mixamo ankle -> ball 27 degrees down, Bandai's 39) pitched down on its toes, its
+    heel and the whole body lifted 4-5 cm off the floor. ``C`` turns about the axis that the transfer
+    carries onto the standing foot's lateral axis, so it raises the toes whatever the rigs' bone rolls.
+    Only for legs with toes on both rigs (kinema.retarget.align for ``R``)."""
+    _, P0t = rest_frames(jm.target)
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)
+    out: dict[int, torch.Tensor] = {}
+    for leg in jm.legs:
+        if leg.toes is None or leg.source_toes is None:
+            continue
+        M = _standing_turns(jm, leg, source_globals, R, planted)
+        d = P0t[leg.toes] - P0t[leg.foot]
+        dw = quat_rotate(M, d.expand(M.shape[0], 3))
+        lateral = torch.linalg.cross(dw, up.expand_as(dw))
+        axis = quat_rotate(quat_inverse(M), lateral / lateral.norm(dim=-1, keepdim=True).clamp_min(1e-12)).mean(0)
+        if float(axis.norm()) < 0.5:
+            continue  # no consistent lateral axis (a foot pointing straight down while planted)
+        half = (_pitch(dw).median() - _pitch(d)) / 2  # > 0: standing steeper than at rest, raise the toes
+        out[leg.foot] = out[leg.toes] = torch.cat([half.cos()[None], half.sin() * axis / axis.norm()])
+    return out
 
 
 def floor_shift(jm: JointMap, positions: torch.Tensor) -> float:

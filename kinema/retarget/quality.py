@@ -1,7 +1,8 @@
 """How well a retargeted motion follows its source: the numbers docs/retarget.md tabulates per rig.
 
 - ``direction_deg``: mean and largest angle (degrees) between each mapped bone's world direction on
-  the target (joint -> mapped child) and the same bone on the source, over every frame;
+  the target (joint -> mapped child) and the same bone on the source, over every frame (not the
+  humanoid feet: they keep the character's own rest pitch);
 - ``skate_cm_s``: foot skate of source and target (kinema.postprocess.footlock.foot_skate: mean
   horizontal speed of the contact joints over consecutive planted frames, the source's planted flags
   for both), the target's divided by the body scale so both are in source centimetres per second;
@@ -22,8 +23,10 @@ from kinema.retarget.proportions import body_scale, lowest_rest_height, target_b
 
 
 def _bones(jm: JointMap) -> list[tuple[int, int, int, int]]:
-    """(target joint, target child, source joint, source child) of every mapped bone."""
-    return [(p, c, jm.pairs[p], jm.pairs[c]) for c, p in jm.chain_parent.items() if p in jm.pairs]
+    """(target joint, target child, source joint, source child) of every mapped bone, less the humanoid
+    feet (ankle -> toes), which keep the character's own rest pitch (kinema.retarget.proportions)."""
+    feet = {g.foot for g in jm.legs}
+    return [(p, c, jm.pairs[p], jm.pairs[c]) for c, p in jm.chain_parent.items() if p in jm.pairs and p not in feet]
 
 
 def direction_errors(source: Motion, target: Motion, jm: JointMap) -> torch.Tensor:
