@@ -54,6 +54,14 @@ def button(page, text: str):
     return page.get_by_role("button", name=text, exact=True)
 
 
+def folder_button(page, folder: str, label: str):
+    """The button ``label`` in the panel ``folder`` (collapsed by default), opening the folder first
+    when the button is hidden, so a test does not depend on an earlier test having opened it."""
+    if not button(page, label).is_visible():
+        page.get_by_text(folder, exact=True).click()
+    return button(page, label)
+
+
 def world_to_screen(camera, point, box: dict) -> tuple[float, float]:
     """Page pixel of a world point seen by ``camera`` (viser's CameraHandle: OpenCV convention, vertical
     fov) in a canvas at ``box`` (Playwright bounding box)."""

@@ -17,7 +17,7 @@ from tests.test_app_browser import _free_port, sync_api, wait_for
 # isort: split
 import kinema
 from kinema.app.server import AppServer
-from tests.browser import button, chromium, row_input, world_to_screen
+from tests.browser import button, chromium, folder_button, row_input, world_to_screen
 
 DRAFT_STEPS = 2  # a quick generation
 LONG_STEPS = 400  # a generation long enough to cancel (seconds of work)
@@ -54,13 +54,6 @@ def tab(app, browser):
     page.close()
 
 
-def upload_button(page, folder: str, label: str):
-    """The upload button ``label`` in the (collapsed by default) ``folder``."""
-    if not button(page, label).is_visible():
-        page.get_by_text(folder, exact=True).click()
-    return button(page, label)
-
-
 def set_steps(page, session, steps: int) -> None:
     box = row_input(page, "Steps")
     box.fill(str(steps))
@@ -80,7 +73,7 @@ def test_bad_session_is_refused_whole(tab, tmp_path):
     path = tmp_path / "long.json"
     path.write_text(json.dumps({"kinema_session": 1, "timeline": [{"prompt": "A person walks.", "seconds": 500}]}))
     with page.expect_file_chooser() as fc:
-        upload_button(page, "Files", "Load session").click()
+        folder_button(page, "Files", "Load session").click()
     fc.value.set_files(path)
     page.get_by_text("a segment lasts 0.5 to 60 s in the app").first.wait_for(timeout=10000)
     assert session.doc.timeline == before  # nothing half-applied
@@ -162,7 +155,7 @@ def test_closing_the_tab_stops_its_generation(app, browser):
 def test_a_fox_rig_fits_the_view(tab):
     page, session = tab
     with page.expect_file_chooser() as fc:
-        upload_button(page, "Rig", "Upload rig").click()
+        folder_button(page, "Rig", "Upload rig").click()
     fc.value.set_files(FOX)
     wait_for(lambda: session.rig.name == "Fox.glb" and session.views, timeout=60, what="the fox")
     page.get_by_text("playback only").first.wait_for(timeout=10000)  # the human model cannot drive a fox
