@@ -138,7 +138,9 @@ def _pitch(v: torch.Tensor) -> torch.Tensor:
     return torch.atan2(-v[..., 1], v[..., [0, 2]].norm(dim=-1))
 
 
-def _standing_turns(jm: JointMap, leg: Leg, source_globals: torch.Tensor, R: torch.Tensor, planted: dict) -> torch.Tensor:
+def _standing_turns(
+    jm: JointMap, leg: Leg, source_globals: torch.Tensor, R: torch.Tensor, planted: dict
+) -> torch.Tensor:
     """(K, 4) world rotations ``Q R_b`` the transfer gives the target foot while the source stands: its
     rest pose when that pose stands (``R_b`` alone: identical rigs are left unchanged), else the frames
     its heel is planted (all frames when it never is)."""
