@@ -40,7 +40,6 @@ from kinema.mesh import SkinnedMesh, vertex_normals
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
-
 #: every scene read, with the wrappers it handed out, kept until the process ends (module docstring)
 _KEPT: list = []
 
