@@ -78,13 +78,19 @@ def _no_poles(motion):
     return motion.prune([skeleton.names[j] for j in helpers(skeleton) if not skeleton.children[j]])
 
 
+def _ankles(r: dict) -> str:
+    if "ankle_cm" not in r:
+        return "n/a (no legs)"
+    return f"{r['ankle_source_cm']:.2f} / {r['ankle_cm']:.2f}"
+
+
 def _row(name: str, r: dict) -> str:
     skate = (
         f"{r['skate_source_cm_s']:.2f} / {r['skate_target_cm_s']:.2f}" if "skate_source_cm_s" in r else "n/a (no legs)"
     )
     return (
         f"| {name} | {r['scale']:.3g} | {r['direction_deg_mean']:.1f} / {r['direction_deg_max']:.1f} | {skate} "
-        f"| {r['lowest']:.4g} / {r['lowest_rest']:.4g} | {r['bone_drift_mm']:.2g} |"
+        f"| {r['lowest']:.4g} / {r['lowest_rest']:.4g} | {_ankles(r)} | {r['bone_drift_mm']:.2g} |"
     )
 
 
@@ -113,9 +119,9 @@ def main() -> None:
         targets[f"Quaternius {name}"] = load_character(q / name).skeleton
     print(
         "| rig | body scale | direction error, deg (mean / max) | skate, cm/s (source / character) "
-        "| lowest joint (clip / rest) | bone drift, mm |"
+        "| lowest joint (clip / rest) | planted feet above rest, cm (source / character) | bone drift, mm |"
     )
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     results = {}
     for name, skeleton in targets.items():
         jm = build_joint_map(source.skeleton, skeleton)

@@ -94,6 +94,11 @@ def run(args: argparse.Namespace) -> int:
         f"bone-length drift {r['bone_drift_mm']:.3g} mm",
         f"  lowest joint {r['lowest']:.4g} (rest pose: {r['lowest_rest']:.4g})",
     ]
+    if "ankle_cm" in r:
+        lines.append(
+            f"  planted feet above their rest height (source units): source {r['ankle_source_cm']:.2f} cm, "
+            f"character {r['ankle_cm']:.2f} cm"
+        )
     if "skate_source_cm_s" in r:
         lines.append(
             f"  foot skate (source units): source {r['skate_source_cm_s']:.2f} cm/s, "

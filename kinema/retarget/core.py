@@ -40,6 +40,7 @@ from kinema.retarget.proportions import (
     ground_root,
     lowest_rest_height,
     placed_positions,
+    planted_floor_shift,
     source_foot_height,
     target_body,
 )
@@ -154,7 +155,8 @@ def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
         fixed = set(jm.pairs) | {f for fs in jm.followers.values() for f in fs}
         fill_chain(G, jm.target, fixed)
         P = positions_from_globals(jm.target, G, placed)
-    lift = floor_shift(jm, P)
+    lift = planted_floor_shift(jm, P, Ps, planted) if jm.legs else None
+    lift = floor_shift(jm, P) if lift is None else lift
     placed = {j: p + torch.tensor([0.0, lift, 0.0], dtype=p.dtype) for j, p in placed.items()}
     placed.update(ground_root(jm, placed))
     P = positions_from_globals(jm.target, G, placed)

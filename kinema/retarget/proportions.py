@@ -185,3 +185,55 @@ def floor_shift(jm: JointMap, positions: torch.Tensor) -> float:
     """Vertical shift putting the clip's lowest body joint at the rest pose's lowest joint height."""
     body = target_body(jm)
     return lowest_rest_height(jm.target, body) - float(positions[:, body, 1].min())
+
+
+def source_standing_ankle(
+    jm: JointMap, leg: Leg, positions: torch.Tensor, heel: torch.Tensor, joint: int | None = None
+) -> float:
+    """Height (y, in the clip's frame) of the source's ankle (or ``joint`` of that leg, its toes) when it
+    stands: its rest pose's when that pose stands on the clip's floor (its lowest joint within a tenth
+    of the leg of the clip's lowest), else the median over the ``heel`` frames (planted; the lowest
+    height when there are none)."""
+    _, P0 = rest_frames(jm.source)
+    joint = leg.source_foot if joint is None else joint
+    chain = (leg.source_upper, leg.source_lower, leg.source_foot)
+    body = source_body(jm)
+    floor_gap = abs(lowest_rest_height(jm.source, body) - float(positions[:, body, 1].min()))
+    if rest_stands(jm.source, jm.hips[1], chain) and floor_gap < 0.1 * _chain_length(jm.source, list(chain)):
+        return float(P0[joint, 1])
+    y = positions[:, joint, 1]
+    return float(y[heel].median()) if bool(heel.any()) else float(y.min())
+
+
+def planted_joints(jm: JointMap, planted: dict) -> list[tuple[Leg, int, int, torch.Tensor]]:
+    """(leg, target joint, source joint, (T,) flags) standing on the floor: each ankle while its source
+    heel is planted, each ball of the foot (toes on both rigs) while only the source's toe is."""
+    out = []
+    for leg in jm.legs:
+        heel = planted.get(leg.source_foot)
+        if heel is not None and bool(heel.any()):
+            out.append((leg, leg.foot, leg.source_foot, heel))
+        toe = planted.get(leg.source_toes) if leg.source_toes is not None else None
+        if toe is not None and leg.toes is not None:
+            only = toe & ~heel if heel is not None else toe
+            if bool(only.any()):
+                out.append((leg, leg.toes, leg.source_toes, only))
+    return out
+
+
+def planted_floor_shift(
+    jm: JointMap, positions: torch.Tensor, source_positions: torch.Tensor, planted: dict
+) -> float | None:
+    """Vertical shift that stands a humanoid on its planted feet (:func:`planted_joints`): there the
+    target joint goes to its rest height plus the source joint's scaled height above its own standing
+    height (median over those frames). None without legs or planted frames (then :func:`floor_shift`).
+    The clip's lowest joint is no reference here: at a toe-off the ball of the foot dips below its
+    standing height (the default model's by 2 cm) and that lifted whole walks 3-4 cm off the floor."""
+    _, P0t = rest_frames(jm.target)
+    s = body_scale(jm)
+    gaps = []
+    for leg, joint, source_joint, on in planted_joints(jm, planted):
+        stand = source_standing_ankle(jm, leg, source_positions, on, source_joint)
+        want = float(P0t[joint, 1]) + s * (source_positions[on, source_joint, 1] - stand)
+        gaps.append(want - positions[on, joint, 1])
+    return float(torch.cat(gaps).median()) if gaps else None

@@ -6,7 +6,12 @@
 - ``skate_cm_s``: foot skate of source and target (kinema.postprocess.footlock.foot_skate: mean
   horizontal speed of the contact joints over consecutive planted frames, the source's planted flags
   for both), the target's divided by the body scale so both are in source centimetres per second;
-- ``lowest``: the target's lowest body joint over the clip and where its rest pose puts it;
+- ``lowest``: the target's lowest body joint over the clip and where its rest pose puts it (a toe-off
+  may dip below it, as the source's ball of the foot dips below its standing height);
+- ``ankle_cm`` / ``ankle_source_cm``: feet on the floor, the median over the frames a source foot is
+  planted of the target's ankle (heel planted) or ball of the foot (only the toe) above its rest
+  height, divided by the body scale, and of the source's above its standing height, source
+  centimetres (kinema.retarget.proportions.planted_joints);
 - ``bone_drift_mm``: the largest change of any bone length of the target against its rest offsets
   (joints placed in the world, such as the hips or IK feet, left out), in the target's units x 1000.
 """
@@ -17,9 +22,16 @@ import torch
 
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
+from kinema.retarget.align import rest_frames
 from kinema.retarget.core import source_planted
 from kinema.retarget.mapping import JointMap
-from kinema.retarget.proportions import body_scale, lowest_rest_height, target_body
+from kinema.retarget.proportions import (
+    body_scale,
+    lowest_rest_height,
+    planted_joints,
+    source_standing_ankle,
+    target_body,
+)
 
 
 def _bones(jm: JointMap) -> list[tuple[int, int, int, int]]:
@@ -61,6 +73,24 @@ def bone_drift(target: Motion, jm: JointMap) -> float:
     return worst
 
 
+def planted_ankles(source: Motion, target: Motion, jm: JointMap, planted: dict, s: float) -> dict:
+    """``ankle_cm`` and ``ankle_source_cm`` of the module docstring ({} without planted feet): ankles
+    while the heel is planted, balls of the feet while only the toe is (proportions.planted_joints)."""
+    _, P0t = rest_frames(jm.target)
+    Ps, Pt = source.positions.double(), target.positions.double()
+    mine, theirs = [], []
+    for leg, joint, source_joint, on in planted_joints(jm, planted):
+        stand = source_standing_ankle(jm, leg, Ps, on, source_joint)
+        mine.append((Pt[on, joint, 1] - float(P0t[joint, 1])) / s)
+        theirs.append(Ps[on, source_joint, 1] - stand)
+    if not mine:
+        return {}
+    return {
+        "ankle_cm": 100 * float(torch.cat(mine).median()),
+        "ankle_source_cm": 100 * float(torch.cat(theirs).median()),
+    }
+
+
 def retarget_report(source: Motion, target: Motion, jm: JointMap) -> dict:
     """The numbers of the module docstring as a JSON-friendly dict."""
     s = body_scale(jm)
@@ -75,6 +105,7 @@ def retarget_report(source: Motion, target: Motion, jm: JointMap) -> dict:
     out["lowest"] = float(target.positions[:, body, 1].min())
     out["lowest_rest"] = lowest_rest_height(target.skeleton, body)
     planted = source_planted(source)
+    out.update(planted_ankles(source, target, jm, planted, s))
     feet = [(g.foot, g.source_foot) for g in jm.legs if g.source_foot in planted]
     if feet:
         flags = torch.stack([planted[a] for _, a in feet], dim=1)
