@@ -7,14 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
-import torch
-
-from kinema.atomic_files import atomic_write_text
-from kinema.bench.stream import markdown, run_stream
 from kinema.cli._args import positive_float, positive_int
 from kinema.errors import KinemaError
-from kinema.generate import load_model
-from kinema.runtime import text_cache_dir
 
 
 def register_bench(targets) -> None:
@@ -34,6 +28,13 @@ def register_bench(targets) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import torch  # imported here: building the CLI's parser loads no model code (every command starts faster)
+
+    from kinema.atomic_files import atomic_write_text
+    from kinema.bench.stream import markdown, run_stream
+    from kinema.generate import load_model
+    from kinema.runtime import text_cache_dir
+
     if args.seconds > 7200:
         raise KinemaError(f"--seconds: at most 7200 (two hours of motion), got {args.seconds:g}")
     model = load_model(args.model, text_cache=text_cache_dir())
