@@ -222,3 +222,18 @@ def test_a_flatter_foot_stands_at_its_rest_height_and_pitch():
         rest_pitch = torch.rad2deg(torch.atan2(-d0[1], d0[[0, 2]].norm()))
         assert abs(float(pitch - rest_pitch)) < 3.0, (side, float(pitch), float(rest_pitch))
         assert abs(float(P[:, foot, 1].median() - P0[foot, 1])) < 0.015, side  # metres
+
+
+def test_a_bone_of_no_length_counts_no_direction_error():
+    """CMU files such as 01_01.bvh put ``Neck`` on ``Spine1`` (offset 0 0 0): that bone has no direction,
+    so it adds no error (it read 90 degrees on every frame)."""
+    rig = build_rig(CMU, axis=None, scale=100.0, name="cmu")
+    neck, head = rig.names.index("Neck"), rig.names.index("Head")
+    offsets = rig.offsets.clone()
+    offsets[head] += offsets[neck]
+    offsets[neck] = 0.0
+    rig = type(rig)(rig.names, rig.parents, offsets, name="cmu")
+    source = source_walk()
+    out = retarget(source, rig)
+    r = retarget_report(source, out, build_joint_map(source.skeleton, rig))
+    assert r["direction_deg_max"] < 45.0 and r["direction_deg_mean"] < 3.0, r

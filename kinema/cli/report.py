@@ -128,7 +128,7 @@ def print_report(result) -> None:
     for i, c in enumerate(rep.character):
         print(f"sample {i} on {c['character']}: size x{c['scale']:.2f}, limb directions within "
               f"{c['direction_deg_mean']:.1f} deg on average ({c['direction_deg_max']:.1f} at most), lowest joint "
-              f"{100 * c['lowest']:.1f} cm (rest {100 * c['lowest_rest']:.1f} cm)"
+              f"{c['lowest']:.3g} (rest {c['lowest_rest']:.3g}, the character's units)"
               + (f", planted feet {c['ankle_cm']:.1f} cm above their rest height (source {c['ankle_source_cm']:.1f})"
                  if "ankle_cm" in c else "")
               + "".join(f", target on {name} {err:.2f} cm" for name, err in c["targets_cm"].items()))

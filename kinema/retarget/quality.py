@@ -22,7 +22,7 @@ import torch
 
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
-from kinema.retarget.align import rest_frames
+from kinema.retarget.align import SHORT_BONE, rest_frames
 from kinema.retarget.core import source_planted
 from kinema.retarget.mapping import JointMap
 from kinema.retarget.proportions import (
@@ -42,13 +42,21 @@ def _bones(jm: JointMap) -> list[tuple[int, int, int, int]]:
 
 
 def direction_errors(source: Motion, target: Motion, jm: JointMap) -> torch.Tensor:
-    """(T, B) angles in degrees between target and source bone directions (module docstring)."""
+    """(T, B) angles in degrees between target and source bone directions (module docstring); bones
+    of no length at rest on either rig (CMU's ``Spine1 -> Neck``) have no direction and count 0."""
     Ps, Pt = source.positions.double(), target.positions.double()
     bones = _bones(jm)
+    _, P0s = rest_frames(jm.source)
+    _, P0t = rest_frames(jm.target)
+    tiny_t = SHORT_BONE * float(P0t[:, 1].max() - P0t[:, 1].min())
+    tiny_s = SHORT_BONE * float(P0s[:, 1].max() - P0s[:, 1].min())
+    real = torch.tensor(
+        [float((P0t[c] - P0t[p]).norm()) > tiny_t and float((P0s[d] - P0s[a]).norm()) > tiny_s for p, c, a, d in bones]
+    )
     vt = torch.stack([Pt[:, c] - Pt[:, p] for p, c, _, _ in bones], dim=1)
     vs = torch.stack([Ps[:, c] - Ps[:, p] for _, _, p, c in bones], dim=1)
     cos = torch.nn.functional.cosine_similarity(vt, vs, dim=-1).clamp(-1, 1)
-    return torch.rad2deg(torch.arccos(cos))
+    return torch.where(real, torch.rad2deg(torch.arccos(cos)), torch.zeros_like(cos))
 
 
 def _placed(jm: JointMap, target: Motion) -> set[int]:
