@@ -11,6 +11,7 @@ from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_normalize
 from kinema.io import load_motion
 from kinema.motion.core import Motion
+from kinema.skeleton import Skeleton
 from tests.test_skeleton import SCHEMES, humanoid
 
 
@@ -120,6 +121,26 @@ def test_npz_round_trip_and_contract(tmp_path):
         assert float(data["fps"]) == 30.0
     again = load_motion(path)
     assert torch.allclose(again.positions, m.positions, atol=1e-5)
+    assert again.skeleton.rest_rotations is None
+
+
+def test_npz_keeps_the_skeletons_rest_rotations(tmp_path):
+    """The default model's skeleton carries its standing rest pose; an npz without it made `kinema retarget
+    walk.npz --rig character` measure every bone from Bandai's +X rest (legs turned 180 degrees about
+    themselves on a skinned character). A zero-length rest quaternion is a one-line error."""
+    m = random_motion(dtype=torch.float32)
+    rest = torch.nn.functional.normalize(torch.randn(m.num_joints, 4, dtype=torch.float64), dim=-1)
+    skel = Skeleton(m.skeleton.names, m.skeleton.parents, m.skeleton.offsets, rest)
+    m = Motion(skel, m.fps, m.root_translation, m.local_rotations)
+    again = load_motion(m.save(tmp_path / "clip.npz"))
+    assert torch.allclose(again.skeleton.rest_rotations, skel.rest_rotations)
+    assert torch.allclose(again.positions, m.positions, atol=1e-5)
+    with np.load(tmp_path / "clip.npz", allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["rest_rotations"][2] = 0.0
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(KinemaError, match="'rest_rotations' holds 1 quaternion"):
+        load_motion(tmp_path / "bad.npz")
 
 
 def test_invalid_motion_and_files(tmp_path):

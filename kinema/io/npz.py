@@ -3,8 +3,10 @@
 Keys: ``joint_names`` (J,) str, ``parents`` (J,) int, ``fps`` float, ``positions`` (T, J, 3) global
 joint positions in metres Y-up, ``local_quats`` (T, J, 4) wxyz, ``root_translation`` (T, 3) metres,
 ``offsets`` (J, 3) metres; optional ``foot_contacts`` (T, C), one column per contact joint of the rig
-(human: [L heel, L toe, R heel, R toe]), and
-``local_translations`` (T, J, 3) metres (animated bone translations, see kinema.motion.core).
+(human: [L heel, L toe, R heel, R toe]),
+``local_translations`` (T, J, 3) metres (animated bone translations, see kinema.motion.core), and
+``rest_rotations`` (J, 4) wxyz (the skeleton's rest/bind rotations: the default model's standing rest
+pose, a GLB/FBX character's bind pose; retargeting measures every bone's turn from it).
 Arrays only, loaded with ``allow_pickle=False``.
 """
 
@@ -50,6 +52,8 @@ def save_npz(motion: Motion, path: str | Path) -> Path:
         arrays["foot_contacts"] = motion.foot_contacts.detach().cpu().numpy().astype(np.float32)
     if motion.local_translations is not None:
         arrays["local_translations"] = _float32(motion.local_translations)
+    if skel.rest_rotations is not None:
+        arrays["rest_rotations"] = skel.rest_rotations.numpy().astype(np.float64)
     for key, arr in arrays.items():
         if arr.dtype.kind == "f" and not np.isfinite(arr).all():
             raise KinemaError(f"{path}: '{key}' does not fit the npz format's float32 (values too large); "
@@ -75,7 +79,7 @@ def _arrays(path: Path, data) -> dict[str, np.ndarray]:
 def _check_finite(path: Path, data: dict[str, np.ndarray]) -> None:
     """Numeric arrays must be finite and fps positive: a one-line error naming the key and where."""
     for key in ("fps", "offsets", "root_translation", "local_quats", "positions", "foot_contacts",
-                "local_translations"):
+                "local_translations", "rest_rotations"):
         if key not in data:
             continue
         arr = data[key]
@@ -90,7 +94,7 @@ def _check_finite(path: Path, data: dict[str, np.ndarray]) -> None:
         raise KinemaError(f"{path}: 'fps' must be one positive number, got {fps.tolist()}")
 
 
-def _check_quats(path: Path, quats: np.ndarray) -> None:
+def _check_quats(path: Path, quats: np.ndarray, key: str = "local_quats") -> None:
     """A quaternion of (near) zero length is no rotation at all: refused, naming the frame and joint
     (normalising it would silently turn it into an arbitrary pose)."""
     if quats.ndim != 3 or quats.shape[-1] != 4:
@@ -99,7 +103,7 @@ def _check_quats(path: Path, quats: np.ndarray) -> None:
     bad = norms < MIN_QUAT_NORM
     if bad.any():
         frame, joint = np.argwhere(bad)[0].tolist()
-        raise KinemaError(f"{path}: 'local_quats' holds {int(bad.sum())} quaternion(s) of zero length (first at "
+        raise KinemaError(f"{path}: '{key}' holds {int(bad.sum())} quaternion(s) of zero length (first at "
                           f"frame {frame}, joint {joint}); each must be a rotation (w, x, y, z) of length 1")
 
 
@@ -121,7 +125,10 @@ def load_npz(path: str | Path, *, scale: float = 1.0) -> Motion:
     _check_finite(path, arrays)
     _check_quats(path, arrays["local_quats"])
     names = [str(n) for n in arrays["joint_names"]]
-    skel = Skeleton(names, arrays["parents"].tolist(), arrays["offsets"] * scale)
+    rest = arrays.get("rest_rotations")
+    if rest is not None:
+        _check_quats(path, rest[None], "rest_rotations")
+    skel = Skeleton(names, arrays["parents"].tolist(), arrays["offsets"] * scale, rest)
     contacts = torch.from_numpy(arrays["foot_contacts"]) if "foot_contacts" in arrays else None
     trans = None
     if "local_translations" in arrays:
