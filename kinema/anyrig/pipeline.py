@@ -215,9 +215,7 @@ class AnyRigPipeline(MotionPipeline):
             progress=progress,
             plan=plan,
         )
-        if not any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
-            steady = heading_from_rate(feats, rig_n.root, self.fps) if len(prompts) == 1 else feats  # not across joins
-            feats = _face(steady, rig_n.root, heading)
+        feats = self._orient(feats, rig_n.root, heading, constraints, one_prompt=len(prompts) == 1)
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
                                   segments=len(prompts), frames=T, seed=seed)
         t_sampled = time.perf_counter()
@@ -228,6 +226,14 @@ class AnyRigPipeline(MotionPipeline):
         report.timings = {"sampling": t_sampled - t0, "postprocess": report.seconds - (t_sampled - t0)}
         report.guidance = (guide.w_text, guide.w_constr)
         return GenerationResult(motions, report)
+
+    def _orient(self, feats: torch.Tensor, root: int, heading: float, constraints, *, one_prompt: bool) -> torch.Tensor:
+        """Sampled features facing ``heading`` at frame 0, unless a root path or keyframe fixes the facing; a
+        single prompt's heading is first read from the model's heading rate (kinema.anyrig.heading; not across
+        the joins of a timeline)."""
+        if any(isinstance(c, (RootPath, Keyframe, RootMotion)) for c in constraints):
+            return feats
+        return _face(heading_from_rate(feats, root, self.fps) if one_prompt else feats, root, heading)
 
     def rig_ties(self, rig, rig_m: Rig):
         """The joint ties of ``rig`` in its units (kinema.anyrig.tied): from its own clips when it is an
