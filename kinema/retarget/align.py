@@ -149,6 +149,40 @@ def transfer_rotations(
     return quat_normalize(out)
 
 
+def least_twist_globals(source_globals: torch.Tensor, source: Skeleton) -> torch.Tensor:
+    """(T, J, 4) world rotations like ``source_globals`` with the twist of every single-child bone (about
+    itself) rebuilt as the least turn from its parent: joint positions do not change.
+
+    A bone with one child shows its direction in the joint positions but not its twist, and a model's
+    output need not agree with itself there: the default human model's spine and shoulders come out
+    turned 90-180 degrees about themselves against the captures (its training clips include mirrored
+    ones, and a mirror turns such a twist the other way). A skinned character driven by those twists
+    wrings its torso. Here such a bone takes its parent's turn since rest, then the shortest arc onto its
+    own direction. A joint with several children (hips, chest) keeps its rotation, which its children's
+    positions fix; a joint with none (head, hand) keeps its rotation relative to its parent, so a hand
+    turns with its rebuilt forearm and keeps the wrist's own bend and turn."""
+    G0, P0 = rest_frames(source)
+    Gs = source_globals.double()
+    T = Gs.shape[0]
+    tiny = SHORT_BONE * float(max(P0[:, 1].max() - P0[:, 1].min(), 1e-9))
+    kids: dict[int, list[int]] = {j: [] for j in range(source.num_joints)}
+    for c, p in enumerate(source.parents):
+        if p >= 0 and float((P0[c] - P0[p]).norm()) > tiny:
+            kids[p].append(c)
+    given = quat_mul(Gs, quat_inverse(G0).expand(T, -1, 4))  # each joint's turn since rest
+    Q = given.clone()
+    for j, p in enumerate(source.parents):  # parents before children
+        if p < 0 or len(kids[j]) > 1:
+            continue
+        if not kids[j]:  # the parent's change, so the rotation relative to it stays
+            Q[:, j] = quat_mul(quat_mul(Q[:, p], quat_inverse(given[:, p])), given[:, j])
+            continue
+        d0 = (P0[kids[j][0]] - P0[j]).expand(T, 3)
+        carried = quat_rotate(Q[:, p], d0)
+        Q[:, j] = quat_mul(quat_between(carried, quat_rotate(given[:, j], d0)), Q[:, p])
+    return quat_normalize(quat_mul(Q, G0.expand(T, -1, 4)))
+
+
 def fill_chain(G: torch.Tensor, target: Skeleton, fixed: set[int]) -> None:
     """In place: every joint not in ``fixed`` gets its parent's world rotation times its rest local
     rotation (a root not in ``fixed`` keeps its rest rotation)."""

@@ -31,7 +31,14 @@ from kinema.geometry.rotations import quat_inverse, quat_mul, quat_rotate
 from kinema.motion.contacts import foot_contacts
 from kinema.motion.core import Motion
 from kinema.retarget import legs as leg_ik
-from kinema.retarget.align import bone_alignment, fill_chain, positions_from_globals, rest_frames, transfer_rotations
+from kinema.retarget.align import (
+    bone_alignment,
+    fill_chain,
+    least_twist_globals,
+    positions_from_globals,
+    rest_frames,
+    transfer_rotations,
+)
 from kinema.retarget.mapping import JointMap, build_joint_map
 from kinema.retarget.proportions import (
     body_scale,
@@ -142,6 +149,8 @@ def _target_contacts(jm: JointMap, planted: dict[int, torch.Tensor], T: int) -> 
 def retarget_with_map(motion: Motion, jm: JointMap) -> Motion:
     """:func:`retarget` with a ready joint map (kinema.retarget.mapping.build_joint_map)."""
     Gs, Ps = (x.double() for x in motion.global_transforms())
+    if jm.frames is not None:  # humanoids: no twist a skin would show that the joints do not
+        Gs = least_twist_globals(Gs, jm.source)
     s = body_scale(jm)
     R = bone_alignment(jm.target, jm.source, dict(jm.pairs), dict(jm.chain_parent), jm.frames, dict(jm.primary))
     planted = source_planted(motion)
