@@ -90,7 +90,8 @@ def _row(name: str, r: dict) -> str:
     )
     return (
         f"| {name} | {r['scale']:.3g} | {r['direction_deg_mean']:.1f} / {r['direction_deg_max']:.1f} | {skate} "
-        f"| {r['lowest']:.4g} / {r['lowest_rest']:.4g} | {_ankles(r)} | {r['bone_drift_mm']:.2g} |"
+        f"| {r['lowest']:.4g} / {r['lowest_rest']:.4g} | {_ankles(r)} | {r['bone_drift_mm']:.2g} "
+        f"| {r.get('twist_deg', 0.0):.0f} ({r.get('twist_bone', '-')}) |"
     )
 
 
@@ -119,9 +120,10 @@ def main() -> None:
         targets[f"Quaternius {name}"] = load_character(q / name).skeleton
     print(
         "| rig | body scale | direction error, deg (mean / max) | skate, cm/s (source / character) "
-        "| lowest joint (clip / rest) | planted feet above rest, cm (source / character) | bone drift, mm |"
+        "| lowest joint (clip / rest) | planted feet above rest, cm (source / character) | bone drift, mm "
+        "| largest bone turn about itself, deg (bone) |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     results = {}
     for name, skeleton in targets.items():
         jm = build_joint_map(source.skeleton, skeleton)

@@ -91,7 +91,12 @@ def run(args: argparse.Namespace) -> int:
         f"{args.out}: {out.num_frames} frames @ {out.fps:g} fps on {character.path.name} "
         f"({character.skeleton.num_joints} joints, {len(jm.pairs)} mapped by {jm.kind}), body scale {r['scale']:.4g}",
         f"  limb directions vs source: mean {r['direction_deg_mean']:.1f} deg, max {r['direction_deg_max']:.1f} deg; "
-        f"bone-length drift {r['bone_drift_mm']:.3g} mm",
+        f"bone-length drift {r['bone_drift_mm']:.3g} mm"
+        + (
+            f"; largest bone turn about itself {r['twist_deg']:.0f} deg ({r['twist_bone']})"
+            if "twist_bone" in r
+            else ""
+        ),
         f"  lowest joint {r['lowest']:.4g} (rest pose: {r['lowest_rest']:.4g})",
     ]
     if "ankle_cm" in r:

@@ -12,6 +12,9 @@
   planted of the target's ankle (heel planted) or ball of the foot (only the toe) above its rest
   height, divided by the body scale, and of the source's above its standing height, source
   centimetres (kinema.retarget.proportions.planted_joints);
+- ``twist_deg`` / ``twist_bone``: the largest turn of a target bone about itself against its rest,
+  relative to its parent (median over frames, degrees), and that bone: what a skin shows (a wrung
+  torso or wrist) and joint positions cannot;
 - ``bone_drift_mm``: the largest change of any bone length of the target against its rest offsets
   (joints placed in the world, such as the hips or IK feet, left out), in the target's units x 1000.
 """
@@ -20,9 +23,10 @@ from __future__ import annotations
 
 import torch
 
+from kinema.geometry.rotations import quat_inverse, quat_mul
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
-from kinema.retarget.align import SHORT_BONE, rest_frames
+from kinema.retarget.align import SHORT_BONE, rest_frames, rest_locals
 from kinema.retarget.core import source_planted
 from kinema.retarget.mapping import JointMap
 from kinema.retarget.proportions import (
@@ -81,6 +85,23 @@ def bone_drift(target: Motion, jm: JointMap) -> float:
     return worst
 
 
+def bone_twists(motion: Motion) -> dict[str, float]:
+    """{bone: median |turn| in degrees about itself against its rest, relative to its parent} of every
+    joint with a parent and a child (its axis: towards its first child)."""
+    sk = motion.skeleton
+    L, L0, T = motion.local_rotations.double(), rest_locals(sk), motion.num_frames
+    out = {}
+    for j, p in enumerate(sk.parents):
+        kids = [c for c, q in enumerate(sk.parents) if q == j and float(sk.offsets[c].norm()) > 1e-9]
+        if p < 0 or not kids:
+            continue
+        rel = quat_mul(quat_inverse(L0[j]).expand(T, 4), L[:, j])
+        axis = sk.offsets[kids[0]].double() / sk.offsets[kids[0]].double().norm()
+        turn = torch.rad2deg(2 * torch.atan2(rel[:, 1:] @ axis, rel[:, 0]))
+        out[sk.names[j]] = float(((turn + 180) % 360 - 180).abs().median())
+    return out
+
+
 def planted_ankles(source: Motion, target: Motion, jm: JointMap, planted: dict, s: float) -> dict:
     """``ankle_cm`` and ``ankle_source_cm`` of the module docstring ({} without planted feet): ankles
     while the heel is planted, balls of the feet while only the toe is (proportions.planted_joints)."""
@@ -109,6 +130,10 @@ def retarget_report(source: Motion, target: Motion, jm: JointMap) -> dict:
         "direction_deg_max": float(err.max()),
         "bone_drift_mm": 1000.0 * bone_drift(target, jm),
     }
+    twists = bone_twists(target)
+    if twists:
+        out["twist_bone"] = max(twists, key=twists.get)
+        out["twist_deg"] = twists[out["twist_bone"]]
     body = target_body(jm)
     out["lowest"] = float(target.positions[:, body, 1].min())
     out["lowest_rest"] = lowest_rest_height(target.skeleton, body)
