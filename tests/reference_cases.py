@@ -1,6 +1,8 @@
 """Fixed generation cases on the shipped human model whose outputs are recorded in
 tests/data/reference_outputs.npz (by scripts/record_reference_outputs.py, from the code before the
 rig/representation refactor of issue 14) and compared by tests/test_reference_outputs.py.
+`creature_cases` are the any-rig "creatures" model's cases on a Quaternius rig from the shared data
+(tests/data/reference_outputs_creatures.npz, recorded by the same script with ``--creatures``).
 
 Each case is ``(name, prompt_or_timeline, kwargs)``; keyframe poses are stored in the fixture itself
 (``input_kf_rot (K, J, 3)`` axis-angle, ``input_kf_root (K, 3)`` metres) so the case does not depend on
@@ -68,3 +70,21 @@ def cases(kf_rot: np.ndarray, kf_root: np.ndarray) -> list[tuple[str, object, di
             (f"timeline_{tag}", TIMELINE, {**base, "postprocess": post}),
         ]
     return out
+
+
+#: the creatures cases' rig, below the shared datasets folder (a test-split file of the creatures model)
+CREATURE_RIG = "quaternius/animals_pack/Alpaca.glb"
+#: a root path over the second second and the head at a point at frame 10 (character-frame JSON, rig metres)
+CREATURE_CONSTRAINTS = [
+    {"type": "root_path", "frames": [20, 39], "xz": [[0.0, 0.6], [0.3, 1.2]]},
+    {"type": "joint", "joint": "Head", "frame": 10, "position": [0.0, 1.8, 0.5]},
+]
+
+
+def creature_cases(rig: str) -> list[tuple[str, object, dict]]:
+    """Prompt only, and a root path plus a joint target, on ``rig`` (a GLB path): 2 s, 5 steps."""
+    base = {"steps": STEPS, "seed": 3, "seconds": 2.0, "rig": rig}
+    return [
+        ("creatures_text", "An alpaca walks forward.", base),
+        ("creatures_constrained", "An alpaca walks forward.", {**base, "constraints": CREATURE_CONSTRAINTS}),
+    ]
