@@ -12,12 +12,14 @@ from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_roo
 from kinema.anyrig.post import pin_root, root_pins, unmet_warnings
 from kinema.anyrig.sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.anyrig.targets import post_targets
+from kinema.anyrig.windows import single_plan
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_rotate
 from kinema.model.anyrig.config import get_anyrig_config
 from kinema.model.anyrig.loading import is_anyrig_checkpoint, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.motion.core import Motion
+from kinema.pipeline.request import GenerationRequest
 from kinema.postprocess.targets import PostTargets
 from kinema.representation.joint import JointRepresentation, yaw_quat
 from kinema.rig import Rig
@@ -122,14 +124,12 @@ def test_constraint_imputation_meets_targets(trained) -> None:
     out = sample_features(
         model.loaded.denoiser,
         codes,
-        frames=12,
+        GenerationRequest(steps=3, samples=1, seed=0),
+        plan=single_plan(12, model.loaded.config.window),
         text_emb=None,
         targets=feats,
         sampler=model.loaded.sampler,
         guidance=model.loaded.guidance,
-        steps=3,
-        samples=1,
-        generator=torch.Generator().manual_seed(0),
     )
     assert torch.allclose(out[0, 5, head, 0:3], torch.tensor([0.0, 0.35, 0.5]), atol=1e-5)
     # through the whole API: the residual is the head's distance from its target in the character frame

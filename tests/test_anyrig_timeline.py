@@ -20,6 +20,7 @@ from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
 from kinema.model.anyrig.config import get_anyrig_config
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
+from kinema.pipeline.request import GenerationRequest
 from kinema.rig import Rig
 
 creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
@@ -72,15 +73,12 @@ def test_every_frame_is_denoised_with_its_segments_prompt() -> None:
     out = sample_features(
         echo,
         codes,
-        frames=40,
+        GenerationRequest(steps=2, samples=2, seed=0),
+        plan=plan,
         text_emb=text,
         targets=None,
         sampler=DDIMSampler(),
         guidance=Guidance("regular", w_text=1.0),
-        steps=2,
-        samples=2,
-        generator=torch.Generator().manual_seed(0),
-        plan=plan,
     )
     v = out[0, :, 0, 0]
     assert (

@@ -122,9 +122,10 @@ class _FakeAnyRig(AnyRigModel):
     def frames(self, prompt, seconds=4.0) -> int:
         return self.clip.num_frames
 
-    def sample_on_rig(self, prompt, *, rig, samples, steps, seed, **_):
-        self.calls.append((prompt, rig.skeleton, samples, steps, seed))
-        return AnyRigResult([self.clip] * samples, AnyRigReport(seconds=0.1, steps=steps))
+    def sample_on_rig(self, request, *, rig, **_):
+        r = request
+        self.calls.append((r.prompt if r.timeline is None else r.timeline, rig.skeleton, r.samples, r.steps, r.seed))
+        return AnyRigResult([self.clip] * r.samples, AnyRigReport(seconds=0.1, steps=r.steps))
 
 
 def test_any_rig_model_gets_the_timeline_and_the_shown_rig(tmp_path):

@@ -140,16 +140,20 @@ class AnyRigPipeline(MotionPipeline):
         r = request
         _refuse_unsupported(r, self.path.name)
         rig = self.resolve_rig(r.rig)
-        what = r.prompt if r.timeline is None else r.timeline
-        kw = dict(seconds=self.default_seconds if r.seconds is None else r.seconds, steps=r.steps, seed=r.seed,
-                  guidance=r.guidance, heading=r.heading, postprocess=r.postprocess,
-                  progress=progress if callable(progress) else None)
-        own, world = self._constraints(r, rig, what, kw["seconds"])
+        fn = progress if callable(progress) else None
+        own, world = self._constraints(r, rig, self._what(r), self._seconds(r))
         if not world:
-            return self.sample_on_rig(what, rig=rig, constraints=own, samples=r.samples, **kw)
-        res, notes, _ = generate_world(self, what, rig=rig, constraints=world, extra=own, samples=r.samples, **kw)
+            return self.sample_on_rig(r, rig=rig, constraints=own, progress=fn)
+        res, notes, _ = generate_world(self, r, rig=rig, constraints=world, extra=own, progress=fn)
         res.report.left_out = notes
         return res
+
+    def _what(self, r: GenerationRequest):
+        """The request's prompt, or its timeline when it has one."""
+        return r.prompt if r.timeline is None else r.timeline
+
+    def _seconds(self, r: GenerationRequest) -> float:
+        return self.default_seconds if r.seconds is None else r.seconds
 
     def _constraints(self, r: GenerationRequest, rig: Rig, what, seconds: float) -> tuple[list, list[dict]]:
         """(any-rig constraint objects, world-frame JSON constraints) of a request. A list may mix both
@@ -168,31 +172,28 @@ class AnyRigPipeline(MotionPipeline):
 
     def sample_on_rig(
         self,
-        prompt: str | Sequence | Path,
+        request: GenerationRequest,
         *,
         rig: str | Path | Skeleton | Rig,
-        seconds: float = 4.0,
         constraints: Sequence[Constraint] = (),
-        samples: int = 1,
-        steps: int | None = None,
-        seed: int = 0,
-        guidance: Guidance | tuple[float, float] | None = None,
-        heading: float = 0.0,
-        postprocess: bool = True,
         progress: ProgressFn | None = None,
     ) -> GenerationResult:
-        """``samples`` motions on ``rig`` for ``prompt`` and ``constraints`` (kinema.constraints.character;
-        frames at the model's fps, counted over the whole motion).
+        """``request.samples`` motions on ``rig`` for the request's prompt or timeline and ``constraints``
+        (kinema.constraints.character, frames at the model's fps, counted over the whole motion; the
+        request's own ``constraints`` and ``rig`` are not read here: `run` converts them).
 
-        ``prompt`` is a text ("" = no text) held for ``seconds``, or a timeline (kinema.pipeline.timeline)
-        whose segments are denoised together by windows that re-play the end of the previous segment and are
-        cross-faded with it (kinema.anyrig.windows). ``heading`` (radians, +Z towards +X): the facing at
-        frame 0 unless a root path or keyframe fixes it. ``progress(done, total)``: after every step."""
+        A prompt ("" = no text) is held for ``request.seconds`` (default `default_seconds`); a timeline
+        (kinema.pipeline.timeline) has its segments denoised together by windows that re-play the end of the
+        previous segment and are cross-faded with it (kinema.anyrig.windows). ``request.heading`` (radians,
+        +Z towards +X): the facing at frame 0 unless a root path or keyframe fixes it. Also read: steps,
+        seed, guidance, postprocess. ``progress(done, total)``: after every step."""
+        r = request
+        samples, seed, heading, postprocess = r.samples, r.seed, r.heading, r.postprocess
         t0 = time.perf_counter()
         if isinstance(samples, bool) or not isinstance(samples, int) or samples < 1:
             raise KinemaError(f"samples must be a positive integer, got {samples!r}")
-        steps = self._steps(steps)
-        prompts, plan = self._plan(prompt, seconds)
+        steps = self._steps(r.steps)
+        prompts, plan = self._plan(self._what(r), self._seconds(r))
         T = plan.frames
         rig_m = self.resolve_rig(rig)
         check_rig_joints(rig_m.num_joints, f"rig {rig}" if isinstance(rig, str | Path) else "rig")
@@ -200,20 +201,17 @@ class AnyRigPipeline(MotionPipeline):
         rig_n = rep_n.rig
         constraints = list(constraints)
         targets = rep_n.encode(constraints, scale, T) if constraints else None
-        guide = self._guidance(guidance)
+        guide = self._guidance(r.guidance)
         feats = sample_features(
             self.loaded.denoiser,
             batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),
-            frames=T,
+            r.replace(steps=steps),
+            plan=plan,
             text_emb=self._texts(prompts),
             targets=targets,
             sampler=self.loaded.sampler,
             guidance=guide,
-            steps=steps,
-            samples=samples,
-            generator=torch.Generator().manual_seed(seed),
             progress=progress,
-            plan=plan,
         )
         feats = self._orient(feats, rig_n.root, heading, constraints, one_prompt=len(prompts) == 1)
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,

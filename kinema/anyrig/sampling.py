@@ -24,15 +24,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import torch
 
-from kinema.anyrig.windows import WindowPlan, single_plan, window_starts, window_weights
+from kinema.anyrig.windows import WindowPlan, window_starts, window_weights
 from kinema.diffusion.guidance import Guidance, combine, split_branches
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.model.anyrig.denoiser import AnyRigDenoiser
 from kinema.model.skeleton_codes import CodeBatch
 from kinema.representation.joint import FeatureTargets
+
+if TYPE_CHECKING:
+    from kinema.pipeline.request import GenerationRequest
 
 #: the largest text guidance weight of the root row (see the module docstring)
 ROOT_TEXT_WEIGHT = 1.0
@@ -120,26 +124,24 @@ class WindowDenoiser:
 def sample_features(
     model: AnyRigDenoiser,
     codes: CodeBatch,
+    request: GenerationRequest,
     *,
-    frames: int,
+    plan: WindowPlan,
     text_emb: torch.Tensor | None,
     targets: FeatureTargets | None,
     sampler: DDIMSampler,
     guidance: Guidance,
-    steps: int,
-    samples: int,
-    generator: torch.Generator,
     progress: Callable[[int, int], None] | None = None,
-    plan: WindowPlan | None = None,
 ) -> torch.Tensor:
-    """Un-normalised features ``(samples, frames, J, C)`` for the single rig of ``codes``; ``plan`` (default:
-    one prompt, `single_plan`) places the windows and gives each one a row of ``text_emb (P, D)``."""
-    plan = single_plan(frames, model.config.window) if plan is None else plan
-    if plan.frames != frames:
-        raise ValueError(f"window plan for {plan.frames} frames, asked for {frames}")
+    """Un-normalised features ``(request.samples, plan.frames, J, C)`` for the single rig of ``codes``;
+    ``plan`` (one prompt: `single_plan`) places the windows and gives each one a row of ``text_emb (P, D)``.
+    The request gives the samples, the seed (a fresh generator) and the steps (None: the sampler's); the
+    caller resolves its guidance (with the model's defaults) into ``guidance``."""
+    steps = sampler.num_inference_steps if request.steps is None else request.steps
+    generator = torch.Generator().manual_seed(request.seed)
     den = WindowDenoiser(model, codes, plan, text_emb, targets, guidance)
     J, C = codes.joint_mask.shape[1], model.config.channels
-    x = torch.randn(samples, frames, J, C, generator=generator)
+    x = torch.randn(request.samples, plan.frames, J, C, generator=generator)
     ts = spaced_timesteps(sampler.num_train_steps, steps, sampler.timestep_spacing)
     for i, (t, prev) in enumerate(zip(ts, ts[1:] + [-1], strict=True)):
         x0 = den(x, t)

@@ -172,28 +172,26 @@ def to_anyrig(
     return out, notes
 
 
-def generate_world(model, prompt, *, rig: Skeleton | Rig, constraints: list[dict], extra: list[Constraint] = (),
-                   samples: int = 1, progress=None, **kw):
-    """``model.sample_on_rig(prompt, rig=rig, ...)`` (kinema.anyrig.pipeline) for JSON-form world
+def generate_world(model, request, *, rig: Skeleton | Rig, constraints: list[dict], extra: list[Constraint] = (),
+                   progress=None):
+    """``model.sample_on_rig(request, rig=rig, ...)`` (kinema.anyrig.pipeline) for JSON-form world
     ``constraints`` (see the module docstring) and any-rig constraints ``extra`` (after them, so that
     their root rows win where both set the root, e.g. a stream's context), the result, the notes of
     what was left out, and the wall time of both passes (s). ``progress(done, total)`` runs over both
-    passes as one bar; ``kw`` goes to ``sample_on_rig``."""
+    passes as one bar; the first pass makes one sample without post-processing."""
     skeleton = rig.skeleton if isinstance(rig, Rig) else rig
     cons, notes = to_anyrig(constraints, skeleton, model.fps)
     cons += list(extra)
     targets = [c for c in cons if isinstance(c, JointTarget)]
     if not targets:
-        res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=progress, **kw)
+        res = model.sample_on_rig(request, rig=rig, constraints=cons, progress=progress)
         return res, notes, res.report.seconds
-    first_kw = kw | {"postprocess": False}
-    first = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=1, progress=_pass(progress, 0),
-                                **first_kw)
+    first = model.sample_on_rig(request.replace(samples=1, postprocess=False), rig=rig, constraints=cons,
+                                progress=_pass(progress, 0))
     reference = first.motions[0]
     cons, _ = to_anyrig(constraints, skeleton, model.fps, reference=reference)
     cons += [*extra, RootMotion(motion=reference, until=max(t.frame for t in targets) + 1)]
-    res = model.sample_on_rig(prompt, rig=rig, constraints=cons, samples=samples, progress=_pass(progress, 1),
-                              **kw)
+    res = model.sample_on_rig(request, rig=rig, constraints=cons, progress=_pass(progress, 1))
     return res, notes, first.report.seconds + res.report.seconds
 
 
