@@ -16,7 +16,7 @@ import torch
 
 import kinema
 from kinema.app import edits
-from kinema.app.camera import character_extent, frame_view
+from kinema.app.camera import CameraFollow, character_extent, frame_view
 from kinema.app.constraint_panel import _default_joint
 from kinema.app.document import (
     Settings,
@@ -120,6 +120,37 @@ def test_framing_fits_a_small_and_a_large_character():
     positions[:, :, 2] = np.arange(5)[:, None]  # walking along +Z
     ext = character_extent(positions, 4, [0.0, -1.6])
     assert ext[:, 0].min() == pytest.approx(-1.6) and ext[:, 2].max() == pytest.approx(4.0)
+
+
+class _Camera:
+    """A tab's camera as viser keeps it: position, look-at, fov and the page's update callbacks."""
+
+    def __init__(self, position, look_at):
+        self.position, self.look_at, self.fov, self.callbacks = position, look_at, math.radians(75), []
+
+    def on_update(self, fn):
+        self.callbacks.append(fn)
+
+    def report(self, position, look_at):  # the page says where its camera is
+        self.position, self.look_at = position, look_at
+        for fn in self.callbacks:
+            fn(self)
+
+
+def test_a_late_starting_view_does_not_undo_the_framing():
+    """Seen on a loaded machine: the page set up its starting view after the first framing had reached
+    it, and the character stood small in a corner until the user moved the camera."""
+    start = ((4.4, 4.6, 1.0), (0.0, 0.2, 3.4))
+    cam = _Camera(*start)
+    follow = CameraFollow(SimpleNamespace(camera=cam), lambda: True, start_view=start)
+    follow.frame(np.array([[0.0, 0.0, 0.0], [0.0, 1.7, 0.0]]), np.zeros(3))
+    framed = (tuple(cam.position), tuple(cam.look_at))
+    cam.report(*start)  # the page's own starting view arrives late
+    assert np.allclose(cam.position, framed[0]) and np.allclose(cam.look_at, framed[1])
+    cam.report(*framed)  # the page shows the framing: from now on its views are the user's
+    for view in (((2.0, 1.0, 2.0), (0.0, 0.9, 0.0)), start):  # an orbit, a script's reset to the start
+        cam.report(*view)
+        assert cam.position == view[0] and cam.look_at == view[1]
 
 
 def test_warnings_are_short_in_status_and_toast():

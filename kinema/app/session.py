@@ -82,7 +82,12 @@ class Session:
         )
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
-        self.camera = CameraFollow(client, lambda: bool(self.player.follow.value) and self.player.playing)
+        start = app.server.initial_camera
+        self.camera = CameraFollow(
+            client,
+            lambda: bool(self.player.follow.value) and self.player.playing,
+            start_view=(start.position, start.look_at),
+        )
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
         self.rig_panel = RigPanel(gui, self)
