@@ -88,14 +88,16 @@ def test_sampled_keyjoints_meet_their_targets_exactly_and_follow_far_ones() -> N
     kj = KeyjointDenoiser(KeyjointConfig(width=32, layers=1, heads=2, text_dim=8)).eval()
     T = 40
     plan = _plan(T, [(0, 0, [0, 0.9, 0]), (20, 3, [0.5, 1.2, 2.0]), (39, 0, [0.2, 0.9, 5.0])])
-    args = (kj, DDIMSampler(), torch.randn(1, 8), torch.tensor([[1.0, 0.0]]), plan)
-    out = sample_keyjoints(*args, fps=20.0, steps=4, generator=torch.Generator().manual_seed(0))
+    planner = KeyjointPlanner(kj, DDIMSampler(), {}, steps=4)
+    args = (torch.randn(1, 8), torch.tensor([[1.0, 0.0]]), plan)
+    out = sample_keyjoints(planner, *args, fps=20.0, generator=torch.Generator().manual_seed(0))
     m = plan.k_mask > 0
     assert torch.allclose(out[m], plan.k_tgt[m], atol=1e-5) and torch.isfinite(out).all()
     # an untrained network: the displacement alone carries the pelvis towards the far target
     assert 1.5 < float(out[0, 30, 2]) < 5.0
     raw = sample_keyjoints(
-        *args, fps=20.0, steps=4, sigma_seconds=0.0, smooth_seconds=0.0, generator=torch.Generator().manual_seed(0)
+        dataclasses.replace(planner, sigma_seconds=0.0, smooth_seconds=0.0), *args, fps=20.0,
+        generator=torch.Generator().manual_seed(0),
     )
     assert abs(float(raw[0, 30, 2])) < 1.5  # imputation alone leaves it where the network put it
 

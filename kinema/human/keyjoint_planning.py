@@ -177,25 +177,23 @@ def displace_keyjoints(
 
 @torch.no_grad()
 def sample_keyjoints(
-    model: KeyjointDenoiser,
-    sampler: DDIMSampler,
+    planner: KeyjointPlanner,
     text_emb: torch.Tensor | None,
     c_dir: torch.Tensor,
     plan: KeyjointPlanTargets,
     *,
     fps: float,
-    steps: int = KEYJOINT_STEPS,
-    w_text: float = KEYJOINT_TEXT_WEIGHT,
-    sigma_seconds: float = KEYJOINT_SIGMA_SECONDS,
-    smooth_seconds: float = KEYJOINT_SMOOTH_SECONDS,
     generator: torch.Generator | None = None,
 ) -> torch.Tensor:
-    """Dense keyjoints ``(B, T, 20)`` (metres) meeting ``plan``'s joint targets exactly.
+    """Dense keyjoints ``(B, T, 20)`` (metres) meeting ``plan``'s joint targets exactly, in
+    ``planner.steps`` DDIM steps of ``planner.model`` / ``planner.sampler``.
 
-    Classifier-free text guidance ``x0 = D_none + w (D_text - D_none)`` (both branches see the targets),
-    then :func:`displace_keyjoints` (``sigma_seconds = 0`` turns it off: imputation alone), then the
-    targets are imputed into the clean estimate. The result is low-passed with a Gaussian of
-    ``smooth_seconds`` (0 = off), bent back onto the targets and imputed once more."""
+    Classifier-free text guidance ``x0 = D_none + w (D_text - D_none)`` (``w = planner.w_text``; both
+    branches see the targets), then :func:`displace_keyjoints` (``planner.sigma_seconds = 0`` turns it
+    off: imputation alone), then the targets are imputed into the clean estimate. The result is low-passed
+    with a Gaussian of ``planner.smooth_seconds`` (0 = off), bent back onto the targets and imputed once more."""
+    model, sampler, steps = planner.model, planner.sampler, planner.steps
+    w_text, sigma_seconds, smooth_seconds = planner.w_text, planner.sigma_seconds, planner.smooth_seconds
     B, T, C = plan.k_tgt.shape
     k_mask = plan.k_mask
     tgt = model.normalize(plan.k_tgt) * k_mask
@@ -289,7 +287,8 @@ def with_keyjoint_plan(
 @dataclass(frozen=True)
 class KeyjointPlanner:
     """A loaded keyjoint denoiser with its DDIM sampler and training facts (``info``), as
-    ``KinemaModel.generate(..., keyjoint_model=...)`` uses it."""
+    ``KinemaModel.generate(..., keyjoint_model=...)`` uses it, and the stage-1 sampler settings
+    :func:`sample_keyjoints` reads (steps, text weight, displacement and smoothing seconds)."""
 
     model: KeyjointDenoiser
     sampler: DDIMSampler
@@ -298,6 +297,9 @@ class KeyjointPlanner:
     refine: int = REFINE_PASSES
     refine_strength: float = REFINE_STRENGTH
     first_pass_share: float = FIRST_PASS_SHARE
+    w_text: float = KEYJOINT_TEXT_WEIGHT
+    sigma_seconds: float = KEYJOINT_SIGMA_SECONDS
+    smooth_seconds: float = KEYJOINT_SMOOTH_SECONDS
 
     @staticmethod
     def check(name_or_path: str | Path) -> Path:
@@ -341,16 +343,7 @@ def sample_with_keyjoint_plan(
     the same noise with the planned keyjoints moved on by the (smoothed) miss the previous pass left;
     ``on_step`` counts the steps of all passes."""
     plan = KeyjointPlanTargets(targets, rep, settings.num_frames)
-    keys = sample_keyjoints(
-        planner.model,
-        planner.sampler,
-        text_emb,
-        targets.c_dir.float(),
-        plan,
-        fps=rep.fps,
-        steps=planner.steps,
-        generator=generator,
-    )
+    keys = sample_keyjoints(planner, text_emb, targets.c_dir.float(), plan, fps=rep.fps, generator=generator)
     noise = None if generator is None else generator.get_state()
     passes, count = 1 + planner.refine, kwargs.pop("on_step", None)
     refine = replace(settings, strength=planner.refine_strength)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -24,6 +25,9 @@ from kinema.motion.core import Motion
 from kinema.objectives.io import ObjectiveError, bind_objectives, load_objectives
 from kinema.objectives.snap import snap_constraints
 from kinema.objectives.terms import Bound
+
+if TYPE_CHECKING:
+    from kinema.human.pipeline import HumanPipeline, SamplingCall
 
 
 def collect_objectives(constraints, objectives, skeleton, fps: float, num_frames: int) -> list[Bound]:
@@ -42,30 +46,32 @@ def collect_objectives(constraints, objectives, skeleton, fps: float, num_frames
 
 
 def sample_with_objectives(
-    model,
+    model: HumanPipeline,
     plan: SegmentPlan,
+    call: SamplingCall,
     settings: SampleSettings,
-    text: torch.Tensor | None,
-    g: torch.Generator,
-    heading: float,
-    samples: int,
     bound: list[Bound],
     opt: NoiseOptSettings,
-    progress: bool,
+    *,
+    progress: bool = False,
 ) -> tuple[list[Motion], list[SegmentPlan], dict]:
-    """``samples`` raw motions meeting ``bound``, the plan that post-processes each (the call's plan plus
-    its snapped targets) and the optimisation report (see optimise_noise; ``"optimised"`` holds the
-    values before snapping, ``"after"`` those of the returned raw motions)."""
+    """``call.samples`` raw motions meeting ``bound``, the plan that post-processes each (the call's plan
+    plus its snapped targets) and the optimisation report (see optimise_noise; ``"optimised"`` holds the
+    values before snapping, ``"after"`` those of the returned raw motions). The noise comes from
+    ``call.generator``; the prompt is the segment's, embedded as ``call.texts`` holds it; ``settings``
+    (not ``call``) give guidance and DDIM steps (:func:`objective_settings`)."""
     if len(plan.segments) != 1:
         raise KinemaError(
             f"objectives need a single motion of at most {model.max_seconds:g} s; "
             f"this call has {len(plan.segments)} segments"
         )
+    heading, samples = call.heading, call.samples
+    text = model._text(plan.segments[0].prompt, call.texts)
     targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
     rep, L = model.representation, model.loaded
     text = None if text is None else text.expand(samples, -1)
     feats, z, report = optimise_noise(
-        L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=g, progress=progress
+        L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=call.generator, progress=progress
     )
     plans, counts = [plan] * samples, [0] * samples
     if opt.snap:

@@ -159,16 +159,15 @@ class HumanPipeline(MotionPipeline):
         bound = collect_objectives(constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
         planner = self._planner(r.keyjoint_model, plan, bound)
         obj_report: dict = {}
+        call = SamplingCall(guide, steps, g, heading, samples, texts, planner)
         if bound:
             settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
                                           DEFAULT_DDIM_STEPS)
             steps = settings.steps
             opt = NoiseOptSettings(DEFAULT_ITERATIONS if r.objective_steps is None else r.objective_steps)
-            text = self._text(plan.segments[0].prompt, texts)
-            raw, plans, obj_report = sample_with_objectives(self, plan, settings, text, g, heading, samples, bound,
-                                                            opt, split_progress(progress)[0])
+            raw, plans, obj_report = sample_with_objectives(self, plan, call, settings, bound, opt,
+                                                            progress=split_progress(progress)[0])
         else:
-            call = SamplingCall(guide, steps, g, heading, samples, texts, planner)
             raw = self._sample_batch(plan, call, progress)
             plans = [plan] * samples
         t_sampled = time.perf_counter()
