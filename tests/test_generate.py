@@ -284,13 +284,12 @@ def test_unconstrained_samples_start_at_the_origin_with_a_smooth_root(model):
     L = model.loaded
     text = model.encode_text("a person walks")
     targets = SampleTargets(torch.tensor([[1.0, 0.0]]))
-    f = sample_features(L.denoiser, L.sampler, L.representation, text, targets,
-                        SampleSettings(40, L.guidance, steps=5), generator=torch.Generator().manual_seed(0))[0]
+    f = sample_features(L, text, targets, SampleSettings(40, L.guidance, steps=5),
+                        generator=torch.Generator().manual_seed(0))[0]
     assert f[0, [0, 2]].abs().max() < 1e-5
     accel = (f[2:, [0, 2]] - 2 * f[1:-1, [0, 2]] + f[:-2, [0, 2]]).norm(dim=-1)
     off = SampleSettings(40, L.guidance, steps=5, root_smoothing=0.0, root_displacement=False)
-    raw = sample_features(L.denoiser, L.sampler, L.representation, text, targets, off,
-                          generator=torch.Generator().manual_seed(0))[0]
+    raw = sample_features(L, text, targets, off, generator=torch.Generator().manual_seed(0))[0]
     accel_raw = (raw[2:, [0, 2]] - 2 * raw[1:-1, [0, 2]] + raw[:-2, [0, 2]]).norm(dim=-1)
     assert accel.mean() < 0.5 * accel_raw.mean()
 

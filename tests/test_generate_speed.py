@@ -85,10 +85,10 @@ def _rowwise(monkeypatch):
     """Replace the batched sampling by one call per sample, fed the same noise rows from the same generator."""
     real = api.sample_features
 
-    def one_by_one(denoiser, sampler, rep, text, targets, settings, *, generator, **kw):
+    def one_by_one(loaded, text, targets, settings, *, generator, **kw):
         B = targets.batch_size
-        noise = torch.randn((B, settings.num_frames, rep.dim), generator=generator)
-        rows = [real(denoiser, sampler, rep, None if text is None else text[i : i + 1], targets.rows(i, i + 1),
+        noise = torch.randn((B, settings.num_frames, loaded.representation.dim), generator=generator)
+        rows = [real(loaded, None if text is None else text[i : i + 1], targets.rows(i, i + 1),
                      settings, generator=generator, init_noise=noise[i : i + 1], **kw)
                 for i in range(B)]
         return torch.cat(rows)
@@ -117,10 +117,10 @@ def test_segments_on_their_own_then_each_samples_join_window(model, monkeypatch)
     seen, joins = [], []
     real = api.sample_features
 
-    def spy(denoiser, sampler, rep, text, targets, settings, **kw):
+    def spy(loaded, text, targets, settings, **kw):
         seen.append((targets.x_tgt.clone(), targets.mask.clone(), targets.c_dir.clone(), targets.start))
         joins.append(targets.context_mask)
-        return real(denoiser, sampler, rep, text, targets, settings, **kw)
+        return real(loaded, text, targets, settings, **kw)
 
     monkeypatch.setattr(api, "sample_features", spy)
     model.generate([(PROMPT, 1.0), ("A person waves.", 1.0)], samples=2, steps=3, seed=1, postprocess=False)
@@ -145,9 +145,9 @@ def test_chunked_batches_give_the_same_rows(model, batch_sizes):
     c_dir = torch.tensor([[1.0, 0.0]]).expand(5, 2)
 
     def run(max_batch_frames):
-        return sample_features(L.denoiser, L.sampler, L.representation, text, SampleTargets(c_dir),
-                               SampleSettings(20, L.guidance, steps=3), generator=torch.Generator().manual_seed(2),
-                               max_batch_frames=max_batch_frames)
+        return sample_features(L, text, SampleTargets(c_dir),
+                               SampleSettings(20, L.guidance, steps=3, max_batch_frames=max_batch_frames),
+                               generator=torch.Generator().manual_seed(2))
 
     whole = run(10_000)
     assert batch_sizes == [10] * 3

@@ -87,8 +87,8 @@ def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
     gt = canonicalize_start(trainer.batches.clips[0][None], trainer.layout)[0]
     text = trainer.text_table[:1]
     settings = SampleSettings(40, loaded.guidance.__class__(mode="none"), steps=20)
-    out = sample_features(loaded.denoiser, loaded.sampler, loaded.representation, text, SampleTargets(gt[None, 0, 3:5]),
-                          settings, generator=torch.Generator().manual_seed(0))
+    out = sample_features(loaded, text, SampleTargets(gt[None, 0, 3:5]), settings,
+                          generator=torch.Generator().manual_seed(0))
     pos = features_to_motion(out[0], loaded.skeleton, loaded.fps).positions
     ref = features_to_motion(gt, loaded.skeleton, loaded.fps).positions
     err = (pos - ref).norm(dim=-1).mean().item()

@@ -35,8 +35,8 @@ from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.errors import KinemaError
 from kinema.human.keyjoints import KeyjointTargets, gaussian_spread
 from kinema.human.sampling import SampleSettings, SampleTargets, sample_features
-from kinema.model.denoiser import Denoiser
 from kinema.model.keyjoint import KeyjointDenoiser, load_keyjoint_model
+from kinema.model.loading import LoadedModel
 from kinema.model.precision import set_precision
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
@@ -326,9 +326,7 @@ class KeyjointPlanner:
 
 
 def sample_with_keyjoint_plan(
-    denoiser: Denoiser,
-    sampler: DDIMSampler,
-    rep: FlatRepresentation,
+    loaded: LoadedModel,
     text_emb: torch.Tensor | None,
     targets: SampleTargets,
     settings: SampleSettings,
@@ -342,6 +340,7 @@ def sample_with_keyjoint_plan(
     (``kwargs`` go there: progress, on_step...), then ``planner.refine`` passes re-sample the body from
     the same noise with the planned keyjoints moved on by the (smoothed) miss the previous pass left;
     ``on_step`` counts the steps of all passes."""
+    sampler, rep = loaded.sampler, loaded.representation
     plan = KeyjointPlanTargets(targets, rep, settings.num_frames)
     keys = sample_keyjoints(planner, text_emb, targets.c_dir.float(), plan, fps=rep.fps, generator=generator)
     noise = None if generator is None else generator.get_state()
@@ -352,8 +351,7 @@ def sample_with_keyjoint_plan(
         step = None if count is None else (lambda d, n: count(k * n + d, passes * n))
         if noise is not None:  # every pass starts from the same noise
             generator.set_state(noise)
-        return sample_features(denoiser, sampler, rep, text_emb, full, how, generator=generator, on_step=step,
-                               **kwargs)
+        return sample_features(loaded, text_emb, full, how, generator=generator, on_step=step, **kwargs)
 
     first = settings
     if planner.refine and planner.first_pass_share < 1:

@@ -22,7 +22,7 @@ import torch
 from kinema.diffusion.sampler import DDIMSampler, spaced_timesteps
 from kinema.errors import KinemaError
 from kinema.human.sampling import SampleSettings, SampleTargets, clean_estimate_fn
-from kinema.model.denoiser import Denoiser
+from kinema.model.loading import LoadedModel
 from kinema.objectives.terms import Bound
 from kinema.representation.flat import FlatRepresentation
 
@@ -84,9 +84,7 @@ def errors(bound: list[Bound], P: torch.Tensor) -> list[list[float]]:
 
 
 def optimise_noise(
-    denoiser: Denoiser,
-    sampler: DDIMSampler,
-    rep: FlatRepresentation,
+    loaded: LoadedModel,
     text_emb,
     targets: SampleTargets,
     settings: SampleSettings,
@@ -98,8 +96,8 @@ def optimise_noise(
 ) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """Optimised unnormalised features ``(B, T, D)``, the noise that gave them and a report
     ``{"iterations", "ddim_steps", "seconds", "loss": {"before", "after"}, "objectives": [{"type", "before",
-    "after"}]}`` (per-sample lists)."""
-    t0 = time.perf_counter()
+    "after"}]}`` (per-sample lists); ``loaded``'s denoiser, sampler and representation."""
+    t0, denoiser, sampler, rep = time.perf_counter(), loaded.denoiser, loaded.sampler, loaded.representation
     B, T, D = targets.batch_size, settings.num_frames, rep.dim
     steps = settings.steps or DEFAULT_DDIM_STEPS
     z = torch.randn((B, T, D), generator=generator).requires_grad_(True)

@@ -70,9 +70,8 @@ def sample_with_objectives(
     targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
     rep, L = model.representation, model.loaded
     text = None if text is None else text.expand(samples, -1)
-    feats, z, report = optimise_noise(
-        L.denoiser, L.sampler, rep, text, targets, settings, bound, opt, generator=call.generator, progress=progress
-    )
+    feats, z, report = optimise_noise(L, text, targets, settings, bound, opt, generator=call.generator,
+                                      progress=progress)
     plans, counts = [plan] * samples, [0] * samples
     if opt.snap:
         for b in range(samples):
@@ -83,9 +82,7 @@ def sample_with_objectives(
             counts[b] = sum(len(c.frames(rep.fps, plan.total_frames)) for c in snapped)
             tg, _ = stack_targets([_with_constraints(plan, rep, snapped).segment_targets(0, None, heading)])
             feats[b] = sample_features(
-                L.denoiser,
-                L.sampler,
-                rep,
+                L,
                 None if text is None else text[b : b + 1],
                 tg,
                 settings,

@@ -328,8 +328,7 @@ class HumanPipeline(MotionPipeline):
         text = None if text is None else text.expand(len(rows), -1)
         sample = sample_features if call.planner is None else partial(sample_with_keyjoint_plan, planner=call.planner)
         settings = replace(self._settings(num_frames, call.guide, call.steps), strength=strength)
-        feats = sample(L.denoiser, L.sampler, rep, text, targets, settings, generator=call.generator, progress=bar,
-                       on_step=on_step)
+        feats = sample(L, text, targets, settings, generator=call.generator, progress=bar, on_step=on_step)
         rep.shift_root_xz(feats, shift[:, None])
         return [rep.to_motion(f) for f in feats]
 

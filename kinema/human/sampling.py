@@ -50,9 +50,9 @@ from dataclasses import dataclass, replace
 import torch
 
 from kinema.diffusion.guidance import Guidance
-from kinema.diffusion.sampler import DDIMSampler
 from kinema.human.keyjoints import KeyjointTargets, joint_displacement
 from kinema.model.denoiser import Denoiser
+from kinema.model.loading import LoadedModel
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.representation.flat import FlatRepresentation
 
@@ -203,21 +203,22 @@ class SampleSettings:
     root_smoothing: float = ROOT_SMOOTHING_SECONDS
     joint_sigma: float = JOINT_SIGMA_SECONDS
     strength: float = 1.0
+    max_batch_frames: int = MAX_BATCH_FRAMES
 
 
 @torch.no_grad()
 def sample_features(
-    denoiser: Denoiser, sampler: DDIMSampler, rep: FlatRepresentation, text_emb: torch.Tensor | None,
-    targets: SampleTargets, settings: SampleSettings, *, generator: torch.Generator | None = None,
-    progress: bool = False, init_noise: torch.Tensor | None = None, max_batch_frames: int = MAX_BATCH_FRAMES,
+    loaded: LoadedModel, text_emb: torch.Tensor | None, targets: SampleTargets, settings: SampleSettings, *,
+    generator: torch.Generator | None = None, progress: bool = False, init_noise: torch.Tensor | None = None,
     on_step: Callable[[int, int], None] | None = None,
 ) -> torch.Tensor:
-    """Run the reverse process for ``targets.batch_size`` motions of ``settings.num_frames`` frames;
-    returns unnormalised features ``(B, T, D)``.
+    """Run the reverse process of ``loaded``'s denoiser and DDIM sampler for ``targets.batch_size``
+    motions of ``settings.num_frames`` frames; returns unnormalised features ``(B, T, D)`` of its
+    representation.
 
     The batch rows are independent motions: row i depends only on its own noise and targets (the
     denoiser, the root / joint corrections and DDIM all act per row), so the batch is sampled in
-    chunks of at most ``max_batch_frames`` rows x frames per denoiser pass. The initial noise is one
+    chunks of at most ``settings.max_batch_frames`` rows x frames per denoiser pass. The initial noise is one
     ``(B, T, D)`` N(0, I) draw from ``generator`` (or ``init_noise``), so the chunking never changes
     which noise a row gets.
 
@@ -228,6 +229,7 @@ def sample_features(
 
     ``on_step(done, total)`` counts denoiser steps over all chunks of this call.
     """
+    denoiser, sampler, rep = loaded.denoiser, loaded.sampler, loaded.representation
     B, T, D = targets.batch_size, settings.num_frames, rep.dim
     targets = targets.pruned()
     if init_noise is None:
@@ -235,7 +237,7 @@ def sample_features(
         init_noise = torch.randn((B, T, D), generator=generator, device=gen_device)
     constrained = targets.mask is not None or targets.has_world
     branches = _branch_count(settings.guidance, text_emb is not None, constrained)
-    chunk = max(1, max_batch_frames // (branches * T))
+    chunk = max(1, settings.max_batch_frames // (branches * T))
     out, starts = [], range(0, B, chunk)
     for c, lo in enumerate(starts):
         text = None if text_emb is None else text_emb[lo : lo + chunk]
