@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import socket
 import threading
 from pathlib import Path
 from types import SimpleNamespace
@@ -16,7 +17,7 @@ import torch
 
 import kinema
 from kinema.app import edits
-from kinema.app.camera import CameraFollow, character_extent, frame_view
+from kinema.app.camera import character_extent, frame_view, opening_view
 from kinema.app.constraint_panel import _default_joint
 from kinema.app.document import (
     Settings,
@@ -27,8 +28,10 @@ from kinema.app.document import (
 )
 from kinema.app.generation import AppRobot, Cancelled, cannot_generate, is_character, outcome
 from kinema.app.rigs import load_rig, model_rig, skeleton_size
+from kinema.app.server import AppServer
 from kinema.app.session import Session, summarize_warnings
 from kinema.app.timeline_panel import MAX_SECONDS, MIN_SECONDS, clamp_seconds
+from kinema.app.views import first_motions
 from kinema.cli import build_parser
 from kinema.errors import KinemaError
 from kinema.robot import load_robot
@@ -122,35 +125,27 @@ def test_framing_fits_a_small_and_a_large_character():
     assert ext[:, 0].min() == pytest.approx(-1.6) and ext[:, 2].max() == pytest.approx(4.0)
 
 
-class _Camera:
-    """A tab's camera as viser keeps it: position, look-at, fov and the page's update callbacks."""
-
-    def __init__(self, position, look_at):
-        self.position, self.look_at, self.fov, self.callbacks = position, look_at, math.radians(75), []
-
-    def on_update(self, fn):
-        self.callbacks.append(fn)
-
-    def report(self, position, look_at):  # the page says where its camera is
-        self.position, self.look_at = position, look_at
-        for fn in self.callbacks:
-            fn(self)
-
-
-def test_a_late_starting_view_does_not_undo_the_framing():
-    """Seen on a loaded machine: the page set up its starting view after the first framing had reached
-    it, and the character stood small in a corner until the user moved the camera."""
-    start = ((4.4, 4.6, 1.0), (0.0, 0.2, 3.4))
-    cam = _Camera(*start)
-    follow = CameraFollow(SimpleNamespace(camera=cam), lambda: True, start_view=start)
-    follow.frame(np.array([[0.0, 0.0, 0.0], [0.0, 1.7, 0.0]]), np.zeros(3))
-    framed = (tuple(cam.position), tuple(cam.look_at))
-    cam.report(*start)  # the page's own starting view arrives late
-    assert np.allclose(cam.position, framed[0]) and np.allclose(cam.look_at, framed[1])
-    cam.report(*framed)  # the page shows the framing: from now on its views are the user's
-    for view in (((2.0, 1.0, 2.0), (0.0, 0.9, 0.0)), start):  # an orbit, a script's reset to the start
-        cam.report(*view)
-        assert cam.position == view[0] and cam.look_at == view[1]
+def test_a_new_tab_starts_framed_on_what_it_shows_first(model):
+    """The view a page starts from (viser's initial camera) frames the rig's first motion: a page that
+    sets up its starting view after the tab's framing (most tabs on a loaded machine) still frames it."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    app = AppServer(model, port=port)
+    try:
+        start = app.server.initial_camera
+        assert np.allclose(start.look_at, opening_view(first_motions(app.rig, model.fps)[0], float(start.fov))[1])
+    finally:
+        app.stop()
+    for rig in (model_rig(model.skeleton), load_rig(FOX, fps=model.fps) if FOX.is_file() else None):
+        if rig is None:
+            continue
+        motion = first_motions(rig, model.fps)[0]
+        position, look_at = opening_view(motion, math.radians(75))
+        body = motion.positions[0].double().numpy()
+        size = float(np.linalg.norm(body.max(0) - body.min(0)))
+        assert float(np.linalg.norm(look_at - body.mean(0))) < size  # looks at the character
+        assert float(np.linalg.norm(position - look_at)) < 4 * size + 1  # from close enough to see it
 
 
 def test_warnings_are_short_in_status_and_toast():

@@ -42,42 +42,25 @@ def character_extent(positions: np.ndarray, frame: int, lanes: list[float]) -> n
     return np.concatenate([span + np.array([x, 0.0, 0.0]) for x in lanes] + [pose])
 
 
+def opening_view(motion, fov: float) -> tuple[np.ndarray, np.ndarray]:
+    """(camera position, look-at) that frame ``motion`` (what a new tab shows first) at its first frame:
+    the view a page starts from, so a page that sets up its starting view late still frames it."""
+    positions = motion.positions.detach().double().numpy()
+    return frame_view(character_extent(positions, 0, [0.0]), fov)
+
+
 class CameraFollow:
     """Frames and follows the shown character in one tab (``client.camera``); ``enabled`` is read from
     the "Follow character" checkbox."""
 
-    def __init__(self, client, enabled, start_view=None):
+    def __init__(self, client, enabled):
         self.client, self.enabled = client, enabled
         self.target: np.ndarray | None = None
-        #: the last view :meth:`frame` set, (position, look-at)
-        self.framed: tuple[np.ndarray, np.ndarray] | None = None
-        self.shown = False  # the page has reported the last framing
-        if start_view is not None:  # the (position, look-at) every page starts from
-            self.start_view = tuple(np.asarray(v, dtype=np.float64) for v in start_view)
-            client.camera.on_update(self._keep_framing)
-
-    def _keep_framing(self, cam) -> None:
-        """On a loaded machine the page can set up its starting view after the first framing reached it,
-        and report that: the character then stands small in a corner. A report of exactly the starting
-        view before the page has shown the framing puts the framing back; once the page has reported the
-        framing, any later view (a user's orbit, a script's) is left alone."""
-        if self.framed is None or self.shown:
-            return
-        here = (np.asarray(cam.position, dtype=np.float64), np.asarray(cam.look_at, dtype=np.float64))
-        if all(np.allclose(a, b, atol=1e-3) for a, b in zip(here, self.framed, strict=True)):
-            self.shown = True
-        elif all(np.allclose(a, b, atol=1e-3) for a, b in zip(here, self.start_view, strict=True)):
-            cam.position, cam.look_at = (tuple(v) for v in self.framed)
-
-    def release(self) -> None:
-        """Another view (live mode's) took the camera: never put this framing back."""
-        self.framed = None
 
     def frame(self, points: np.ndarray, target) -> None:
         """Point the camera at ``points`` from the default angle; ``target``: the root it then follows."""
         cam = self.client.camera
         position, look_at = frame_view(points, float(cam.fov))
-        self.framed, self.shown = (position, look_at), False
         cam.position = tuple(position)
         cam.look_at = tuple(look_at)
         self.target = np.asarray(target, dtype=np.float64)

@@ -55,7 +55,6 @@ RIG_PROMPT = "An animal walks."
 BUTTONS = {"faster": "Faster", "slower": "Slower", "left": "Turn left", "right": "Turn right"}
 START, STOP, SWITCH = "Start live", "Stop live", "Switch prompt"
 
-
 @dataclass
 class Steering:
     """The live heading (degrees; None: not steered yet, the character's facing is taken) and the
@@ -100,7 +99,8 @@ class LiveRun:
         rig = session.rig.skeleton if getattr(model, "needs_rig", False) else None
         self.stream = open_stream(model, GenerationRequest(prompt=prompt, seed=int(session.seed.value), rig=rig))
         self.fps = self.stream.fps
-        self.view = SkeletonView(session.client.scene, "/live", self.stream.skeleton, color=SELECTED_COLOR, contacts=[])
+        self.view = SkeletonView(session.client.scene, "/live", self.stream.skeleton, color=SELECTED_COLOR,
+                                 contacts=[])
         self.camera = CameraFollow(session.client, lambda: bool(session.player.follow.value))
         self.commands: queue.Queue = queue.Queue()
         self.ready: deque = deque()  # (stream frame, positions (J, 3)) made, not drawn yet
@@ -180,7 +180,6 @@ class LiveRun:
                 self.view.show(0)
             self.drawn = frame
             if frame == 0:
-                self.session.camera.release()  # the tab's framing is not put back over the live view
                 self.camera.frame(positions, positions[0])  # the first frame: framed from the default angle
             self.camera.follow(positions[0])
             self._ground_under(positions[0])
@@ -230,27 +229,20 @@ class LivePanel:
         self.steering = Steering()
         prompt = RIG_PROMPT if getattr(session.model, "needs_rig", False) else HUMAN_PROMPT
         with gui.add_folder("Live", expand_by_default=False):
-            self.start_btn = gui.add_button(
-                START,
-                icon="player-play",
-                color="green",
-                hint="the character moves on and on; steer it and switch its prompt",
-            )
+            self.start_btn = gui.add_button(START, icon="player-play", color="green",
+                                            hint="the character moves on and on; steer it and switch its prompt")
             self.stop_btn = gui.add_button(STOP, icon="player-stop", color="red", visible=False)
             self.prompt = gui.add_text("Live prompt", prompt, hint="what the character does; Enter switches")
             self.switch_btn = gui.add_button(SWITCH, icon="arrows-exchange", disabled=True)
             self.steer_btns = {
                 key: gui.add_button(label, icon=icon, disabled=True)
-                for key, label, icon in (
-                    ("faster", BUTTONS["faster"], "arrow-up"),
-                    ("left", BUTTONS["left"], "arrow-left"),
-                    ("right", BUTTONS["right"], "arrow-right"),
-                    ("slower", BUTTONS["slower"], "arrow-down"),
-                )
+                for key, label, icon in (("faster", BUTTONS["faster"], "arrow-up"),
+                                         ("left", BUTTONS["left"], "arrow-left"),
+                                         ("right", BUTTONS["right"], "arrow-right"),
+                                         ("slower", BUTTONS["slower"], "arrow-down"))
             }
-            self.status = gui.add_markdown(
-                "Press **Start live**: arrow keys or WASD steer, the prompt box switches what it does."
-            )
+            self.status = gui.add_markdown("Press **Start live**: arrow keys or WASD steer, the prompt box "
+                                           "switches what it does.")
         self.start_btn.on_click(lambda _: self.start())
         self.stop_btn.on_click(lambda _: self.stop())
         self.switch_btn.on_click(lambda _: self.switch())

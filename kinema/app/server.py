@@ -8,9 +8,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import viser
 
+from kinema.app.camera import opening_view
 from kinema.app.generation import AppRobot, is_any_rig
 from kinema.app.rigs import AppRig, model_rig
 from kinema.app.session import Session
+from kinema.app.views import first_motions
 from kinema.errors import KinemaError
 
 #: generations that may run at once (across tabs); more wait in the pool's queue
@@ -50,8 +52,10 @@ class AppServer:
         self._lock = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="kinema", verbose=verbose)
         self.server.scene.set_up_direction("+y")
-        self.server.initial_camera.position = CAMERA_POSITION
-        self.server.initial_camera.look_at = CAMERA_LOOK_AT
+        # a new tab starts framed on what it shows first (a page may set up its starting view after the
+        # tab's own framing reached it: on a loaded machine most did, leaving the character in a corner)
+        start = self.server.initial_camera
+        start.position, start.look_at = opening_view(first_motions(self.rig, model.fps)[0], float(start.fov))
         self.server.on_client_connect(self._connect)
         self.server.on_client_disconnect(self._disconnect)
 

@@ -23,7 +23,14 @@ from kinema.app.playback import Player
 from kinema.app.rig_panel import RigPanel
 from kinema.app.rigs import AppRig, skeleton_size
 from kinema.app.timeline_panel import TimelinePanel
-from kinema.app.views import OTHER_COLOR, ROBOT_COLOR, SELECTED_COLOR, CharacterView, SkeletonView, rest_motion
+from kinema.app.views import (
+    OTHER_COLOR,
+    ROBOT_COLOR,
+    SELECTED_COLOR,
+    CharacterView,
+    SkeletonView,
+    first_motions,
+)
 from kinema.errors import KinemaError
 
 #: spacing of the samples not selected (towards -X, away from the camera), drawn beside the selected one, in
@@ -82,12 +89,7 @@ class Session:
         )
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
-        start = app.server.initial_camera
-        self.camera = CameraFollow(
-            client,
-            lambda: bool(self.player.follow.value) and self.player.playing,
-            start_view=(start.position, start.look_at),
-        )
+        self.camera = CameraFollow(client, lambda: bool(self.player.follow.value) and self.player.playing)
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
         self.rig_panel = RigPanel(gui, self)
@@ -330,7 +332,7 @@ class Session:
 
     def rig_motions(self) -> list:
         """What a rig shows before anything is generated: its first clip, else its rest pose."""
-        return list(self.rig.clips.values())[:1] or [rest_motion(self.rig.skeleton, self.model.fps)]
+        return first_motions(self.rig, self.model.fps)
 
     def _views(self, i: int, skeleton) -> list[CharacterView]:
         """Sample ``i``'s views: the skin when shown, else the bones; planted contacts and the trail always;

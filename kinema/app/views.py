@@ -45,6 +45,12 @@ def rest_motion(skeleton: Skeleton, fps: float) -> Motion:
     return Motion(skeleton, fps, torch.tensor([[0.0, lift, 0.0]]), local[None].clone())
 
 
+def first_motions(rig, fps: float) -> list[Motion]:
+    """What a rig (kinema.app.rigs.AppRig) shows in a new tab before anything is generated: its first
+    clip, else its rest pose."""
+    return list(rig.clips.values())[:1] or [rest_motion(rig.skeleton, fps)]
+
+
 def _human_contacts(skeleton: Skeleton) -> list[int]:
     """The human four contact joints, or none for a skeleton without them."""
     try:
