@@ -109,14 +109,18 @@ def test_shipped_model_matches_reference(model, reference, case) -> None:
     result = model.generate(prompt, **kwargs)
     assert len(result) == sample_count(reference, name)
     for i, m in enumerate(result):
-        got, want = motion_arrays(m), recorded(reference, name, i)
-        d = differences(got, want)
-        print(f"{name} sample {i}: " + ", ".join(f"{f} {v:.3g}" for f, v in d.items()))
-        for field, value in d.items():
-            assert value <= BOUNDS[field], f"{name} sample {i} {field}: {value:.3g} > {BOUNDS[field]:g}"
-        if EXACT:
-            for field, value in _exact_differences(got, want).items():
-                assert value <= EXACT_TOL, f"{name} sample {i} {field}: max difference {value:.3g} (exact mode)"
+        _assert_matches(motion_arrays(m), recorded(reference, name, i), f"{name} sample {i}")
+
+
+def _assert_matches(got: dict, want: dict, label: str) -> None:
+    """``got`` within the cross-CPU bounds of ``want`` (and exactly, in exact mode)."""
+    d = differences(got, want)
+    print(f"{label}: " + ", ".join(f"{f} {v:.3g}" for f, v in d.items()))
+    for field, value in d.items():
+        assert value <= BOUNDS[field], f"{label} {field}: {value:.3g} > {BOUNDS[field]:g}"
+    if EXACT:
+        for field, value in _exact_differences(got, want).items():
+            assert value <= EXACT_TOL, f"{label} {field}: max difference {value:.3g} (exact mode)"
 
 
 def test_bounds_catch_small_real_changes(model, reference) -> None:
@@ -159,10 +163,4 @@ def test_creatures_model_matches_reference(creatures, case) -> None:
     assert len(result) == sample_count(reference, name) == 1
     got, want = motion_arrays(result[0]), recorded(reference, name, 0)
     assert got["pos"].shape == want["pos"].shape == (40, 43, 3)
-    d = differences(got, want)
-    print(f"{name}: " + ", ".join(f"{f} {v:.3g}" for f, v in d.items()))
-    for field, value in d.items():
-        assert value <= BOUNDS[field], f"{name} {field}: {value:.3g} > {BOUNDS[field]:g}"
-    if EXACT:
-        for field, value in _exact_differences(got, want).items():
-            assert value <= EXACT_TOL, f"{name} {field}: max difference {value:.3g} (exact mode)"
+    _assert_matches(got, want, name)
