@@ -18,7 +18,6 @@ from tests.test_app_browser import _free_port, open_tab, sync_api, wait_for
 
 # isort: split
 import kinema
-from kinema.app.camera import VIEW_DIRECTION
 from kinema.app.server import AppServer
 from tests.browser import button, launch, row_input
 
@@ -61,9 +60,9 @@ def test_arrow_keys_steer_instead_of_moving_the_camera(live_tab):
     run = session.live.run
     page.evaluate("document.activeElement && document.activeElement.blur()")  # keys go to the page, not a button
     # the camera the server holds is the browser's last report: on a loaded machine the report of the
-    # live run's first framing (kinema.app.camera) can come after 20 drawn frames, and it turns the camera
-    wait_for(lambda: _framed(session.client.camera), what="the browser's report of the live framing")
-    turn = session.client.camera.wxyz
+    # live run's first framing (kinema.app.camera) can come late and turn the camera; following only moves
+    # it. The reference is the orientation once it has held still for 2 s, wherever the framing left it.
+    turn = _steady_orientation(session.client.camera)
     before = len(run.stream.commands)
     with _facings(run) as facings:  # the key turns from the facing when it arrives: one of these
         page.keyboard.press("ArrowLeft")
@@ -100,10 +99,18 @@ def test_prompt_box_enter_switches_what_it_does(live_tab):
     assert not any(c.kind == "steer" for c in run.stream.commands[before:])  # typing W/S/A/D did not steer
 
 
-def _framed(camera) -> bool:
-    """Whether ``camera`` looks the way the live run framed it (following keeps that direction)."""
-    view = np.asarray(camera.look_at, dtype=np.float64) - np.asarray(camera.position, dtype=np.float64)
-    return bool(np.allclose(view / np.linalg.norm(view), -VIEW_DIRECTION, atol=1e-3))
+def _steady_orientation(camera, still: float = 2.0, timeout: float = 60.0) -> np.ndarray:
+    """``camera.wxyz`` once it has not changed for ``still`` seconds."""
+    t0 = time.time()
+    last, since = np.asarray(camera.wxyz, dtype=np.float64), time.time()
+    while time.time() - t0 < timeout:
+        time.sleep(0.1)
+        now = np.asarray(camera.wxyz, dtype=np.float64)
+        if not np.allclose(now, last, atol=1e-4):
+            last, since = now, time.time()
+        elif time.time() - since >= still:
+            return now
+    raise AssertionError(f"the camera kept turning for {timeout:g} s")
 
 
 @contextlib.contextmanager
