@@ -38,6 +38,12 @@ from kinema.skeleton import Skeleton
 SHORT_BONE = 1e-4
 
 
+def short_length(P0: torch.Tensor) -> float:
+    """Length under which a bone of a skeleton whose rest positions are ``P0 (J, 3)`` gives no direction:
+    ``SHORT_BONE`` of its rest height."""
+    return SHORT_BONE * float(max(P0[:, 1].max() - P0[:, 1].min(), 1e-9))
+
+
 def rest_locals(skeleton: Skeleton) -> torch.Tensor:
     """(J, 4) local rest rotations: the skeleton's, else identity."""
     if skeleton.rest_rotations is not None:
@@ -98,8 +104,7 @@ def bone_alignment(
     mapped joints below it. The other children only set the roll."""
     _, P0t = rest_frames(target)
     _, P0s = rest_frames(source)
-    tiny = SHORT_BONE * float(max(P0t[:, 1].max() - P0t[:, 1].min(), 1e-9))
-    tiny_s = SHORT_BONE * float(max(P0s[:, 1].max() - P0s[:, 1].min(), 1e-9))
+    tiny, tiny_s = short_length(P0t), short_length(P0s)
     kids: dict[int, list[int]] = {b: [] for b in pairs}
     for c in pairs:
         p = target.parents[c]
@@ -164,7 +169,7 @@ def least_twist_globals(source_globals: torch.Tensor, source: Skeleton) -> torch
     G0, P0 = rest_frames(source)
     Gs = source_globals.double()
     T = Gs.shape[0]
-    tiny = SHORT_BONE * float(max(P0[:, 1].max() - P0[:, 1].min(), 1e-9))
+    tiny = short_length(P0)
     kids: dict[int, list[int]] = {j: [] for j in range(source.num_joints)}
     for c, p in enumerate(source.parents):
         if p >= 0 and float((P0[c] - P0[p]).norm()) > tiny:

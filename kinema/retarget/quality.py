@@ -26,7 +26,7 @@ import torch
 from kinema.geometry.rotations import quat_inverse, quat_mul
 from kinema.motion.core import Motion
 from kinema.postprocess.footlock import foot_skate
-from kinema.retarget.align import SHORT_BONE, rest_frames, rest_locals
+from kinema.retarget.align import rest_frames, rest_locals, short_length
 from kinema.retarget.core import source_planted
 from kinema.retarget.mapping import JointMap
 from kinema.retarget.proportions import (
@@ -52,8 +52,7 @@ def direction_errors(source: Motion, target: Motion, jm: JointMap) -> torch.Tens
     bones = _bones(jm)
     _, P0s = rest_frames(jm.source)
     _, P0t = rest_frames(jm.target)
-    tiny_t = SHORT_BONE * float(P0t[:, 1].max() - P0t[:, 1].min())
-    tiny_s = SHORT_BONE * float(P0s[:, 1].max() - P0s[:, 1].min())
+    tiny_t, tiny_s = short_length(P0t), short_length(P0s)
     real = torch.tensor(
         [float((P0t[c] - P0t[p]).norm()) > tiny_t and float((P0s[d] - P0s[a]).norm()) > tiny_s for p, c, a, d in bones]
     )
