@@ -66,7 +66,7 @@ def sample_with_objectives(
             f"this call has {len(plan.segments)} segments"
         )
     heading, samples = call.heading, call.samples
-    text = model._text(plan.segments[0].prompt, call.texts)
+    text = model.prompt_condition(plan.segments[0].prompt, call.texts)
     targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
     rep, L = model.representation, model.loaded
     text = None if text is None else text.expand(samples, -1)

@@ -272,7 +272,7 @@ class HumanPipeline(MotionPipeline):
         return {p: ground(p, self.encode_text(p), self.known_prompts, settings)
                 for p in dict.fromkeys(prompts) if p.strip()}
 
-    def _text(self, prompt: str, texts: dict[str, Grounded] | None) -> torch.Tensor | None:
+    def prompt_condition(self, prompt: str, texts: dict[str, Grounded] | None) -> torch.Tensor | None:
         """The conditioning embedding ``(1, E)`` of a prompt (None for no text), grounded by the model's
         default unless ``texts`` (from :meth:`ground_prompts`) holds it."""
         if not prompt.strip():
@@ -324,7 +324,7 @@ class HumanPipeline(MotionPipeline):
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
         rep, L = self.representation, self.loaded
         targets, shift = stack_targets(rows)
-        text = self._text(prompt, call.texts)
+        text = self.prompt_condition(prompt, call.texts)
         text = None if text is None else text.expand(len(rows), -1)
         sample = sample_features if call.planner is None else partial(sample_with_keyjoint_plan, planner=call.planner)
         settings = replace(self._settings(num_frames, call.guide, call.steps), strength=strength)
