@@ -10,7 +10,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import socket
 import time
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from PIL import Image
 import kinema
 from tests.app_rig_data import synthetic_rig_glb
 from tests.browser import button, chromium_path, folder_button, launch, row_input, set_camera, world_to_screen
+from tests.server_process import free_port
 
 if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
     import viser  # noqa: F401
@@ -45,11 +45,6 @@ STEPS = 4  # DDIM steps: a draft is enough to test the UI
 WAYPOINTS = ((40, 0.4, 2.2), (100, 1.2, 5.0))  # (frame, x, z)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def wait_for(cond, timeout: float = 60.0, what: str = "condition", fail: bool = True):
     t0 = time.time()
@@ -70,7 +65,7 @@ def default_model():
 
 @pytest.fixture(scope="module")
 def app(default_model):
-    server = AppServer(default_model, port=_free_port(), steps=STEPS)
+    server = AppServer(default_model, port=free_port(), steps=STEPS)
     yield server
     server.stop()
 

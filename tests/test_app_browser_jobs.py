@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 
 # importing the page tests' module first skips this one too when Playwright, viser or the browser is missing
-from tests.test_app_browser import _free_port, sync_api, wait_for
+from tests.test_app_browser import sync_api, wait_for
 
 # isort: split
 import kinema
 from kinema.app.server import AppServer
 from tests.browser import button, chromium, folder_button, row_input, world_to_screen
+from tests.server_process import free_port
 
 DRAFT_STEPS = 2  # a quick generation
 LONG_STEPS = 400  # a generation long enough to cancel (seconds of work)
@@ -32,7 +33,7 @@ def browser():
 
 @pytest.fixture(scope="module")
 def app():
-    server = AppServer(kinema.load_model("default"), port=_free_port(), steps=DRAFT_STEPS)
+    server = AppServer(kinema.load_model("default"), port=free_port(), steps=DRAFT_STEPS)
     yield server
     server.stop()
 

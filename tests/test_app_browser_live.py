@@ -14,18 +14,19 @@ import numpy as np
 import pytest
 
 # importing the page tests' module first skips this one too when Playwright, viser or the browser is missing
-from tests.test_app_browser import _free_port, open_tab, sync_api, wait_for
+from tests.test_app_browser import open_tab, sync_api, wait_for
 
 # isort: split
 import kinema
 from kinema.app.server import AppServer
 from tests.browser import button, launch, row_input
+from tests.server_process import free_port
 
 
 @pytest.fixture(scope="module")
 def live_tab():
     """(page, session, log) of a tab with live mode started."""
-    server = AppServer(kinema.load_model("default"), port=_free_port(), steps=4)
+    server = AppServer(kinema.load_model("default"), port=free_port(), steps=4)
     with sync_api.sync_playwright() as p:
         browser = launch(p)
         page, session, log = open_tab(browser, server)

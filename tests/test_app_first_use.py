@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 import threading
 from pathlib import Path
 from types import SimpleNamespace
@@ -36,6 +35,7 @@ from kinema.cli import build_parser
 from kinema.errors import KinemaError
 from kinema.robot import load_robot
 from kinema.skeleton import Skeleton
+from tests.server_process import free_port
 
 DATA = Path("/work/shared/datasets/quaternius")
 CHARACTER = DATA / "cyberpunk_pack" / "Character.glb"
@@ -128,10 +128,7 @@ def test_framing_fits_a_small_and_a_large_character():
 def test_a_new_tab_starts_framed_on_what_it_shows_first(model):
     """The view a page starts from (viser's initial camera) frames the rig's first motion: a page that
     sets up its starting view after the tab's framing (most tabs on a loaded machine) still frames it."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    app = AppServer(model, port=port)
+    app = AppServer(model, port=free_port())
     try:
         start = app.server.initial_camera
         assert np.allclose(start.look_at, opening_view(first_motions(app.rig, model.fps)[0], float(start.fov))[1])

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.server_process import free_port
+
 pytest.importorskip("pydantic")
 
 #: Ray: every address on loopback, no usage report, and token auth with a token of this run's own (not
@@ -222,11 +224,6 @@ def test_bench_table(tmp_path):
     assert "| workers | motions |" in table and "| 1 | 2 | 0 |" in table
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def _listening(port: int) -> bool:
     with socket.socket() as s:
@@ -238,7 +235,7 @@ def test_batch_on_a_local_ray_head(tmp_path):
     ray_bin = Path(sys.executable).with_name("ray")
     if not ray_bin.exists():
         pytest.skip("the ray command is not installed next to this Python")
-    port = _free_port()
+    port = free_port()
     temp = tempfile.mkdtemp(prefix="kr", dir="/tmp")  # short: Ray's socket paths must stay < 108 bytes
     head = subprocess.Popen(
         [

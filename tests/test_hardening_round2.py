@@ -24,6 +24,7 @@ from kinema.io import load_motion
 from kinema.motion.core import Motion
 from tests import hardening_fixtures as fixtures
 from tests.hardening_fixtures import one_line_error
+from tests.server_process import free_port
 
 bvh_file = fixtures.bvh_file
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "constraints"
@@ -123,15 +124,10 @@ def test_batch_out_that_is_a_file_is_one_line_error(tmp_path, capsys):
     assert existing.read_text() == "keep me"
 
 
-def _closed_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def test_batch_ray_address_without_ray_fails_fast(tmp_path, capsys):
     pytest.importorskip("ray")
-    port = _closed_port()
+    port = free_port()
     t0 = time.perf_counter()
     assert main(["batch", str(_jobs(tmp_path)), "--out", str(tmp_path / "o"), "--ray", f"127.0.0.1:{port}"]) == 2
     assert time.perf_counter() - t0 < 30

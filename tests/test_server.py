@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from server_process import stop_server
+from server_process import free_port, stop_server
 
 httpx = pytest.importorskip("httpx")
 pytest.importorskip("fastapi")
@@ -60,11 +60,6 @@ BLENDER = shutil.which("blender")
 ADDON = Path(__file__).resolve().parents[1] / "integrations/blender"
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 def _rss_mb(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
@@ -78,7 +73,7 @@ def server(tmp_path_factory):
     """``(base URL, process)`` of a running `kinema serve`; stopped (its process group) at the end."""
     tmp = tmp_path_factory.mktemp("server")
     (tmp / "keys").write_text(f"# test key\n{KEY}\n")
-    port = _free_port()
+    port = free_port()
     cmd = [
         sys.executable,
         "-m",
@@ -327,7 +322,7 @@ def test_cors_is_off_and_public_binds_need_a_key(server, tmp_path, capsys):
         f"{url}/v1/generate", headers={"Origin": "https://example.org", "Access-Control-Request-Method": "POST"}
     )
     assert "access-control-allow-origin" not in pre.headers
-    assert main(["serve", "--host", "0.0.0.0", "--port", str(_free_port())]) == 2
+    assert main(["serve", "--host", "0.0.0.0", "--port", str(free_port())]) == 2
     assert "--api-key-file" in capsys.readouterr().err
     (tmp_path / "weak").write_text("short\n")
     assert main(["serve", "--host", "0.0.0.0", "--api-key-file", str(tmp_path / "weak")]) == 2

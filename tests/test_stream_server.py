@@ -16,7 +16,7 @@ import sys
 import time
 
 import pytest
-from server_process import stop_server
+from server_process import free_port, stop_server
 
 websockets = pytest.importorskip("websockets")
 pytest.importorskip("uvicorn")
@@ -27,17 +27,12 @@ KEY = "stream-test-key-0123456789abcdef"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 @pytest.fixture(scope="module")
 def url(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("stream_server")
     (tmp / "keys").write_text(f"{KEY}\n")
-    port = _free_port()
+    port = free_port()
     env = os.environ | {"OMP_NUM_THREADS": "1", "KINEMA_STREAM_MAX_SECONDS": "4", "KINEMA_STREAM_MAX_STREAMS": "1"}
     log = (tmp / "server.log").open("w")
     proc = subprocess.Popen([sys.executable, "-m", "kinema", "serve", "--port", str(port), "--api-key-file",
