@@ -7,7 +7,9 @@ and stands up again like an unturned one). Its first `CONTEXT_SECONDS` are the l
 so far, imposed as ``fullbody`` keyframes, so it continues the motion; the controls (prompt, steering
 path, targets: kinema.stream.controls) constrain the rest. Its next `BLEND_SECONDS` are cross-faded
 from the previous window (`SKIP_SECONDS` after the context may be left out first; 0 by default)
-(kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended). While steering,
+(kinema.stream.frames.stitch: rotations slerped, the root's ground velocity blended), and the root's
+ground velocity is low-passed over the next `EASE_SECONDS` (kinema.stream.frames.ease_root_velocity:
+the denoiser's first free frames after the context jolt the pelvis). While steering,
 the window is turned to face along its path; every window is lifted or lowered onto the first one's
 ground level (at most `FLOOR_STEP` a window). Windows are not post-processed, except while a target
 is held: after context keyframes the raw denoiser leaves a hand target 25-30 cm off (a lone clip:
@@ -40,7 +42,7 @@ from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.stream.bodies import HumanBody, RigBody
 from kinema.stream.controls import Controls, Steer, Target, WindowFrame
-from kinema.stream.frames import StreamFrames, ground_level, shifted, stitch, turn_xz, turned
+from kinema.stream.frames import StreamFrames, ease_root_velocity, ground_level, shifted, stitch, turn_xz, turned
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
 WINDOW_SECONDS = 3.0
@@ -60,6 +62,14 @@ CONTEXT_SECONDS = 0.2
 SKIP_SECONDS = 0.0
 #: seconds over which a window is cross-faded from the previous one's provisional frames
 BLEND_SECONDS = 0.25
+#: seconds after a seam over which the root's ground velocity is low-passed (`ease_root_velocity`),
+#: the Gaussian's width in frames, and the final frames before the seam it reads. A window made twice
+#: (`ROOT_FROM_FIRST_PASS`) is eased over its whole length: the stronger guidance leaves its pelvis
+#: stuttering around the imposed root path (a wave -> jog: 2.5, 1.7, 0.6, 3.9, 2.4 m/s on consecutive
+#: frames, 65 m/s^2 against the windows' own 29 over 120 s of `kinema bench stream`'s cycle)
+EASE_SECONDS = 0.5
+EASE_SIGMA_FRAMES = 1.5
+EASE_HISTORY = 8
 #: frames kept before the next context (the smoothed root is measured over them)
 HISTORY_FRAMES = 40
 #: Gaussian (seconds) over which a steered window's facing error is smoothed before it is turned away
@@ -286,7 +296,7 @@ class MotionStream:
         t0 = time.perf_counter()
         s = self.settings
         if self._motion is None:
-            window, timings = self._generate(None, None, None)
+            window, timings, _ = self._generate(None, None, None)
             self._floor = ground_level(window)
             self._motion, self._tail = window, s.skip + s.blend
             self._log_window(0, window.num_frames - self._tail, timings, t0)
@@ -297,10 +307,13 @@ class MotionStream:
         frame = self._window_frame(context, smooth)
         local = turned(shifted(context, -frame.origin[0], -frame.origin[1]), -frame.yaw)
         local_smooth = turn_xz(smooth - torch.tensor(frame.origin), -frame.yaw)
-        window, timings = self._generate(local, local_smooth, frame)
+        window, timings, made_twice = self._generate(local, local_smooth, frame)
         window = self._on_floor(self._face_path(window))
         window = shifted(turned(window, frame.yaw), *frame.origin).crop(s.context - 1)
         stitched = stitch(self._motion.crop(end - 1), window, s.skip, s.blend)
+        before = self._motion.root_translation[max(0, end - EASE_HISTORY) : end, [0, 2]]
+        ease = stitched.num_frames if made_twice else round(EASE_SECONDS * s.fps)
+        stitched = ease_root_velocity(before, stitched, ease, EASE_SIGMA_FRAMES)
         self._motion = self._motion.crop(0, end).concatenate(stitched.to(self._motion.dtype))
         self._tail = s.skip + s.blend
         self._log_window(self._offset + end, stitched.num_frames - self._tail, timings, t0)
@@ -340,8 +353,9 @@ class MotionStream:
         return self.body.face_path(window, path, first, FACING_SIGMA_SECONDS * self.fps)
 
     def _generate(self, context: Motion | None, smooth: torch.Tensor | None,
-                  frame: WindowFrame | None) -> tuple[Motion, dict]:
-        """One window (local frame) and the pipeline's timings. The first window after a prompt switch
+                  frame: WindowFrame | None) -> tuple[Motion, dict, bool]:
+        """One window (local frame), the pipeline's timings and whether it was made twice. The first
+        window after a prompt switch
         is made twice when not steered and the body can take a root path (the human model): with the
         model's guidance, whose root path is then imposed on the window made with the stronger
         `SWITCH_GUIDANCE` (`ROOT_FROM_FIRST_PASS`)."""
@@ -353,7 +367,7 @@ class MotionStream:
         self._path_headings = None
         self._window_index += 1
         if context is None:
-            return self._run(fields)
+            return *self._run(fields), False
         controls = self.controls.window_constraints(frame, context.num_frames, s.window)
         fields["constraints"] = self.body.window_constraints(context, smooth, controls)
         fields["heading"] = frame.heading
@@ -362,7 +376,7 @@ class MotionStream:
                 vectors = torch.tensor(c["global_root_heading"])
                 self._path_headings = torch.atan2(vectors[:, 1], vectors[:, 0])
         if self._switch_windows <= 0:
-            return self._run(fields)
+            return *self._run(fields), False
         self._switch_windows -= 1
         first_pass = None
         if ROOT_FROM_FIRST_PASS and self._path_headings is None and hasattr(self.body, "root_path"):
@@ -373,7 +387,7 @@ class MotionStream:
         if first_pass is not None:
             timings = {k: float(timings.get(k, 0.0)) + float(first_timings.get(k, 0.0))
                        for k in set(timings) | set(first_timings)}
-        return window, timings
+        return window, timings, first_pass is not None
 
     def _run(self, fields: dict) -> tuple[Motion, dict]:
         """The pipeline's one motion for a window's request ``fields``, and its timings."""

@@ -97,6 +97,32 @@ def stitch(old: Motion, new: Motion, skip: int, blend: int) -> Motion:
     return out.concatenate(shifted(rest, float(move[0]), float(move[2])))
 
 
+def ease_root_velocity(before: torch.Tensor, motion: Motion, frames: int, sigma_frames: float) -> Motion:
+    """``motion``, which continues the ground path ``before`` (root x/z ``(H, 2)``, its last point the
+    frame just before ``motion``'s first), with its root's ground velocity low-passed over its first
+    ``frames`` frames: a Gaussian of ``sigma_frames`` over the velocity of ``before`` and ``motion``
+    together, faded (raised cosine) from fully smoothed at the first frame to ``motion``'s own velocity
+    at frame ``frames``; positions are integrated from ``before[-1]``, so the rest of ``motion`` keeps
+    its path, moved by what the eased frames gained or lost. The denoiser's first free frames after
+    context keyframes jolt the pelvis (speed 2.9, 1.4, 0.2, 4.0 m/s on consecutive frames of a jog),
+    which a cross-fade of poses does not hide; a step's own speed swing (a period of 10+ frames) passes
+    a 1.5-frame Gaussian almost unchanged."""
+    T = motion.num_frames
+    frames = min(frames, T)
+    if frames < 1 or sigma_frames <= 0:
+        return motion
+    before = before.to(motion.dtype)
+    xz = torch.cat([before, motion.root_translation[:, [0, 2]]])
+    velocity = xz[1:] - xz[:-1]
+    own = velocity[before.shape[0] - 1 :]
+    smooth = smooth_time(velocity, sigma_frames)[before.shape[0] - 1 :]
+    w = torch.zeros(T, 1, dtype=motion.dtype)
+    w[:frames, 0] = 0.5 + 0.5 * torch.cos(math.pi * torch.arange(frames, dtype=motion.dtype) / frames)
+    root = motion.root_translation.clone()
+    root[:, [0, 2]] = before[-1] + torch.cumsum(w * smooth + (1 - w) * own, 0)
+    return replace(motion, root_translation=root)
+
+
 def face_along(motion: Motion, headings: torch.Tensor, start: int, left_hip: int, right_hip: int,
                sigma_frames: float) -> Motion:
     """``motion`` turned about its pelvis, frame by frame from ``start`` on, so that its facing (the
