@@ -51,7 +51,9 @@ def test_world_targets_waypoints_and_keyframes_from_a_constraints_file(trained, 
     code, free = _run(trained, rig_file, tmp_path, [{"type": "root2d", "times": [1.0], "smooth_root_2d": [[0.1, 0.4]]}])
     assert code == 0
     head = free.skeleton.index("HeadA")
-    goal = (free.positions[10, head] + torch.tensor([0.0, 0.05, 0.03])).tolist()
+    # forward and down: within a lean's reach (a target above the head, which the body may not rise to,
+    # is met only to 0.5-1.0 cm, varying with the CPU)
+    goal = (free.positions[10, head] + torch.tensor([0.0, -0.03, 0.05])).tolist()
     pose = walking(quadruped(), frames=1)
     rot = pose.local_rotations[0]
     aa = (

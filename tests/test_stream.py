@@ -23,6 +23,7 @@ from kinema.motion.smoothing import smooth_time
 from kinema.pipeline.request import GenerationRequest
 from kinema.stream import open_stream
 from kinema.stream.measure import (
+    JoinMeter,
     circular_mean_deg,
     floor_heights,
     frames_to_motion,
@@ -64,6 +65,16 @@ def test_frames_continue_seamlessly_and_stay_on_the_floor(model) -> None:
     assert len(seams) >= 4
     report = join_report(motion, seams)
     assert report.ok, report.to_json()
+    # the benchmark's meter, fed the frames as they come, measures the same joins without keeping them
+    meter = JoinMeter()
+    for part in parts:
+        meter.feed(part)
+    metered = meter.report(s.seams())
+    assert metered.joins == report.joins
+    for key in ("join_speed_change", "inside_speed_change_max", "join_acceleration", "inside_acceleration_p99"):
+        assert getattr(metered, key) == pytest.approx(getattr(report, key), rel=1e-4), key
+    with pytest.raises(ValueError, match="expected 240"):
+        meter.feed(parts[0])
     # the ground level of every 2 s (lowest joint, 10th percentile) stays where the first window put it
     # (no sinking or floating), and no frame's lowest joint goes more than 2 cm under the floor
     lows = floor_heights(motion)

@@ -6,9 +6,10 @@ pulled half a second at a time. Measured: the real-time factor (seconds of motio
 and per CPU second of this process, which a busy shared machine disturbs less), each command's latency
 (seconds of motion from the command to the first frame that obeys it, and wall seconds until that
 frame was generated), the time per window split into sampling / post-processing / other, the resident
-memory over the stream (no frame is kept by the benchmark after the first ``JOIN_SECONDS``, so the
-memory is the stream's), the ground level per minute (drift), and pops at the joins of the first
-``JOIN_SECONDS``.
+memory over the stream (the benchmark keeps no frame: kinema.stream.measure.JoinMeter keeps two
+numbers a frame, so the memory is the stream's), the ground level per minute (drift), and pops at
+every join of the whole stream (the largest pelvis speed change and joint acceleration near a join
+against the largest away from joins).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from dataclasses import asdict, dataclass
 import torch
 
 from kinema.stream import MotionStream, StreamFrames, open_stream
-from kinema.stream.measure import frames_to_motion, join_report, rss_mb
+from kinema.stream.measure import JoinMeter, rss_mb
 
 #: seconds of motion between two commands of the benchmark's cycle
 COMMAND_EVERY_SECONDS = 6.0
@@ -32,8 +33,6 @@ CYCLE = ((("set_prompt", ("A person walks forward.",)),),
          (("set_prompt", ("A person jogs.",)),),
          (("steer", (-90.0, 2.5)),),
          (("clear", ()), ("set_prompt", ("A person walks forward.",))))
-#: seconds at the start of a stream whose frames are kept to measure the joins
-JOIN_SECONDS = 60.0
 #: seconds of motion between two memory samples
 MEMORY_EVERY_SECONDS = 30.0
 
@@ -83,7 +82,7 @@ def run_stream(model, seconds: float, threads: int, window_seconds: float, steps
     stream = open_stream(model, window_seconds=window_seconds, steps=steps)
     fps, chunk = stream.fps, max(1, round(0.5 * stream.fps))
     total, every = round(seconds * fps), round(COMMAND_EVERY_SECONDS * fps)
-    kept, grounds, memory, issued = [], {}, [], 0
+    joins, grounds, memory, issued = JoinMeter(), {}, [], 0
     wall0, cpu0 = time.perf_counter(), time.process_time()
     while stream.frames_out < total:
         if stream.frames_out >= issued * every:
@@ -91,21 +90,19 @@ def run_stream(model, seconds: float, threads: int, window_seconds: float, steps
             issued += 1
         n = min(chunk, total - stream.frames_out, issued * every - stream.frames_out)
         frames = stream.next_frames(max(1, n))
-        if frames.start < JOIN_SECONDS * fps:
-            kept.append(frames)
+        joins.feed(frames)
         minute = int(frames.start / fps // 60)
         grounds.setdefault(minute, []).append(_ground(frames))
         if frames.start % round(MEMORY_EVERY_SECONDS * fps) < frames.num_frames:
             memory.append(rss_mb())
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-    return _row(stream, threads, seconds, wall, cpu, kept, grounds, memory + [rss_mb()])
+    return _row(stream, threads, seconds, wall, cpu, joins, grounds, memory + [rss_mb()])
 
 
-def _row(stream: MotionStream, threads: int, seconds: float, wall: float, cpu: float, kept: list,
+def _row(stream: MotionStream, threads: int, seconds: float, wall: float, cpu: float, meter: JoinMeter,
          grounds: dict, memory: list[float]) -> StreamBenchRow:
     windows = stream.windows[1:]  # the first window starts from nothing
-    motion = frames_to_motion(kept, stream.skeleton)
-    joins = join_report(motion, [(lo, hi) for lo, hi in stream.seams() if hi + 3 < motion.num_frames])
+    joins = meter.report(stream.seams())
     latencies = [c.latency_seconds for c in stream.commands]
     walls = [c.wall_seconds for c in stream.commands if c.wall_seconds is not None]
     per_minute = [statistics.median(v) for _, v in sorted(grounds.items())]
@@ -125,14 +122,15 @@ def markdown(rows: list[StreamBenchRow]) -> str:
     """The rows as the table in docs/stream.md."""
     head = ("| threads | motion s | wall s | x real time (wall / CPU) | windows | ms per window: sampling / "
             "post / other | command latency, s of motion (mean / max) | wall latency s (median / max) | "
-            "RSS MB (first / last / max) | ground drift cm | joins: accel / windows' max m/s^2 |")
-    lines = [head, "|" + "---|" * 11]
+            "RSS MB (first / last / max) | ground drift cm | joins: pelvis speed change / windows' max m/s^2 | "
+            "joins: accel / windows' max m/s^2 |")
+    lines = [head, "|" + "---|" * 12]
     for r in rows:
         lines.append(
             f"| {r.threads} | {r.seconds:g} | {r.wall_s:.1f} | {r.realtime_wall:.1f} / {r.realtime_cpu:.1f} | "
             f"{r.windows} | {r.sampling_ms:.0f} / {r.postprocess_ms:.0f} / {r.other_ms:.0f} | "
             f"{r.latency_mean_s:.2f} / {r.latency_max_s:.2f} | {r.wall_latency_median_s:.2f} / "
             f"{r.wall_latency_max_s:.2f} | {r.rss_first_mb:.0f} / {r.rss_last_mb:.0f} / {r.rss_max_mb:.0f} | "
-            f"{r.ground_drift_cm:.1f} | {r.join_acceleration:.0f} / {r.inside_acceleration_max:.0f}"
-            f"{'' if r.joins_ok else ' (pop)'} |")
+            f"{r.ground_drift_cm:.1f} | {r.join_speed_change:.1f} / {r.inside_speed_change_max:.1f} | "
+            f"{r.join_acceleration:.0f} / {r.inside_acceleration_max:.0f}{'' if r.joins_ok else ' (pop)'} |")
     return "\n".join(lines)

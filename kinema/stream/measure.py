@@ -72,8 +72,13 @@ def join_report(motion: Motion, seams: list[tuple[int, int]]) -> JoinReport:
     the next: `MotionStream.seams`) with the rest of it."""
     speed = pelvis_speed(motion)
     dspeed = (speed[1:] - speed[:-1]).abs() * motion.fps  # index i: around frame i + 1
-    acc = joint_acceleration(motion)  # index i: frame i + 1
-    near = torch.zeros(motion.num_frames, dtype=torch.bool)
+    return _report(dspeed, joint_acceleration(motion), motion.num_frames, seams)
+
+
+def _report(dspeed: torch.Tensor, acc: torch.Tensor, num_frames: int, seams: list[tuple[int, int]]) -> JoinReport:
+    """`JoinReport` from the pelvis speed change and the largest joint acceleration of each inner frame
+    (index i: frame i + 1) of a ``num_frames``-frame motion."""
+    near = torch.zeros(num_frames, dtype=torch.bool)
     for lo, hi in seams:
         near[max(0, lo - JOIN_RADIUS) : hi + JOIN_RADIUS] = True
     inner = near[1:-1]
@@ -84,6 +89,43 @@ def join_report(motion: Motion, seams: list[tuple[int, int]]) -> JoinReport:
     return JoinReport(len(seams), float(dspeed[inner].max()), float(ds.max()),
                       float(torch.quantile(ds, 0.99)), float(acc[inner].max()), float(da.max()),
                       float(torch.quantile(da, 0.99)))
+
+
+class JoinMeter:
+    """`join_report` over a stream of any length without keeping its frames: fed each `StreamFrames`
+    in order, it keeps the last two frames and two float32 numbers per frame (96 kB for 10 minutes at
+    20 fps), so a 10-minute benchmark measures every join and its memory stays the stream's."""
+
+    def __init__(self) -> None:
+        self._root: torch.Tensor | None = None  # the last (up to) 2 frames' root x/z
+        self._pos: torch.Tensor | None = None  # and joint positions
+        self._dspeed: list[torch.Tensor] = []
+        self._acc: list[torch.Tensor] = []
+        self.num_frames = 0
+        self.fps = 0.0
+
+    def feed(self, frames: StreamFrames) -> None:
+        if frames.start != self.num_frames:
+            raise ValueError(f"JoinMeter: frames start at {frames.start}, expected {self.num_frames}")
+        self.fps = frames.fps
+        root = frames.root_translation[:, [0, 2]].float()
+        pos = frames.positions.float()
+        if self._root is not None:
+            root, pos = torch.cat([self._root, root]), torch.cat([self._pos, pos])
+        if root.shape[0] >= 3:
+            speed = (root[1:] - root[:-1]).norm(dim=-1) * self.fps
+            self._dspeed.append(((speed[1:] - speed[:-1]).abs() * self.fps).to(torch.float32))
+            self._acc.append(((pos[2:] - 2 * pos[1:-1] + pos[:-2]).norm(dim=-1) * self.fps**2).amax(-1))
+        self._root, self._pos = root[-2:], pos[-2:]
+        self.num_frames += frames.num_frames
+
+    def report(self, seams: list[tuple[int, int]]) -> JoinReport:
+        """The joins ``seams`` (frame ranges, `MotionStream.seams`) that end `JOIN_RADIUS` frames before
+        the last frame fed, against the rest."""
+        if not self._dspeed:
+            return JoinReport(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        seams = [(lo, hi) for lo, hi in seams if hi + JOIN_RADIUS < self.num_frames]
+        return _report(torch.cat(self._dspeed), torch.cat(self._acc), self.num_frames, seams)
 
 
 def trunk_lean_deg(motion: Motion) -> torch.Tensor:
