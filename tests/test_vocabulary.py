@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import re
+
 import pytest
 import torch
 
@@ -10,7 +13,7 @@ from kinema.cli import main
 from kinema.data.dataset import MotionDataset
 from kinema.errors import KinemaError
 from kinema.model.actions import actions_in, clips_per_action
-from kinema.model.vocabulary import FILE_NAME, MIN_ACTION_CLIPS, UNKNOWN_BELOW, KnownPrompts
+from kinema.model.vocabulary import FILE_NAME, MIN_ACTION_CLIPS, UNKNOWN_BELOW, KnownPrompts, read_action_probes
 from kinema.text import get_text_encoder
 
 CAPTIONS = ["A person walks forward.", "A person bows.", "A person waves their right hand.", "A person bows."]
@@ -122,6 +125,19 @@ def test_export_writes_known_prompts(tiny_checkpoint, tiny_data, tmp_path, capsy
         == 2
     )
     assert "not a dataset build" in capsys.readouterr().err and not (tmp_path / "m2").exists()
+    # measured actions (issue 38): written with the known prompts; refused alone or malformed, before writing
+    probes = tmp_path / "probes.json"
+    probes.write_text(json.dumps({"rows": [{"content": "walk", "pass": False}, {"content": "walk", "pass": True}]}))
+    assert main(["export", str(tiny_checkpoint), "--out", str(out), "--known-prompts", str(tiny_data),
+                 "--action-probes", str(probes)]) == 0
+    assert "measured: walk 1/2" in capsys.readouterr().out
+    assert kinema.load_model(out).known_prompts.action_probes == {"walk": (1, 2)}
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "m3"), "--action-probes", str(probes)]) == 2
+    assert "--action-probes: give --known-prompts DATA too" in capsys.readouterr().err
+    probes.write_text("{}")
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "m3"), "--known-prompts", str(tiny_data),
+                 "--action-probes", str(probes)]) == 2
+    assert "not an action-probes file" in capsys.readouterr().err and not (tmp_path / "m3").exists()
 
 
 # ----------------------------------------------------------------------------- actions (issues 36, 38)
@@ -138,6 +154,37 @@ def test_action_counts_round_trip_and_older_files_still_load(tmp_path):
     assert back.action_clips == {} and back.learned == {"bow", "kick", "walk"}  # every named action counts
     assert back.match("A person kicks.", enc.encode(["A person kicks."])[0]).known
     assert not back.match("A person punches.", enc.encode(["A person kicks."])[0]).known  # never named
+
+
+def test_measured_actions_decide_over_clip_counts(tmp_path):
+    """Issue 38: a probe file (scripts/humanoid_action_probes.py --json) measured on the model decides
+    whether an action is learned, both ways: kick (6 clips) learned when its samples pass, punch (12 clips)
+    not when they fail; unmeasured actions keep the count rule."""
+    enc = get_text_encoder("hash-test-32")
+    clips = [["A person kicks."]] * 6 + [["A person punches."]] * 12 + [["A person jumps."]] * 3
+    known = KnownPrompts.from_clips(clips, enc)
+    assert known.learned == {"punch"}
+    rows = ([{"content": "kick-left", "pass": True}] * 3 + [{"content": "kick-right", "pass": False}]
+            + [{"content": "punch-right", "pass": False}] * 4 + [{"content": "dance", "travel_m": 0.3}])
+    probes_file = tmp_path / "probes.json"
+    probes_file.write_text(json.dumps({"rows": rows}))
+    probes = read_action_probes(probes_file)
+    assert probes == {"kick": (3, 4), "punch": (0, 4)}
+    measured = known.with_probes(probes)
+    assert measured.learned == {"kick"}
+    (note,) = measured.action_notes(frozenset({"punch"}))
+    assert note == "the model does not make 'punch': 0 of 4 measured samples show it"
+    assert "only 3 training clips show it" in measured.action_notes(frozenset({"jump"}))[0]
+    measured.save(tmp_path / "m")
+    back = KnownPrompts.load(tmp_path / "m")
+    assert back.action_probes == probes and back.learned == {"kick"}
+    for text, says in ((json.dumps({"rows": [{"content": "moonwalk", "pass": True}]}), "names no known action"),
+                       (json.dumps({"rows": [{"content": "kick", "pass": 1}]}), "rows[0].pass: expected true or false"),
+                       (json.dumps({"rows": [{"content": "dance"}]}), "no row with a 'pass'"),
+                       ("[1, 2]", "not an action-probes file")):
+        probes_file.write_text(text)
+        with pytest.raises(KinemaError, match=re.escape(says)):
+            read_action_probes(probes_file)
 
 
 def test_the_default_model_knows_which_actions_its_clips_show():

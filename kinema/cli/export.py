@@ -30,6 +30,10 @@ def register(sub) -> None:
     p.add_argument("--known-prompts", type=Path, metavar="DATA",
                    help="dataset build whose train captions the model learned: their embeddings are saved as "
                         "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
+    p.add_argument("--action-probes", type=Path, metavar="JSON",
+                   help="with --known-prompts: per-action measurements of this model (scripts/humanoid_action_"
+                        "probes.py --json); an action counts as learned when half its samples pass, instead of "
+                        "by its number of training clips")
     p.set_defaults(func=run)
 
 
@@ -40,12 +44,19 @@ def run(args: argparse.Namespace) -> int:
 
     if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
         raise KinemaError(f"{args.known_prompts}: not a dataset build (no clips.json); run `kinema data build`")
+    probes = None
+    if args.action_probes is not None:
+        from kinema.model.vocabulary import read_action_probes
+
+        if args.known_prompts is None:
+            raise KinemaError("--action-probes: give --known-prompts DATA too (the probes qualify its actions)")
+        probes = read_action_probes(args.action_probes)
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
                       ema=args.weights == "ema", grounding=grounding_overrides(args))
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
-        _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id)
+        _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
@@ -53,8 +64,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
-    """Embed the train captions of ``data`` with the model's text encoder into ``out``."""
+def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | None) -> None:
+    """Embed the train captions of ``data`` with the model's text encoder into ``out``, with the
+    per-action ``probes`` (kinema.model.vocabulary.read_action_probes) when given."""
     from kinema.data.dataset import MotionDataset
     from kinema.data.phrasings import manner_phrases
     from kinema.model.vocabulary import KnownPrompts
@@ -63,7 +75,11 @@ def _write_known_prompts(data: Path, out: Path, encoder_id: str) -> None:
     clips = [rec["captions"] for rec in MotionDataset(data, "train").clips]
     encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
     known = KnownPrompts.from_clips(clips, encoder, manner_phrases())
-    print(f"wrote {known.save(out)} ({len(known.captions)} known captions)")
+    if probes:
+        known = known.with_probes(probes)
+    learned = "" if not probes else "; measured: " + ", ".join(
+        f"{a} {p}/{n}{'' if a in known.learned else ' (not learned)'}" for a, (p, n) in known.action_probes.items())
+    print(f"wrote {known.save(out)} ({len(known.captions)} known captions{learned})")
 
 
 def _grounding_note(loaded) -> str:

@@ -24,6 +24,12 @@ learned but never appear together in one caption ("A person walks and waves.") i
 for the threshold (model card of the default model, train split with mirrors): kick, dance (2 clips each),
 call and slash (4) are not produced; bow (22), guide, bye (24 each) are. A file without ``action_clips``
 (older exports) counts every action its captions name as learned.
+
+A clip count is a proxy. Where an action was measured on the model itself (``action_probes``: per action,
+how many generated samples of held-out phrasings passed a check of the action, e.g. a kick lifts the named
+foot above the hips; scripts/humanoid_action_probes.py, saved by ``kinema export --action-probes``), the
+measurement decides instead: learned when at least ``PROBE_PASS_SHARE`` of its samples pass, whatever the
+count (a fine-tune can teach an action from 6 clips drawn often, and 10 clips do not prove a punch).
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from safetensors.torch import save
 
 from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
-from kinema.model.actions import actions_in, clips_per_action
+from kinema.model.actions import ACTION_WORDS, actions_in, clips_per_action
 
 FILE_NAME = "known_prompts.safetensors"
 #: cosine similarity below which a prompt counts as unknown (see the module docstring for the numbers)
@@ -49,6 +55,8 @@ UNKNOWN_BELOW = 0.70
 NEAREST = 3
 #: an action shown by fewer training clips (mirrors included) is not learned (see the module docstring)
 MIN_ACTION_CLIPS = 10
+#: an action measured on the model (``action_probes``) is learned when this share of its samples pass
+PROBE_PASS_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -95,6 +103,7 @@ class KnownPrompts:
         encoder_id: str,
         manner_phrases: tuple[str, ...] = (),
         action_clips: Mapping[str, int] | None = None,
+        action_probes: Mapping[str, tuple[int, int]] | None = None,
     ):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
             raise KinemaError(
@@ -114,22 +123,41 @@ class KnownPrompts:
         self.action_clips = dict(sorted((action_clips or {}).items()))
         self.action_sets = frozenset(self.caption_actions)
         self.named_actions = frozenset().union(*self.caption_actions)
-        self.learned = frozenset(
-            a for a in self.named_actions if self.action_clips.get(a, MIN_ACTION_CLIPS) >= MIN_ACTION_CLIPS
-        )
+        # per measured action (passed, samples) of the model's own probes (empty = none measured)
+        self.action_probes = {str(a): (int(p), int(n)) for a, (p, n) in sorted((action_probes or {}).items())}
+        for a, (passed, total) in self.action_probes.items():
+            if not 0 <= passed <= total or total < 1:
+                raise KinemaError(f"known prompts: action {a!r} probes {passed}/{total} are not a share of samples")
+        self.learned = frozenset(a for a in self.named_actions if self._learned(a))
+
+    def _learned(self, action: str) -> bool:
+        """Whether the model learned ``action``: its probes pass (where measured), else enough clips show it."""
+        if action in self.action_probes:
+            passed, total = self.action_probes[action]
+            return passed >= PROBE_PASS_SHARE * total
+        return self.action_clips.get(action, MIN_ACTION_CLIPS) >= MIN_ACTION_CLIPS
 
     def action_notes(self, actions: frozenset[str]) -> tuple[str, ...]:
         """Why a prompt naming ``actions`` is unknown to the model, one phrase per reason (empty: it is not):
         actions no caption names, actions too few training clips show, or learned actions no one caption
         names all of."""
         notes = [f"the model was not trained on {a!r}" for a in sorted(actions - self.named_actions)]
-        notes += [
-            f"the model was not trained on {a!r} enough to learn it: only {self.action_clips[a]} training clips show it"
-            for a in sorted((actions & self.named_actions) - self.learned)
-        ]
+        notes += [self._unlearned_note(a) for a in sorted((actions & self.named_actions) - self.learned)]
         if not notes and not any(actions <= a for a in self.action_sets):
             notes.append(f"no training caption has {' and '.join(map(repr, sorted(actions)))} together")
         return tuple(notes)
+
+    def _unlearned_note(self, action: str) -> str:
+        if action in self.action_probes:
+            passed, total = self.action_probes[action]
+            return f"the model does not make {action!r}: {passed} of {total} measured samples show it"
+        return (f"the model was not trained on {action!r} enough to learn it: only {self.action_clips[action]} "
+                "training clips show it")
+
+    def with_probes(self, action_probes: Mapping[str, tuple[int, int]]) -> KnownPrompts:
+        """These known prompts with ``action_probes`` (per action: samples passed, samples) measured."""
+        return KnownPrompts(self.captions, self.embeddings, self.encoder_id, self.manner_phrases,
+                            self.action_clips, action_probes)
 
     def untrained(self, actions: frozenset[str]) -> frozenset[str]:
         """The ``actions`` the model has not learned (no caption names them, or too few clips show them)."""
@@ -176,6 +204,8 @@ class KnownPrompts:
         }
         if self.action_clips:
             meta["action_clips"] = json.dumps(self.action_clips)
+        if self.action_probes:
+            meta["action_probes"] = json.dumps({a: list(v) for a, v in self.action_probes.items()})
         path = Path(folder) / FILE_NAME
         atomic_write_bytes(path, save({"embeddings": self.embeddings.half().contiguous()}, metadata=meta))
         return path
@@ -193,7 +223,8 @@ class KnownPrompts:
             captions = json.loads(meta["captions"])
             phrases = tuple(json.loads(meta.get("manner_phrases", "[]")))
             clips = {str(a): int(n) for a, n in json.loads(meta.get("action_clips", "{}")).items()}
-            return cls(captions, emb, meta["text_encoder"], phrases, clips)
+            probes = {str(a): (int(v[0]), int(v[1])) for a, v in json.loads(meta.get("action_probes", "{}")).items()}
+            return cls(captions, emb, meta["text_encoder"], phrases, clips, probes)
         except (OSError, KeyError, TypeError, ValueError, AttributeError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
@@ -217,3 +248,30 @@ class KnownPrompts:
         actions = actions_in(prompt)
         notes = self.action_notes(actions)
         return PromptMatch(prompt, nearest, nearest[0][1] >= UNKNOWN_BELOW and not notes, tuple(sorted(actions)), notes)
+
+
+def read_action_probes(path: str | Path) -> dict[str, tuple[int, int]]:
+    """Per action, (samples passed, samples) from the JSON that scripts/humanoid_action_probes.py writes
+    (``--json``): its ``rows``, each with a ``content`` (``kick-left``, ``jump``, ...: the action before
+    the first ``-``) and, for the actions it checks, a boolean ``pass``."""
+    path = Path(path)
+    try:
+        rows = json.loads(path.read_text())["rows"]
+        out: dict[str, list[int]] = {}
+        for i, row in enumerate(rows):
+            if "pass" not in row:
+                continue
+            action = str(row["content"]).split("-")[0]
+            if action not in ACTION_WORDS:
+                raise KinemaError(f"{path}: rows[{i}].content: {row['content']!r} names no known action")
+            if not isinstance(row["pass"], bool):
+                raise KinemaError(f"{path}: rows[{i}].pass: expected true or false, got {row['pass']!r}")
+            counts = out.setdefault(action, [0, 0])
+            counts[0] += row["pass"]
+            counts[1] += 1
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:
+        raise KinemaError(f"{path}: not an action-probes file from scripts/humanoid_action_probes.py --json "
+                          f"({type(err).__name__}: {err})") from None
+    if not out:
+        raise KinemaError(f"{path}: no row with a 'pass' (an action-probes file measures kicks, punches, ...)")
+    return {a: (p, n) for a, (p, n) in sorted(out.items())}
