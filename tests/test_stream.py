@@ -223,6 +223,8 @@ def test_cli_streams_a_script_to_a_file_and_a_log(tmp_path) -> None:
     log = json.loads((tmp_path / "stream.stream.json").read_text())
     assert log["frames"] == 80 and log["threads"] == 1 and len(log["commands"]) == 2
     assert log["commands"][1]["latency_seconds"] <= 0.5
+    assert log["joins"]["joins"] >= 1 and log["joins"]["ok"] is True, log["joins"]
+    assert f"joins ({log['joins']['joins']}): pelvis speed change" in r.stdout
     assert out.is_file()
 
 

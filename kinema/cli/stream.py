@@ -81,4 +81,10 @@ def run(args: argparse.Namespace) -> int:
           f"{played.motion.fps:g} fps in {played.wall_seconds:.2f} s wall ({played.realtime_factor:.1f}x real "
           f"time, {threads} thread(s)); {len(latencies)} commands, latency up to "
           f"{max(latencies, default=0):.2f} s of motion; log {log}")
+    joins = report["joins"]
+    if joins["joins"]:
+        print(f"joins ({joins['joins']}): pelvis speed change {joins['join_speed_change']:.1f} m/s^2 against the "
+              f"windows' own largest {joins['inside_speed_change_max']:.1f}, joint acceleration "
+              f"{joins['join_acceleration']:.0f} against {joins['inside_acceleration_max']:.0f}"
+              f"{'' if joins['ok'] else ' (a pop: a join goes beyond the windows themselves)'}")
     return 0

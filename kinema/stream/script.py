@@ -23,7 +23,7 @@ from typing import Any
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.stream.continuation import MotionStream
-from kinema.stream.measure import frames_to_motion
+from kinema.stream.measure import JoinReport, frames_to_motion, join_report
 
 COMMANDS = ("prompt", "steer", "target", "clear")
 #: most commands one script may hold
@@ -109,15 +109,21 @@ class ScriptRun:
         """Seconds of motion generated per wall second."""
         return self.motion.duration / max(self.wall_seconds, 1e-9)
 
+    def joins(self) -> JoinReport:
+        """Pops at the window joins against the windows' own motion (kinema.stream.measure.join_report)."""
+        seams = [(lo, hi) for lo, hi in self.stream.seams() if hi + 3 < self.motion.num_frames]
+        return join_report(self.motion, seams)
+
     def log(self) -> dict:
-        """The JSON log: settings, each command's latency, each window's timings, the totals."""
+        """The JSON log: settings, each command's latency, each window's timings, the joins, the totals."""
         s = self.stream.settings
         windows = [{"first_frame": w.first_frame, "new_frames": w.new_frames, "sampling": round(w.sampling, 4),
                     "postprocess": round(w.postprocess, 4), "other": round(w.other, 4)} for w in self.stream.windows]
         return {"fps": s.fps, "frames": self.motion.num_frames, "seconds": round(self.motion.duration, 3),
                 "wall_seconds": round(self.wall_seconds, 3), "realtime_factor": round(self.realtime_factor, 2),
                 "window_seconds": s.window / s.fps, "steps": s.steps, "lookahead_seconds": s.lookahead / s.fps,
-                "commands": [c.to_json() for c in self.stream.commands], "windows": windows}
+                "commands": [c.to_json() for c in self.stream.commands], "windows": windows,
+                "joins": self.joins().to_json()}
 
 
 def run_script(stream: MotionStream, commands: list[ScriptCommand], seconds: float,
