@@ -69,13 +69,17 @@ def _cpu(fn) -> float:
 
 
 def bench_speed(model_name: str = "default", seconds: float = 5.0, rounds: int = 3,
-                samples: tuple[int, ...] = (1, 4, 16), steps: int | None = None) -> dict:
-    """Median CPU seconds of every measurement of the module docstring, per precision."""
+                samples: tuple[int, ...] = (1, 4, 16), steps: int | None = None, guidance_refresh: int = 1,
+                guidance_cached: str = "constr") -> dict:
+    """Median CPU seconds of every measurement of the module docstring, per precision; ``guidance_refresh``
+    / ``guidance_cached``: the models' guidance caching (kinema.diffusion.guidance_cache; 1 = off)."""
     from kinema.bench.generate import example_constraints
     from kinema.bench.keyjoint_planning import _error, sparse_example
     from kinema.generate import load_model
 
     models = {p: load_model(model_name, precision=p) for p in ("fp32", "bf16")}
+    for m in models.values():
+        m.guidance_refresh, m.guidance_cached = guidance_refresh, guidance_cached
     cons = example_constraints(seconds)
     any_model = models["fp32"]
     sparse = sparse_example(any_model.skeleton, seconds, any_model.fps)
@@ -101,7 +105,8 @@ def bench_speed(model_name: str = "default", seconds: float = 5.0, rounds: int =
                     PROMPT, constraints=sparse, postprocess=False, keyjoint_model=None if mode == "default" else
                     mode, **kw)[0])))
                 errors[p][f"sparse_{mode}_cm"] = 100 * _error(out[0], sparse)
-    result: dict = {"seconds": seconds, "rounds": rounds, "samples": list(samples)}
+    result: dict = {"seconds": seconds, "rounds": rounds, "samples": list(samples),
+                    "guidance_refresh": guidance_refresh, "guidance_cached": guidance_cached}
     for p, m in models.items():
         med = {k: statistics.median(v) for k, v in times[p].items()}
         med["post_share"] = (med["constrained_post"] - med["constrained_raw"]) / med["constrained_post"]

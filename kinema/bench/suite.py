@@ -34,6 +34,8 @@ class GenerateSuiteOptions:
     threads: tuple[int, ...] = (1, 2)
     loads: tuple[int, ...] = (0, 2)
     thread_repeats: int = 3
+    guidance_refresh: int = 1  # speed section: guidance caching (kinema.diffusion.guidance_cache); 1 = off
+    guidance_cached: str = "constr"
 
     @classmethod
     def quick(cls, **kw) -> GenerateSuiteOptions:
@@ -79,7 +81,8 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
         from kinema.bench.precision import bench_speed
 
         say(f"fp32 vs bf16, post-processing share, samples {list(opts.samples)}, sparse targets (interleaved)")
-        out["speed"] = bench_speed(opts.model, opts.seconds, rounds=max(opts.repeats, 1), samples=opts.samples)
+        out["speed"] = bench_speed(opts.model, opts.seconds, rounds=max(opts.repeats, 1), samples=opts.samples,
+                                   guidance_refresh=opts.guidance_refresh, guidance_cached=opts.guidance_cached)
     if "cold" in opts.sections:
         say("first `kinema generate` in a fresh process (cold, warm, phases)")
         out["cli"] = cli_times(opts.model, opts.seconds)

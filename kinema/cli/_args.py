@@ -99,6 +99,16 @@ def add_precision_argument(p: argparse.ArgumentParser) -> None:
                         "else $KINEMA_PRECISION), fp32 or bf16 (docs/speed.md)")
 
 
+def add_guidance_cache_arguments(p: argparse.ArgumentParser) -> None:
+    """``--guidance-refresh N`` and ``--guidance-cached text|constr``: guidance caching
+    (kinema.diffusion.guidance_cache), off by default."""
+    p.add_argument("--guidance-refresh", type=positive_int, default=1, metavar="N",
+                   help="guidance caching: run the cached separated-guidance branch on every N-th DDIM step only "
+                        "and reuse its last difference on the others (default 1 = off)")
+    p.add_argument("--guidance-cached", choices=("constr", "text"), default="constr",
+                   help="the branch --guidance-refresh caches (default constr)")
+
+
 def add_grounding_arguments(p: argparse.ArgumentParser) -> None:
     """``--grounding WEIGHT``, ``--grounding-top-k K``, ``--grounding-temperature T`` (prompt grounding,
     kinema.model.grounding); each left out keeps the model's saved setting."""

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from kinema.cli._args import add_precision_argument, positive_float, positive_int
+from kinema.cli._args import add_guidance_cache_arguments, add_precision_argument, positive_float, positive_int
 from kinema.cli.batch import register_bench as register_batch_bench
 from kinema.cli.bench_keyjoint_planning import register_bench as register_keyjoint_planning_bench
 from kinema.cli.bench_objectives import register_bench as register_objectives_bench
@@ -310,6 +310,7 @@ def _register_generate(targets) -> None:
     p.add_argument("--seconds", type=positive_float, default=5.0)
     p.add_argument("--no-cold-start", action="store_true", help="skip the fresh-process section")
     add_precision_argument(p)
+    add_guidance_cache_arguments(p)
     p.set_defaults(func=_run_generate)
 
 
@@ -324,6 +325,7 @@ def _run_generate(args: argparse.Namespace) -> int:
         return _run_anyrig(args, threads)
     opts = _suite_options(args, SECTIONS)
     opts.seconds = args.seconds
+    opts.guidance_refresh, opts.guidance_cached = args.guidance_refresh, args.guidance_cached
     if args.no_cold_start:
         opts.sections = tuple(s for s in opts.sections if s != "cold")
     result = run_generate_suite(opts)

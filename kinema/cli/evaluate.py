@@ -7,6 +7,7 @@ from pathlib import Path
 
 from kinema.cli._args import (
     add_grounding_arguments,
+    add_guidance_cache_arguments,
     add_precision_argument,
     grounding_overrides,
     non_negative_float,
@@ -50,7 +51,18 @@ def register(sub) -> None:
     p.add_argument("--no-progress", action="store_true")
     add_sfcontrol_arguments(p)
     add_precision_argument(p)
+    add_guidance_cache_arguments(p)
     p.set_defaults(func=run)
+
+
+def _apply_sampling_options(model, args: argparse.Namespace) -> None:
+    """On the loaded model: grounding overrides (every row, probe and held-out case then uses them), the
+    imputation-only ablation and guidance caching."""
+    if grounding_overrides(args):
+        model.grounding = model.grounding_settings(grounding_overrides(args))
+    if args.imputation_only:
+        model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
+    model.guidance_refresh, model.guidance_cached = args.guidance_refresh, args.guidance_cached
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,10 +117,7 @@ def run(args: argparse.Namespace) -> int:
             model.skeleton.require_roles(PROBE_ROLES)
         except KinemaError as err:
             raise KinemaError(f"--phrasings: {err}; or pass --phrasings 0") from None
-    if grounding_overrides(args):  # every row, probe and held-out case then uses these settings
-        model.grounding = model.grounding_settings(grounding_overrides(args))
-    if args.imputation_only:
-        model.root_displacement, model.root_smoothing, model.joint_sigma = False, 0.0, 0.0
+    _apply_sampling_options(model, args)
     save_suite(cases, out / "suite.json")
     modes = {"both": (False, True), "raw": (False,), "post": (True,)}[args.modes]
     results = run_suite(model, cases, postprocess_modes=modes, steps=args.steps, seed=args.seed,

@@ -81,6 +81,8 @@ class HumanPipeline(MotionPipeline):
         self.root_displacement = True
         self.root_smoothing = ROOT_SMOOTHING_SECONDS
         self.joint_sigma = JOINT_SIGMA_SECONDS
+        self.guidance_refresh = 1  # > 1: guidance caching (kinema.diffusion.guidance_cache), off by default
+        self.guidance_cached = "constr"
         self.grounding: Grounding = loaded.grounding
 
     @classmethod
@@ -291,7 +293,8 @@ class HumanPipeline(MotionPipeline):
     def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
         return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,
                               anchor_start=self.root_displacement, root_smoothing=self.root_smoothing,
-                              joint_sigma=self.joint_sigma)
+                              joint_sigma=self.joint_sigma, guidance_refresh=self.guidance_refresh,
+                              guidance_cached=self.guidance_cached)
 
     def _sample_batch(self, plan: SegmentPlan, call: SamplingCall, progress) -> list[Motion]:
         """``call.samples`` raw motions: every segment sampled on its own (grounded) prompt alone, then every

@@ -50,6 +50,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from kinema.diffusion.guidance import Guidance
+from kinema.diffusion.guidance_cache import GuidanceCache
 from kinema.human.keyjoints import KeyjointTargets, joint_displacement
 from kinema.model.denoiser import Denoiser
 from kinema.model.loading import LoadedModel
@@ -193,7 +194,10 @@ class SampleSettings:
     """How to sample: ``num_frames``, ``guidance``, DDIM ``steps`` (None: the sampler's default) and the
     per-step corrections of the module docstring (``root_displacement`` with ``anchor_start``,
     ``root_smoothing`` and ``joint_sigma`` in seconds; 0 / False turns one off). ``strength`` (0, 1]:
-    the share of the steps run when the targets give a ``start`` (kinema.diffusion.sampler)."""
+    the share of the steps run when the targets give a ``start`` (kinema.diffusion.sampler).
+    ``guidance_refresh`` > 1 caches the separated guidance's ``guidance_cached`` branch ("text" or
+    "constr"): it runs on every ``guidance_refresh``-th step only and its last difference is reused on the
+    others (kinema.diffusion.guidance_cache); 1 (the default) runs every branch at every step."""
 
     num_frames: int
     guidance: Guidance
@@ -204,6 +208,8 @@ class SampleSettings:
     joint_sigma: float = JOINT_SIGMA_SECONDS
     strength: float = 1.0
     max_batch_frames: int = MAX_BATCH_FRAMES
+    guidance_refresh: int = 1
+    guidance_cached: str = "constr"
 
 
 @torch.no_grad()
@@ -255,8 +261,9 @@ def clean_estimate_fn(denoiser: Denoiser, rep: FlatRepresentation, text_emb: tor
                       targets: SampleTargets, settings: SampleSettings):
     """The clean-estimate function ``(x_t, t) -> x0`` (normalised) that :func:`sample_features` hands to
     DDIM: guided denoiser plus the corrections of the module docstring. For callers that run their own
-    DDIM loop, e.g. a differentiable one (kinema.human.noise_optimisation); every operation is differentiable."""
-    return _StepCorrections(denoiser, rep, text_emb, targets.pruned(), settings)
+    DDIM loop, e.g. a differentiable one (kinema.human.noise_optimisation); every operation is differentiable.
+    Guidance caching is off here (the function may be called out of step order)."""
+    return _StepCorrections(denoiser, rep, text_emb, targets.pruned(), replace(settings, guidance_refresh=1))
 
 
 def _branch_count(guidance: Guidance, has_text: bool, constrained: bool) -> int:
@@ -293,13 +300,16 @@ class _StepCorrections:
             keys = KeyjointTargets(rep, self.tgt, self.mask, self.world_xz if self.has_world else None,
                                    self.world_mask if self.has_world else None)
             self.keys = keys if keys.any else None
+        self.cache = (GuidanceCache(settings.guidance_refresh, settings.guidance_cached)
+                      if settings.guidance_refresh > 1 else None)
 
     def __call__(self, x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         rep, s, mask = self.rep, self.settings, self.mask
         tgt_n = None if mask is None else rep.normalize(self.tgt) * mask
         x0 = self.denoiser.forward_guided(x_t, t, self.text_emb, self.c_dir, tgt_n, mask, None, self.guidance,
                                           text_mask=self.text_mask,
-                                          context_mask=None if mask is None else self.context_mask)
+                                          context_mask=None if mask is None else self.context_mask,
+                                          cache=self.cache)
         rxz = rep.root_xz
         if self.smooth_frames > 0:
             x0 = x0.clone()

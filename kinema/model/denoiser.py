@@ -31,6 +31,7 @@ import torch
 from torch import nn
 
 from kinema.diffusion.guidance import Guidance, combine, split_branches, stack_branches
+from kinema.diffusion.guidance_cache import GuidanceCache
 from kinema.model.config import ModelConfig
 from kinema.model.layers import StageTransformer
 from kinema.representation.kimodo_features import global_to_local_root
@@ -211,6 +212,7 @@ class Denoiser(nn.Module):
         guidance: Guidance,
         text_mask: torch.Tensor | None = None,
         context_mask: torch.Tensor | None = None,
+        cache: GuidanceCache | None = None,
     ) -> torch.Tensor:
         """Guided x0 ``(B, T, D)``: all branches of ``guidance`` in ONE forward pass of batch ``k * B``.
 
@@ -224,21 +226,12 @@ class Denoiser(nn.Module):
         ``w_constr`` times and the previous segment's motion outweighs the new prompt (issue 18). When
         the mask holds nothing but context, the constraint branch equals the unconditional one and the
         separated mode is reduced to regular CFG, as without a mask.
+
+        ``cache`` (kinema.diffusion.guidance_cache): the separated mode runs the cache's cached branch only
+        on its refresh calls and reuses that branch's last difference on the others.
         """
-        if mask is None:
-            guidance = guidance.without_constraints()
-            mask = torch.zeros_like(x_t)
-            x_tgt = torch.zeros_like(x_t)
-        elif x_tgt is None:
-            raise ValueError("a constraint mask needs constraint targets x_tgt")
-        if context_mask is None:
-            context = torch.zeros_like(mask)
-        else:
-            context = context_mask.to(mask.dtype)
-            mask = torch.maximum(mask, context)
-            if not bool((mask > context).any()):
-                guidance = guidance.without_constraints()
-        names = guidance.branches
+        guidance, x_tgt, mask, context = _guided_conditions(x_t, x_tgt, mask, context_mask, guidance)
+        names = guidance.branches if cache is None else cache.branches(guidance)
         B = x_t.shape[0]
         t = t.expand(B) if t.dim() == 0 else t
         if text_mask is None:
@@ -262,4 +255,27 @@ class Denoiser(nn.Module):
                                 names),
             pad_mask=rep(pad_mask),
         )
-        return combine(guidance, split_branches(out, names))
+        outputs = split_branches(out, names)
+        return combine(guidance, outputs) if cache is None else cache.combine(guidance, outputs)
+
+
+def _guided_conditions(x_t: torch.Tensor, x_tgt: torch.Tensor | None, mask: torch.Tensor | None,
+                       context_mask: torch.Tensor | None, guidance: Guidance
+                       ) -> tuple[Guidance, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``forward_guided``'s (guidance, x_tgt, mask, context): zero targets and mask without a mask, the
+    context merged into the mask, and the separated mode reduced to regular CFG when nothing but context
+    is constrained."""
+    if mask is None:
+        guidance = guidance.without_constraints()
+        mask = torch.zeros_like(x_t)
+        x_tgt = torch.zeros_like(x_t)
+    elif x_tgt is None:
+        raise ValueError("a constraint mask needs constraint targets x_tgt")
+    if context_mask is None:
+        context = torch.zeros_like(mask)
+    else:
+        context = context_mask.to(mask.dtype)
+        mask = torch.maximum(mask, context)
+        if not bool((mask > context).any()):
+            guidance = guidance.without_constraints()
+    return guidance, x_tgt, mask, context
