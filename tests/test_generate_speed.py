@@ -11,6 +11,7 @@ import kinema.human.pipeline as api
 from kinema.diffusion.guidance import Guidance
 from kinema.generate import load_model
 from kinema.text import HashTestEncoder, MemoryCachedEncoder
+from tests.denoiser_spy import record_forward_rows
 
 PROMPT = "A person walks forward."
 WAYPOINT = [{"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}]
@@ -25,16 +26,7 @@ def model(tiny_checkpoint):
 @pytest.fixture
 def batch_sizes(model, monkeypatch):
     """Batch size of every denoiser forward pass during the test."""
-    sizes: list[int] = []
-    den = model.loaded.denoiser
-    forward = den.forward
-
-    def spy(x_t, *args, **kwargs):
-        sizes.append(x_t.shape[0])
-        return forward(x_t, *args, **kwargs)
-
-    monkeypatch.setattr(den, "forward", spy)
-    return sizes
+    return record_forward_rows(model, monkeypatch)
 
 
 def _same(a, b) -> bool:

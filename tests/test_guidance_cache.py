@@ -8,6 +8,7 @@ import torch
 import kinema
 from kinema.diffusion.guidance import Guidance, combine
 from kinema.diffusion.guidance_cache import GuidanceCache
+from tests.denoiser_spy import record_forward_rows
 
 PROMPT = "A person walks forward."
 CONSTRAINTS = [
@@ -52,19 +53,6 @@ def model():
     return kinema.load_model(precision="fp32")
 
 
-def _rows_per_call(model, monkeypatch) -> list[int]:
-    rows: list[int] = []
-    den = model.loaded.denoiser
-    forward = den.forward
-
-    def spy(x_t, *args, **kwargs):
-        rows.append(x_t.shape[0])
-        return forward(x_t, *args, **kwargs)
-
-    monkeypatch.setattr(den, "forward", spy)
-    return rows
-
-
 def _waypoint_miss_cm(motion) -> float:
     """Worst root x/z distance (cm) from the two waypoints of ``CONSTRAINTS``."""
     way = CONSTRAINTS[0]
@@ -76,7 +64,7 @@ def _waypoint_miss_cm(motion) -> float:
 @pytest.mark.parametrize("cached", ["text", "constr"])
 def test_shipped_model_cached_guidance_runs_fewer_rows_and_stays_close(model, monkeypatch, cached) -> None:
     steps = 12
-    rows = _rows_per_call(model, monkeypatch)
+    rows = record_forward_rows(model, monkeypatch)
     model.guidance_refresh = 1
     try:
         full = model.generate(PROMPT, seconds=5.0, seed=0, steps=steps, constraints=CONSTRAINTS, postprocess=False)
