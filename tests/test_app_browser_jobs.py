@@ -123,10 +123,16 @@ def test_frame_slider_and_range_agree_after_adding_a_prompt(tab):
 
 def test_frame_range_takes_typed_frames(tab):
     page, session = tab
-    for label, value in (("From frame", 60), ("To frame", 110)):
-        box = row_input(page, label)
-        box.fill(str(value))
-        box.press("Enter")
+    for end, (label, value) in enumerate((("From frame", 60), ("To frame", 110))):
+        # as a user does: type one box, see it taken, then the next (the server's answer to the first entry
+        # re-draws both boxes; on a loaded machine it can arrive while the second is being typed)
+        for _ in range(3):
+            box = row_input(page, label)
+            box.fill(str(value))
+            box.press("Enter")
+            if wait_for(lambda end=end, value=value: session.constraints.range.value[end] == value, timeout=10,
+                        fail=False):
+                break
     wait_for(lambda: tuple(session.constraints.range.value) == (60, 110), timeout=10, what="the range 60-110")
 
 
