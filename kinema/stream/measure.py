@@ -33,14 +33,28 @@ def frames_to_motion(parts: list[StreamFrames], skeleton) -> Motion:
 
 def pelvis_speed(motion: Motion) -> torch.Tensor:
     """Ground speed of the pelvis between consecutive frames ``(T - 1,)``, m/s."""
-    p = motion.root_translation[:, [0, 2]]
-    return (p[1:] - p[:-1]).norm(dim=-1) * motion.fps
+    return _ground_speed(motion.root_translation[:, [0, 2]], motion.fps)
 
 
 def joint_acceleration(motion: Motion) -> torch.Tensor:
     """Largest joint acceleration of each inner frame ``(T - 2,)``, m/s^2 (frame i is motion frame i + 1)."""
-    p = motion.positions
-    return ((p[2:] - 2 * p[1:-1] + p[:-2]).norm(dim=-1) * motion.fps**2).amax(-1)
+    return _largest_acceleration(motion.positions, motion.fps)
+
+
+def _ground_speed(xz: torch.Tensor, fps: float) -> torch.Tensor:
+    """Speed between consecutive ground points ``(T, 2)`` -> ``(T - 1,)``, m/s."""
+    return (xz[1:] - xz[:-1]).norm(dim=-1) * fps
+
+
+def _speed_change(speed: torch.Tensor, fps: float) -> torch.Tensor:
+    """|change| of consecutive speeds ``(T - 1,)`` -> ``(T - 2,)``, m/s^2 (index i: around frame i + 1)."""
+    return (speed[1:] - speed[:-1]).abs() * fps
+
+
+def _largest_acceleration(positions: torch.Tensor, fps: float) -> torch.Tensor:
+    """Largest joint acceleration of each inner frame of positions ``(T, J, 3)`` -> ``(T - 2,)``, m/s^2."""
+    p = positions
+    return ((p[2:] - 2 * p[1:-1] + p[:-2]).norm(dim=-1) * fps**2).amax(-1)
 
 
 @dataclass(frozen=True)
@@ -70,9 +84,8 @@ class JoinReport:
 def join_report(motion: Motion, seams: list[tuple[int, int]]) -> JoinReport:
     """Compare the motion around ``seams`` (frame ranges ``[lo, hi)`` where one window is stitched to
     the next: `MotionStream.seams`) with the rest of it."""
-    speed = pelvis_speed(motion)
-    dspeed = (speed[1:] - speed[:-1]).abs() * motion.fps  # index i: around frame i + 1
-    return _report(dspeed, joint_acceleration(motion), motion.num_frames, seams)
+    return _report(_speed_change(pelvis_speed(motion), motion.fps), joint_acceleration(motion), motion.num_frames,
+                   seams)
 
 
 def _report(dspeed: torch.Tensor, acc: torch.Tensor, num_frames: int, seams: list[tuple[int, int]]) -> JoinReport:
@@ -113,9 +126,8 @@ class JoinMeter:
         if self._root is not None:
             root, pos = torch.cat([self._root, root]), torch.cat([self._pos, pos])
         if root.shape[0] >= 3:
-            speed = (root[1:] - root[:-1]).norm(dim=-1) * self.fps
-            self._dspeed.append(((speed[1:] - speed[:-1]).abs() * self.fps).to(torch.float32))
-            self._acc.append(((pos[2:] - 2 * pos[1:-1] + pos[:-2]).norm(dim=-1) * self.fps**2).amax(-1))
+            self._dspeed.append(_speed_change(_ground_speed(root, self.fps), self.fps))
+            self._acc.append(_largest_acceleration(pos, self.fps))
         self._root, self._pos = root[-2:], pos[-2:]
         self.num_frames += frames.num_frames
 

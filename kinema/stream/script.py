@@ -23,7 +23,7 @@ from typing import Any
 from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.stream.continuation import MotionStream
-from kinema.stream.measure import JoinReport, frames_to_motion, join_report
+from kinema.stream.measure import JOIN_RADIUS, JoinReport, frames_to_motion, join_report
 
 COMMANDS = ("prompt", "steer", "target", "clear")
 #: most commands one script may hold
@@ -111,7 +111,7 @@ class ScriptRun:
 
     def joins(self) -> JoinReport:
         """Pops at the window joins against the windows' own motion (kinema.stream.measure.join_report)."""
-        seams = [(lo, hi) for lo, hi in self.stream.seams() if hi + 3 < self.motion.num_frames]
+        seams = [(lo, hi) for lo, hi in self.stream.seams() if hi + JOIN_RADIUS < self.motion.num_frames]
         return join_report(self.motion, seams)
 
     def log(self) -> dict:
