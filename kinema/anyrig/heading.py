@@ -21,10 +21,7 @@ from __future__ import annotations
 
 import torch
 
-from kinema.representation.joint import ROOT_HEADING_COS, ROOT_HEADING_SIN
-
-#: channel of the root row holding the heading rate (rad/s; kinema.representation.joint)
-ROOT_HEADING_RATE = ROOT_HEADING_SIN + 1
+from kinema.representation.joint import ROOT_HEADING_COS, ROOT_HEADING_RATE, ROOT_HEADING_SIN
 
 
 def heading_from_rate(feats: torch.Tensor, root: int, fps: float) -> torch.Tensor:

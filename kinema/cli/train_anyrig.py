@@ -21,6 +21,11 @@ def register(sub) -> None:
         type=positive_int,
         help="batch size x joints per batch (default 256: 32 fish windows or 5 fox windows)",
     )
+    p.add_argument(
+        "--root-weight",
+        type=positive_float,
+        help="the root row's share of the loss, in joint rows (default 1; 10 puts ground path and heading first)",
+    )
     p.add_argument("--variants", type=int, help="rig-augmented copies per clip (default 2; 0 = no augmentation)")
     p.add_argument("--no-tree-pe", action="store_true", help="ablation: no TreePE")
     p.add_argument("--no-rest-pe", action="store_true", help="ablation: no RestPE")
@@ -46,6 +51,7 @@ def _settings(args: argparse.Namespace) -> dict:
         "lr": "lr",
         "token_budget": "token_budget",
         "variants": "variants",
+        "root_weight": "root_weight",
         "ckpt_every": "ckpt_every",
         "log_every": "log_every",
         "seed": "seed",

@@ -43,6 +43,8 @@ POSE = slice(POS.start, ROT.stop)
 ROOT_LATERAL, ROOT_HEIGHT, ROOT_FORWARD = 0, 1, 2
 ROOT_HEADING_COS, ROOT_HEADING_SIN = 9, 10
 ROOT_HEADING = slice(ROOT_HEADING_COS, ROOT_HEADING_SIN + 1)
+#: the root row's heading rate (rad/s), after the heading's cosine and sine
+ROOT_HEADING_RATE = ROOT_HEADING_SIN + 1
 #: the root row's channels that place the body: ground velocity, height, rotation, heading
 ROOT_PLACEMENT = list(range(ROOT_HEADING_SIN + 1))
 
@@ -157,7 +159,7 @@ class JointRepresentation:
         if T > 1:  # wrapped heading change per frame, the last frame repeating the previous
             rate[:-1] = (torch.remainder(psi[1:] - psi[:-1] + torch.pi, 2 * torch.pi) - torch.pi) * m.fps
             rate[-1] = rate[-2]
-        out[:, root, 9:12] = torch.stack([torch.cos(psi), torch.sin(psi), rate], dim=-1)
+        out[:, root, ROOT_HEADING_COS : ROOT_HEADING_RATE + 1] = torch.stack([torch.cos(psi), torch.sin(psi), rate], dim=-1)
         out[:, root, CONTACT] = 0.0
         return out.to(motion.dtype if motion.dtype == torch.float64 else torch.float32)
 

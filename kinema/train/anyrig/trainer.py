@@ -53,6 +53,7 @@ class AnyRigTrainConfig:
     text_drop: float = 0.1
     p_constrained: float = 0.5
     grad_clip: float = 1.0
+    root_weight: float = 1.0
     text_encoder: str = "minilm-l6-v2"
     init_from: str | None = None
 
@@ -163,7 +164,9 @@ class AnyRigTrainer:
         text = torch.stack([self.text[c] for c in batch.captions]) * keep
         mask = random_masks(batch.frame_mask, batch.channel_mask, codes.flags[..., 0], gen, self.cfg.p_constrained)
         pred = model(x_t, t, text, codes, batch.frame_mask, x0, mask)
-        return ((pred - x0) ** 2 * real).sum() / real.sum().clamp_min(1.0)
+        # the root row (ground velocity, height, heading) counts root_weight times a joint's row
+        weight = real * (1.0 + (self.cfg.root_weight - 1.0) * (codes.flags[..., 0] > 0.5).float())[:, None, :, None]
+        return ((pred - x0) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
 
     def train_step(self) -> float:
         gen = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + self.step)

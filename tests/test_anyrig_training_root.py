@@ -1,0 +1,85 @@
+"""Any-rig training's root row (issue 34): rates clamped to the motions' own spread, and a loss weight."""
+
+from __future__ import annotations
+
+import math
+
+import creature_fixtures
+import pytest
+import torch
+from rig_fixtures import quadruped, walking
+
+from kinema.model.anyrig.config import get_anyrig_config
+from kinema.representation.joint import ROOT_FORWARD, ROOT_HEADING_RATE, ROOT_LATERAL
+from kinema.rig import Rig
+from kinema.train.anyrig.data import ROOT_RATES, clamp_root_rates, make_clip
+from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
+
+creature_cache = creature_fixtures.creature_cache  # module-scoped fixture
+
+
+def _clips(n: int = 20):
+    skel = quadruped()
+    rig, cfg = Rig.from_skeleton(skel), get_anyrig_config("anyrig-tiny", text_dim=32)
+    out = []
+    for k in range(n):
+        m = walking(skel, frames=40, speed=0.05 * k)
+        out.append(make_clip(m, rig, cfg, ["A quadruped walks."], "q"))
+    return out, rig.root
+
+
+def test_a_heading_flip_is_clamped_and_the_walks_are_not() -> None:
+    clips, root = _clips()
+    flip = clips[3].features[:, root]
+    flip[17, ROOT_HEADING_RATE] = math.pi * 20.0  # half a turn in one frame at 20 fps, as a rolling body
+    flip[17, ROOT_LATERAL] = 9.0
+    before = [c.features.clone() for c in clips]
+    spread = torch.cat([c.features[:, root, ROOT_HEADING_RATE] for c in clips]).std()
+    bounds = clamp_root_rates(clips, tail=0.005)
+    assert bounds.shape == (len(ROOT_RATES), 2) and bool((bounds[:, 0] <= bounds[:, 1]).all())
+    rate = ROOT_RATES.index(ROOT_HEADING_RATE)
+    assert float(clips[3].features[17, root, ROOT_HEADING_RATE]) == pytest.approx(float(bounds[rate, 1]))
+    assert float(bounds[rate, 1]) < 5.0  # the flip does not set its own bound
+    after = torch.cat([c.features[:, root, ROOT_HEADING_RATE] for c in clips]).std()
+    assert float(after) < 0.2 * float(spread)
+    # every other joint row and the root's height are untouched; the walks' forward speeds keep their spread
+    for b, c in zip(before, clips, strict=True):
+        keep = torch.ones(c.features.shape[1:], dtype=torch.bool)
+        keep[root, list(ROOT_RATES)] = False
+        assert torch.equal(b[:, keep], c.features[:, keep])
+    fwd = torch.stack([c.features[:, root, ROOT_FORWARD].mean() for c in clips])
+    assert float(fwd[-1] - fwd[1]) > 0.5 * float(before[-1][:, root, ROOT_FORWARD].mean() - before[1][:, root, ROOT_FORWARD].mean())
+
+
+class _Still(torch.nn.Module):
+    """A 'denoiser' that predicts zeros: the loss is then the mean square of the normalised targets."""
+
+    def __init__(self, model) -> None:
+        super().__init__()
+        self.inner = model
+
+    def normalize(self, x, codes):
+        return self.inner.normalize(x, codes)
+
+    def forward(self, x_t, *args):
+        return torch.zeros_like(x_t)
+
+
+def test_root_weight_counts_the_root_row_that_many_times(creature_cache, tmp_path) -> None:
+    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
+    losses = {}
+    for w in (1.0, 10.0):
+        tc = AnyRigTrainConfig(steps=1, variants=0, text_encoder="hash-test-32", warmup=1, root_weight=w)
+        tr = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / f"w{w}", text_cache=None, log=lambda s: None)
+        batch = tr.clips.sample_batch(torch.Generator().manual_seed(0), 256)
+        x0 = tr.model.normalize(batch.x, batch.codes)
+        real = (batch.frame_mask[:, :, None, None] & batch.channel_mask[:, None]).float()
+        is_root = (batch.codes.flags[..., 0] > 0.5).float()[:, None, :, None] * real
+        sq = x0**2 * real
+        root_sq, body_sq = float((sq * is_root).sum()), float((sq * (real - is_root)).sum())
+        n_root, n_body = float(is_root.sum()), float((real - is_root).sum())
+        want = (w * root_sq + body_sq) / (w * n_root + n_body)
+        got = float(tr.loss(_Still(tr.model), batch, torch.Generator().manual_seed(1)))
+        assert got == pytest.approx(want, rel=1e-5)
+        losses[w] = got
+    assert losses[1.0] != pytest.approx(losses[10.0], rel=1e-3)
