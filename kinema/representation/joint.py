@@ -159,7 +159,8 @@ class JointRepresentation:
         if T > 1:  # wrapped heading change per frame, the last frame repeating the previous
             rate[:-1] = (torch.remainder(psi[1:] - psi[:-1] + torch.pi, 2 * torch.pi) - torch.pi) * m.fps
             rate[-1] = rate[-2]
-        out[:, root, ROOT_HEADING_COS : ROOT_HEADING_RATE + 1] = torch.stack([torch.cos(psi), torch.sin(psi), rate], dim=-1)
+        heading = torch.stack([torch.cos(psi), torch.sin(psi), rate], dim=-1)
+        out[:, root, ROOT_HEADING_COS : ROOT_HEADING_RATE + 1] = heading
         out[:, root, CONTACT] = 0.0
         return out.to(motion.dtype if motion.dtype == torch.float64 else torch.float32)
 
