@@ -21,7 +21,7 @@ import torch
 from kinema.generate import load_model
 from kinema.pipeline.request import GenerationRequest
 from kinema.stream import open_stream
-from kinema.stream.measure import circular_mean_deg, frames_to_motion, join_report
+from kinema.stream.measure import circular_mean_deg, frames_to_motion, join_report, pelvis_speed
 
 FOX = Path(__file__).resolve().parents[1] / ".." / "shared" / "datasets" / "quaternius" / "animals_pack" / "Fox.glb"
 SCRIPT = Path(__file__).resolve().parents[1] / "examples" / "streams" / "creatures" / "fox_walk_turn_run.jsonl"
@@ -51,15 +51,26 @@ def test_fox_frames_carry_the_rigs_bones_and_translations(fox_stream) -> None:
 
 
 def test_fox_windows_join_without_a_jump(fox_stream) -> None:
-    s, parts, _, _ = fox_stream
+    s, parts, _, switch = fox_stream
     motion = frames_to_motion(parts, s.skeleton)
     seams = [(lo, hi) for lo, hi in s.seams() if hi + 3 < motion.num_frames]
-    joins = join_report(motion, seams)
-    assert joins.joins >= 4
-    # measured (seed 0): pelvis speed change at the seams 5.0 m/s^2 (windows' own up to 5.0), joint
-    # acceleration 203 m/s^2 (windows' own up to 169: the IK front foot right after the steer's seam)
-    assert joins.join_speed_change <= 1.25 * joins.inside_speed_change_max, joins.to_json()
-    assert joins.join_acceleration <= 1.5 * joins.inside_acceleration_max, joins.to_json()
+    at_switch = [(lo, hi) for lo, hi in seams if lo - 5 <= switch.effective_frame <= hi + 8]
+    same = [seam for seam in seams if seam not in at_switch]
+    joins, windows = join_report(motion, same), join_report(motion, seams)  # windows: away from every seam
+    assert joins.joins >= 3 and at_switch
+    # measured (seed 0): pelvis speed change at the seams within one prompt 10.9 m/s^2 (windows' own up to
+    # 13.5), joint acceleration 153 m/s^2 (windows' own up to 339)
+    assert joins.join_speed_change <= 1.25 * windows.inside_speed_change_max, joins.to_json()
+    assert joins.join_acceleration <= 1.5 * windows.inside_acceleration_max, joins.to_json()
+    # walk -> gallop: the fox speeds up from 0.55 to 7.2 m/s over the 7 frames after the switch (0.14 ->
+    # 1.7 body lengths/s, its own clips gallop at 1.65), a ramp that may be steeper than a gallop's own
+    # stride-to-stride swing; what must not happen is a stutter (faster, slower, faster: a pop), so the
+    # pelvis speed across the switch's seams only rises or only falls, beyond a quarter of its largest step
+    speed = pelvis_speed(motion)
+    lo, hi = min(a for a, _ in at_switch) - 3, max(b for _, b in at_switch) + 6
+    steps = speed[lo + 1 : hi] - speed[lo : hi - 1]
+    big = steps[steps.abs() > 0.25 * steps.abs().max()]
+    assert bool((big > 0).all()) or bool((big < 0).all()), [round(float(v), 2) for v in speed[lo:hi]]
     body = motion.positions[:, s.body.rig.root]
     step = (body[1:] - body[:-1]).norm(dim=-1)  # step i: frame i -> i + 1
     near = torch.zeros_like(step, dtype=torch.bool)
