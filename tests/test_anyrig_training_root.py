@@ -84,3 +84,18 @@ def test_root_weight_counts_the_root_row_that_many_times(creature_cache, tmp_pat
         assert got == pytest.approx(want, rel=1e-5)
         losses[w] = got
     assert losses[1.0] != pytest.approx(losses[10.0], rel=1e-3)
+
+
+def test_the_seed_fixes_the_initial_weights(creature_cache, tmp_path) -> None:
+    """The initial weights come from the run's seed, not from whatever the process drew before (a test
+    run's earlier tests changed them, and with them a tiny model's outputs)."""
+    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
+    tc = AnyRigTrainConfig(steps=1, variants=0, text_encoder="hash-test-32", warmup=1)
+    first = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / "a", text_cache=None, log=lambda s: None)
+    torch.rand(1000)  # the process's random state moves on
+    again = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / "b", text_cache=None, log=lambda s: None)
+    for k, v in first.model.state_dict().items():
+        assert torch.equal(v, again.model.state_dict()[k]), k
+    other = AnyRigTrainer(cfg, AnyRigTrainConfig(**{**tc.__dict__, "seed": 1}), creature_cache, tmp_path / "c",
+                          text_cache=None, log=lambda s: None)  # fmt: skip
+    assert any(not torch.equal(a, b) for a, b in zip(first.model.parameters(), other.model.parameters(), strict=True))

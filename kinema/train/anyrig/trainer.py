@@ -79,7 +79,9 @@ class AnyRigTrainer:
         self.model_config, self.cfg, self.out, self.log = model_config, cfg, Path(out), log
         self.data_path = str(data)
         self.clips = AnyRigClips(data, model_config, split="train", variants=cfg.variants, seed=cfg.seed, log=log)
-        self.model = AnyRigDenoiser(model_config)
+        with torch.random.fork_rng():  # the initial weights come from the seed, not the process's random state
+            torch.manual_seed(cfg.seed)
+            self.model = AnyRigDenoiser(model_config)
         self.model.set_normalization(*self.clips.stats())
         self.ema = make_ema(self.model)
         self.opt = torch.optim.AdamW(
