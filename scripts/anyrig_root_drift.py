@@ -35,11 +35,11 @@ def noised_bias(pipe, motion, rig: Rig, caption: str, levels=(999, 800, 500, 200
     x0 = den.normalize(feats[None], codes)
     text = pipe.text_encoder.encode([caption]).float()
     frames = torch.ones(1, x0.shape[1], dtype=torch.bool)
-    out = {}
+    schedule, out = NoiseSchedule(), {}
     for t in levels:
         gen, got = torch.Generator().manual_seed(0), []
         for _ in range(4):
-            x_t = NoiseSchedule().q_sample(x0, torch.tensor([t]), torch.randn(x0.shape, generator=gen))
+            x_t = schedule.q_sample(x0, torch.tensor([t]), torch.randn(x0.shape, generator=gen))
             with torch.no_grad():
                 pred = den(x_t, torch.tensor([t]), text, codes, frames, torch.zeros_like(x0), torch.zeros_like(x0))
             got.append(float(den.denormalize(pred, codes)[0, :, rig.root, ROOT_FORWARD].mean()))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import creature_fixtures
 import pytest
@@ -96,6 +97,5 @@ def test_the_seed_fixes_the_initial_weights(creature_cache, tmp_path) -> None:
     again = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / "b", text_cache=None, log=lambda s: None)
     for k, v in first.model.state_dict().items():
         assert torch.equal(v, again.model.state_dict()[k]), k
-    other = AnyRigTrainer(cfg, AnyRigTrainConfig(**{**tc.__dict__, "seed": 1}), creature_cache, tmp_path / "c",
-                          text_cache=None, log=lambda s: None)  # fmt: skip
+    other = AnyRigTrainer(cfg, replace(tc, seed=1), creature_cache, tmp_path / "c", text_cache=None, log=lambda s: None)
     assert any(not torch.equal(a, b) for a, b in zip(first.model.parameters(), other.model.parameters(), strict=True))
