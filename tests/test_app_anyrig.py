@@ -125,7 +125,9 @@ def test_waypoint_and_target_from_the_scene_are_met(model, rig):
     steps: list[tuple[int, int]] = []
     out = outcome(model, rig, check_timeline(doc.timeline), constraints=doc.constraints, samples=1, steps=10,
                   seed=0, progress=lambda d, t: steps.append((d, t)))  # fmt: skip
-    assert steps == [(d, 20) for d in range(1, 21)]  # two passes of 10 steps on one bar
+    # two passes on one bar, each the root stage's 10 steps and the body's 10 (the second pass copies the first
+    # pass's root up to the foot target's frame, where it pins the root, and samples the root after it)
+    assert steps == [(d, 40) for d in range(1, 41)]
     m = out.motions[0].to(torch.float64)
     assert m.num_frames == 60 and out.notes == []
     root = Rig.from_skeleton(rig.skeleton).root

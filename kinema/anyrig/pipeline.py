@@ -43,7 +43,7 @@ from kinema.anyrig.post import (
     translatable_bones,
     unmet_warnings,
 )
-from kinema.anyrig.sampling import sample_features
+from kinema.anyrig.sampling import sample_features, uses_root_stage
 from kinema.anyrig.targets import post_targets as make_post_targets
 from kinema.anyrig.tied import hold_ties, rig_clips, ties_for
 from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, single_plan
@@ -202,20 +202,23 @@ class AnyRigPipeline(MotionPipeline):
         constraints = list(constraints)
         targets = rep_n.encode(constraints, scale, T) if constraints else None
         guide = self._guidance(r.guidance)
+        codes = batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops)
+        stage = self.loaded.root_stage if uses_root_stage(targets, codes) else None
         feats = sample_features(
             self.loaded.denoiser,
-            batch_codes([skeleton_codes(rig_n, self.loaded.config)], max_hops=self.loaded.config.max_hops),
+            codes,
             r.replace(steps=steps),
             plan=plan,
             text_emb=self._texts(prompts),
             targets=targets,
             sampler=self.loaded.sampler,
             guidance=guide,
+            root_stage=stage,
             progress=progress,
         )
         feats = self._orient(feats, rig_n.root, heading, constraints, one_prompt=len(prompts) == 1)
         report = GenerationReport(steps=steps, windows=len(plan.starts), joints=rig_m.num_joints,
-                                  segments=len(prompts), frames=T, seed=seed)
+                                  segments=len(prompts), frames=T, seed=seed, root_stage=stage is not None)
         t_sampled = time.perf_counter()
         _require_finite(feats)
         ties = self.rig_ties(rig, rig_m).scaled(scale)

@@ -78,6 +78,25 @@ class WindowPlan:
             out[k, : e - s] = w
         return out
 
+    def cut(self, x: torch.Tensor) -> torch.Tensor:
+        """``(S, frames, ...)`` -> ``(S * K, width, ...)``, sample-major: every sample's windows (frames
+        past the end of the motion are zeros, padding)."""
+        x = torch.cat([x, x.new_zeros(x.shape[0], self.width, *x.shape[2:])], dim=1)
+        return torch.stack([x[:, s : s + self.width] for s in self.starts], dim=1).flatten(0, 1)
+
+    def blend(self, xw: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        """The windows' ``(S * K, width, ...)`` (as `cut` lays them out) blended back to ``(S, frames, ...)``
+        with ``weights`` (`weights`)."""
+        K = len(self.starts)
+        xw = xw.view(xw.shape[0] // K, K, *xw.shape[1:])
+        out = xw.new_zeros(xw.shape[0], self.frames, *xw.shape[3:])
+        den = torch.zeros(self.frames)
+        for k, (s, n) in enumerate(zip(self.starts, self.lengths, strict=True)):
+            w = weights[k, :n]
+            out[:, s : s + n] += w.view(n, *([1] * (xw.dim() - 3))) * xw[:, k, :n]
+            den[s : s + n] += w
+        return out / den.view(1, self.frames, *([1] * (xw.dim() - 3)))
+
 
 def single_plan(T: int, W: int) -> WindowPlan:
     """One prompt over ``T`` frames with windows of ``W`` frames (`window_starts`)."""

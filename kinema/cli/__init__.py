@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
         stream,
         train,
         train_anyrig,
+        train_anyrig_root,
     )
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
         data,
         train,
         train_anyrig,
+        train_anyrig_root,
         export,
         bench,
         render,

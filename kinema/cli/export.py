@@ -27,6 +27,9 @@ def register(sub) -> None:
                    help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
                         "mostly holds the starting weights)")
     add_grounding_arguments(p)
+    p.add_argument("--root-stage", type=Path, metavar="RUN",
+                   help="any-rig models: pack this root-stage run (`kinema train-anyrig-root`) with the model, so "
+                        "generation samples the root first")
     p.add_argument("--known-prompts", type=Path, metavar="DATA",
                    help="dataset build whose train captions the model learned: their embeddings are saved as "
                         "known_prompts.safetensors, so that `generate` warns about prompts far from all of them")
@@ -53,12 +56,13 @@ def run(args: argparse.Namespace) -> int:
         probes = read_action_probes(args.action_probes)
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
-                      ema=args.weights == "ema", grounding=grounding_overrides(args))
+                      ema=args.weights == "ema", grounding=grounding_overrides(args), root_stage=args.root_stage)
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
-    print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}, "
+    stage = "" if getattr(loaded, "root_stage", None) is None else ", with a root stage"
+    print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}{stage}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
           f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")
     return 0

@@ -59,28 +59,34 @@ def _settings(args: argparse.Namespace) -> dict:
     return {k: getattr(args, a) for a, k in names.items() if getattr(args, a) is not None}
 
 
-def _model_path(name: str) -> Path:
+def model_folder(name: str, option: str = "--init-from") -> Path:
     """A model name shipped with kinema (``creatures``) or a folder path."""
     from kinema.errors import KinemaError
 
     shipped = Path(__file__).resolve().parents[1] / "assets" / "models" / name
     path = shipped if shipped.is_dir() and not Path(name).exists() else Path(name)
     if not path.exists():
-        raise KinemaError(f"--init-from {name}: no such model folder")
+        raise KinemaError(f"{option} {name}: no such model folder")
     return path
 
 
-def run(args: argparse.Namespace) -> int:
+def start_run(args: argparse.Namespace) -> None:
+    """Threads set, ``--variants`` checked, and ``--out`` free unless ``--resume`` (any-rig training commands)."""
     from kinema.errors import KinemaError
-    from kinema.model.anyrig.config import get_anyrig_config
     from kinema.runtime import configure_threads
-    from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
 
     configure_threads(args.threads, cap=None)
     if args.variants is not None and args.variants < 0:
         raise KinemaError(f"--variants must be >= 0, got {args.variants}")
     if not args.resume and (args.out / "latest").exists():
         raise KinemaError(f"{args.out} already holds a run; pass --resume to continue it or choose another --out")
+
+
+def run(args: argparse.Namespace) -> int:
+    from kinema.model.anyrig.config import get_anyrig_config
+    from kinema.train.anyrig.trainer import AnyRigTrainConfig, AnyRigTrainer
+
+    start_run(args)
     model_config = get_anyrig_config(
         args.config, tree_pe=not args.no_tree_pe, rest_pe=not args.no_rest_pe, hop_bias=not args.no_hop_bias
     )
@@ -96,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         trainer.cfg.init_from = str(args.init_from)
     resumed = trainer.resume() if args.resume else False
     if args.init_from and not resumed:
-        print(f"fine-tuning from {trainer.init_weights(_model_path(args.init_from))}", flush=True)
+        print(f"fine-tuning from {trainer.init_weights(model_folder(args.init_from))}", flush=True)
     ckpt = trainer.run(minutes=args.minutes)
     print(f"wrote {ckpt}")
     return 0

@@ -45,6 +45,7 @@ def export_model(
     extra_info: dict | None = None,
     ema: bool = True,
     grounding: dict | None = None,
+    root_stage: str | Path | None = None,
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
@@ -54,6 +55,8 @@ def export_model(
     ``guidance`` and ``sampling_steps`` replace the defaults saved with the model (e.g. values tuned on
     the validation split); ``grounding`` (some of kinema.model.grounding.Grounding's keys) replaces those
     keys of the saved prompt-grounding default; ``extra_info`` is merged into checkpoint.json under ``"export"``.
+    ``root_stage``: an any-rig model's root-stage run or checkpoint (kinema.train.anyrig.root_stage), whose
+    EMA weights are packed as ``root_stage.safetensors`` with its config under ``"root_stage"``.
     Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
     """
     if dtype not in DTYPES:
@@ -82,14 +85,45 @@ def export_model(
     info["export"] = {"source": str(ckpt), "weights": weights.name, "dtype": dtype, **(extra_info or {})}
     if info.get("kind") == "anyrig":
         info["rig_files"] = rig_files(info)
+    stage = None
+    if root_stage is not None:
+        if info.get("kind") != "anyrig":
+            raise KinemaError(f"--root-stage: {ckpt} is not an any-rig model; only those have a root stage")
+        info["root_stage"], stage = _root_stage(root_stage, info)
     state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
-    return _write_folder(Path(out), info, state)
+    return _write_folder(Path(out), info, state, stage)
 
 
-def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor]) -> Path:
-    keep = [p for p in out.iterdir() if p.name not in ("ema.safetensors", "checkpoint.json")] if out.is_dir() else []
+def _root_stage(src: str | Path, info: dict) -> tuple[dict, dict[str, torch.Tensor]]:
+    """The checkpoint.json entry and float32 EMA weights of the root-stage run ``src`` for the any-rig
+    model described by ``info``."""
+    ckpt = find_checkpoint(src)
+    stage_info = read_checkpoint_info(ckpt)
+    if stage_info.get("kind") != "anyrig-root-stage":
+        raise KinemaError(f"{ckpt}: not a root-stage run (kind {stage_info.get('kind')!r})")
+    if stage_info.get("anyrig_config") != info.get("model_config"):
+        raise KinemaError(f"{ckpt}: trained for another any-rig model config than {info.get('model_config')}")
+    entry = {
+        "config": stage_info["model_config"],
+        "source": str(ckpt),
+        "step": stage_info.get("step"),
+        "train_config": stage_info.get("train_config"),
+        "elapsed_s": stage_info.get("elapsed_s"),
+    }
+    state = read_weights(weights_file(ckpt, True))
+    return entry, {k: v.float().contiguous() for k, v in state.items()}
+
+
+#: the files an export writes (any others in the folder, e.g. the card and its images, are kept)
+_WRITTEN = ("ema.safetensors", "checkpoint.json", "root_stage.safetensors")
+
+
+def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor], stage: dict | None = None) -> Path:
+    keep = [p for p in out.iterdir() if p.name not in _WRITTEN] if out.is_dir() else []
     with atomic_folder(out) as tmp:
         save_file(state, str(tmp / "ema.safetensors"))
+        if stage is not None:
+            save_file(stage, str(tmp / "root_stage.safetensors"))
         (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
         for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
             (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)

@@ -35,7 +35,8 @@ class GenerationReport:
     grounding did (kinema.model.vocabulary, kinema.model.grounding), ``objectives`` the noise-optimised
     objectives' values.
 
-    The any-rig pipeline (kinema.anyrig): ``windows``, ``joints``, ``residuals_cm`` / ``residuals_deg``
+    The any-rig pipeline (kinema.anyrig): ``windows``, ``joints``, ``root_stage`` (whether the model's root
+    stage sampled the root first, kinema.model.anyrig.root_stage), ``residuals_cm`` / ``residuals_deg``
     (constraint errors after post-processing), ``foot_lock``, the largest vertical change of de-jittering
     the root height, of putting the motion on the floor and of settling the body onto its legs (rig sizes:
     ``height_smoothed``, ``grounded``, ``settled``) and ``reached_by_translation`` (joint targets met by
@@ -63,6 +64,7 @@ class GenerationReport:
     objectives: dict = field(default_factory=dict)
     windows: int = 1
     joints: int = 0
+    root_stage: bool = False
     residuals_cm: list[float] = field(default_factory=list)
     residuals_deg: list[float] = field(default_factory=list)
     foot_lock: list[dict] = field(default_factory=list)

@@ -3,7 +3,8 @@
 A checkpoint folder (training checkpoint or exported model) holds ``checkpoint.json`` with
 ``"kind": "anyrig"``, the model config, fps, text encoder id, sampler and guidance settings and the
 training rigs (``train_rigs``: rig id -> `Rig.to_dict`, in normalised units; ``rig_files``: rig id ->
-source files, when the exporter knew them), plus ``ema.safetensors`` / ``model.safetensors``.
+source files, when the exporter knew them), plus ``ema.safetensors`` / ``model.safetensors``, and, when
+``"root_stage"`` names one, the root stage's ``root_stage.safetensors``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
 from kinema.model.anyrig.config import AnyRigConfig
 from kinema.model.anyrig.denoiser import AnyRigDenoiser
+from kinema.model.anyrig.root_stage import RootStageConfig, RootStageDenoiser
 from kinema.model.loading import find_checkpoint, read_checkpoint_info, read_weights, weights_file
 
 
@@ -38,6 +40,8 @@ class LoadedAnyRig:
     text_encoder_id: str
     info: dict
     path: Path
+    #: the root stage (kinema.model.anyrig.root_stage), when the folder has one
+    root_stage: RootStageDenoiser | None = None
 
     @property
     def fps(self) -> float:
@@ -71,11 +75,23 @@ def load_anyrig(path: str | Path, ema: bool = True) -> LoadedAnyRig:
             text_encoder_id=str(info["text_encoder"]),
             info=info,
             path=ckpt,
+            root_stage=_root_stage(ckpt, info),
         )
     except KinemaError as err:
         raise KinemaError(f"{ckpt}: cannot load model ({err})") from None
     except (KeyError, TypeError, ValueError, RuntimeError) as err:
         raise KinemaError(f"{ckpt}: cannot load model ({type(err).__name__}: {err})") from None
-    for p in model.parameters():
-        p.requires_grad_(False)
+    for m in (model, loaded.root_stage):
+        for p in () if m is None else m.parameters():
+            p.requires_grad_(False)
     return loaded
+
+
+def _root_stage(ckpt: Path, info: dict) -> RootStageDenoiser | None:
+    """The root stage named by ``info["root_stage"]`` with its weights from ``root_stage.safetensors``."""
+    entry = info.get("root_stage")
+    if entry is None:
+        return None
+    stage = RootStageDenoiser(RootStageConfig.from_dict(entry["config"]))
+    stage.load_state_dict({k: v.float() for k, v in read_weights(ckpt / "root_stage.safetensors").items()})
+    return stage.eval()

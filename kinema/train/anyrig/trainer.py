@@ -126,7 +126,7 @@ class AnyRigTrainer:
             return False
         ck = load_checkpoint(self.out)
         info = ck["info"]
-        if AnyRigConfig.from_dict(info["model_config"]) != self.model_config:
+        if info.get("model_config") != self.info()["model_config"]:
             raise KinemaError(f"{self.out}: the checkpoint's model config differs from the requested one")
         self.model.load_state_dict(ck["model"])
         self.ema.load_state_dict(ck["ema"])
@@ -170,9 +170,15 @@ class AnyRigTrainer:
         weight = real * (1.0 + (self.cfg.root_weight - 1.0) * (codes.flags[..., 0] > 0.5).float())[:, None, :, None]
         return ((pred - x0) ** 2 * weight).sum() / weight.sum().clamp_min(1.0)
 
+    def sample_batch(self, gen: torch.Generator) -> Batch:
+        return self.clips.sample_batch(gen, self.cfg.token_budget)
+
+    def batch_note(self) -> str:
+        return f"token budget {self.cfg.token_budget}"
+
     def train_step(self) -> float:
         gen = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + self.step)
-        batch = self.clips.sample_batch(gen, self.cfg.token_budget)
+        batch = self.sample_batch(gen)
         for g in self.opt.param_groups:
             g["lr"] = lr_at(self.step, self.cfg.lr, self.cfg.warmup, self.cfg.steps)
         self.model.train()
@@ -190,8 +196,7 @@ class AnyRigTrainer:
         """Train to ``cfg.steps`` (or for ``minutes``), checkpointing every ``ckpt_every`` and at the end."""
         self.out.mkdir(parents=True, exist_ok=True)
         self.log(
-            f"model: {self.model.num_parameters()} parameters; {self.cfg.steps} steps, "
-            f"token budget {self.cfg.token_budget}"
+            f"model: {self.model.num_parameters()} parameters; {self.cfg.steps} steps, {self.batch_note()}"
         )
         start, t_log, losses = time.time(), time.time(), []
         last = None

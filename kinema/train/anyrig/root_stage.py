@@ -1,0 +1,151 @@
+"""Training the root stage of an any-rig model (kinema.model.anyrig.root_stage) on its multi-rig build.
+
+The data, captions, rig augmentation, clamped root rates and checkpoints are those of the any-rig
+trainer (kinema.train.anyrig.trainer); a batch is ``batch_size`` windows drawn from all clips alike
+(the stage reads one row per frame, so a 48-joint fox costs what a 6-joint fish does), and the loss
+is the masked MSE on the root row's real channels. Constraint masks (probability ``p_constrained``)
+are what sampling gives the stage: a prefix of whole frames (window blending, live streams), a few
+whole frames (keyframes), or some channels on every frame (a root path's ground velocity, a heading).
+The stage belongs to one any-rig model: its config fixes the rig codes (RestPE) the stage reads.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+
+from kinema.diffusion.schedule import NoiseSchedule
+from kinema.errors import KinemaError
+from kinema.model.anyrig.loading import load_anyrig
+from kinema.model.anyrig.root_stage import RootStageConfig, RootStageDenoiser
+from kinema.model.config import reject_unknown_keys
+from kinema.model.skeleton_codes import rest_dim
+from kinema.text import get_text_encoder
+from kinema.train.anyrig.data import AnyRigClips, Batch
+from kinema.train.anyrig.trainer import AnyRigTrainer
+from kinema.train.optim import make_ema
+
+MASK_KINDS = ("prefix", "frames", "channels")
+
+
+@dataclass
+class RootStageTrainConfig:
+    """Settings of one root-stage run (saved in every checkpoint; unknown keys are rejected)."""
+
+    steps: int = 6000
+    lr: float = 1e-3
+    warmup: int = 200
+    weight_decay: float = 0.0
+    batch_size: int = 64
+    variants: int = 2
+    seed: int = 0
+    ckpt_every: int = 500
+    log_every: int = 50
+    ema_decay: float = 0.998
+    text_drop: float = 0.1
+    p_constrained: float = 0.5
+    grad_clip: float = 1.0
+    width: int = 128
+    layers: int = 4
+    heads: int = 4
+    model: str = ""  # the any-rig model folder the stage belongs to
+
+    @classmethod
+    def from_dict(cls, d: dict) -> RootStageTrainConfig:
+        reject_unknown_keys(cls, d, "root stage training settings")
+        return cls(**d)
+
+
+def root_rows(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
+    """The batch's root rows ``(B, T, 13)`` and their real channels ``(B, 13)``."""
+    root = batch.codes.flags[..., 0].argmax(1)
+    b = torch.arange(root.shape[0])
+    return batch.x[b, :, root], batch.channel_mask[b, root]
+
+
+def root_masks(frame_mask: torch.Tensor, channels: torch.Tensor, gen: torch.Generator, p: float) -> torch.Tensor:
+    """{0, 1} masks ``(B, T, 13)`` of the kinds in the module docstring, on real frames and channels."""
+    B, T = frame_mask.shape
+    out = torch.zeros(B, T, channels.shape[1])
+    for i in range(B):
+        if float(torch.rand(1, generator=gen)) >= p:
+            continue
+        n = int(frame_mask[i].sum())
+        kind = MASK_KINDS[int(torch.randint(len(MASK_KINDS), (1,), generator=gen))]
+        if kind == "prefix":
+            out[i, : int(torch.randint(1, max(2, n // 2 + 1), (1,), generator=gen))] = 1.0
+        elif kind == "frames":
+            k = int(torch.randint(1, 4, (1,), generator=gen))
+            out[i, torch.randperm(n, generator=gen)[:k]] = 1.0
+        else:
+            real = channels[i].nonzero().flatten()
+            pick = real[torch.rand(len(real), generator=gen) < 0.5]
+            out[i, :n, pick if len(pick) else real[:1]] = 1.0
+    return out * frame_mask[:, :, None] * channels[:, None]
+
+
+class RootStageTrainer(AnyRigTrainer):
+    """Train a `RootStageDenoiser` for the any-rig model ``cfg.model`` (see the module docstring)."""
+
+    def __init__(
+        self, cfg: RootStageTrainConfig, data: str | Path, out: str | Path, *, text_cache: Path | None = Path(
+            "cache/text"), log=print
+    ) -> None:
+        base = load_anyrig(cfg.model)
+        self.model_config, self.cfg, self.out, self.log = base.config, cfg, Path(out), log
+        self.data_path = str(data)
+        self.clips = AnyRigClips(data, base.config, split="train", variants=cfg.variants, seed=cfg.seed, log=log)
+        encoder = get_text_encoder(base.text_encoder_id, cache_dir=text_cache)
+        self.stage_config = RootStageConfig(
+            code_dim=2 + rest_dim(base.config), width=cfg.width, layers=cfg.layers, heads=cfg.heads,
+            text_dim=encoder.dim,
+        )
+        with torch.random.fork_rng():
+            torch.manual_seed(cfg.seed)
+            self.model = RootStageDenoiser(self.stage_config)
+        mean, std = self.clips.stats()
+        self.model.set_normalization(mean[0], std[0])
+        self.ema = make_ema(self.model)
+        self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr, betas=(0.9, 0.99),
+                                     weight_decay=cfg.weight_decay)
+        self.schedule = NoiseSchedule()
+        captions = sorted({c for clip in self.clips.clips for c in clip.captions})
+        self.text = dict(zip(captions, encoder.encode(captions), strict=True))
+        self.text_dim = encoder.dim
+        self.step, self.elapsed = 0, 0.0
+
+    def info(self) -> dict:
+        return {
+            "kind": "anyrig-root-stage",
+            "model_config": self.stage_config.to_dict(),
+            "anyrig_config": self.model_config.to_dict(),
+            "train_config": asdict(self.cfg),
+            "data": self.data_path,
+            "elapsed_s": round(self.elapsed, 1),
+        }
+
+    def init_weights(self, path: str | Path) -> Path:
+        raise KinemaError("a root stage trains from scratch (it is small); --init-from does not apply")
+
+    def sample_batch(self, gen: torch.Generator) -> Batch:
+        idx = torch.randint(len(self.clips.clips), (self.cfg.batch_size,), generator=gen)
+        return self.clips.window_batch([self.clips.clips[int(i)] for i in idx], gen)
+
+    def batch_note(self) -> str:
+        return f"{self.cfg.batch_size} windows a batch"
+
+    def loss(self, model: RootStageDenoiser, batch: Batch, gen: torch.Generator) -> torch.Tensor:
+        x, channels = root_rows(batch)
+        real = (batch.frame_mask[:, :, None] & channels[:, None]).float()
+        x0 = model.normalize(x) * real
+        B = x0.shape[0]
+        t = torch.randint(0, self.schedule.num_train_steps, (B,), generator=gen)
+        x_t = self.schedule.q_sample(x0, t, torch.randn(x0.shape, generator=gen)) * real
+        keep = (torch.rand(B, generator=gen) >= self.cfg.text_drop).float()[:, None]
+        text = torch.stack([self.text[c] for c in batch.captions]) * keep
+        mask = root_masks(batch.frame_mask, channels, gen, self.cfg.p_constrained)
+        pred = model(x_t, t, text, batch.codes, batch.frame_mask, x0, mask)
+        return ((pred - x0) ** 2 * real).sum() / real.sum().clamp_min(1.0)
+
