@@ -152,8 +152,8 @@ class RootStageWindows:
         self.stage, self.plan, self.codes = stage, plan, codes
         self.weights, self.frame_mask = plan.weights(), plan.frame_mask()
         w = min(guidance.w_text, ROOT_STAGE_TEXT_WEIGHT)
-        self.guidance = Guidance("none") if text_emb is None or guidance.mode.value == "none" else Guidance(
-            "regular", w_text=w)
+        plain = text_emb is None or guidance.mode.value == "none" or w == 1.0  # one branch: the text as given
+        self.guidance = Guidance("none") if plain else Guidance("regular", w_text=w)
         text = text_emb if text_emb is not None else torch.zeros(1, stage.config.text_dim)
         self.text = text[[p if text_emb is not None else 0 for p in plan.prompts]]
         C = NUM_CHANNELS
