@@ -62,15 +62,20 @@ def test_fox_windows_join_without_a_jump(fox_stream) -> None:
     # 13.5), joint acceleration 153 m/s^2 (windows' own up to 339)
     assert joins.join_speed_change <= 1.25 * windows.inside_speed_change_max, joins.to_json()
     assert joins.join_acceleration <= 1.5 * windows.inside_acceleration_max, joins.to_json()
-    # walk -> gallop: the fox speeds up from 0.55 to 7.2 m/s over the 7 frames after the switch (0.14 ->
-    # 1.7 body lengths/s, its own clips gallop at 1.65), a ramp that may be steeper than a gallop's own
-    # stride-to-stride swing; what must not happen is a stutter (faster, slower, faster: a pop), so the
-    # pelvis speed across the switch's seams only rises or only falls, beyond a quarter of its largest step
+    # walk -> gallop: the fox speeds up from 0.54 to 7.5 m/s over the 6 frames after the switch (0.14 ->
+    # 1.9 body lengths/s, its own clips gallop at 1.65), a ramp that may be steeper than a gallop's own
+    # stride-to-stride swing; what must not happen is a stutter (faster, slower, faster: a pop). So the
+    # pelvis speed rises, beyond a quarter of its largest step, until it first reaches the gallop's pace (90 %
+    # of its median in the frames after the switch's seams); from there to past the seams it stays within the
+    # gallop's own stride swing (measured, seed 0: 7.5 -> 5.9 m/s right after the ramp; 8.0 -> 5.9 later on)
     speed = pelvis_speed(motion)
     lo, hi = min(a for a, _ in at_switch) - 3, max(b for _, b in at_switch) + 6
-    steps = speed[lo + 1 : hi] - speed[lo : hi - 1]
+    gallop = speed[hi:]
+    reach = lo + int(torch.nonzero(speed[lo:] >= 0.9 * gallop.median())[0])
+    steps = speed[lo + 1 : reach + 1] - speed[lo:reach]
     big = steps[steps.abs() > 0.25 * steps.abs().max()]
-    assert bool((big > 0).all()) or bool((big < 0).all()), [round(float(v), 2) for v in speed[lo:hi]]
+    assert reach < hi and bool((big > 0).all()), [round(float(v), 2) for v in speed[lo:hi]]
+    assert float(speed[reach:hi].min()) >= 0.95 * float(gallop.min()), [round(float(v), 2) for v in speed[lo:]]
     body = motion.positions[:, s.body.rig.root]
     step = (body[1:] - body[:-1]).norm(dim=-1)  # step i: frame i -> i + 1
     near = torch.zeros_like(step, dtype=torch.bool)
