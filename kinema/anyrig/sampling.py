@@ -157,8 +157,7 @@ class RootStageWindows:
         text = text_emb if text_emb is not None else torch.zeros(1, stage.config.text_dim)
         self.text = text[[p if text_emb is not None else 0 for p in plan.prompts]]
         C = NUM_CHANNELS
-        self.real = torch.ones(C)
-        self.real[CONTACT] = 0.0  # the root row's contact slot is masked: zero in training, so zero here
+        self.real = real_channels(codes)[int(codes.flags[0, :, 0].argmax())]  # the root row's
         if targets is not None and targets.any():
             self.mask = targets.mask.float()
             self.x_tgt = stage.normalize(targets.x_tgt) * self.mask
@@ -220,21 +219,23 @@ def sample_features(
     steps = sampler.num_inference_steps if request.steps is None else request.steps
     generator = torch.Generator().manual_seed(request.seed)
     J, C = codes.joint_mask.shape[1], model.config.channels
-    context, report = None, progress
-    if root_stage is not None and progress is not None:
-        def report(i: int, n: int) -> None:  # the body's steps follow the root's: 2 x steps in all
-            progress(steps + i, 2 * steps)
-
-    if root_stage is not None:
-        root_report = None if progress is None else (lambda i, n: progress(i, 2 * steps))
+    context, body_progress = None, progress
+    if root_stage is not None:  # one bar over both stages: the root's steps, then the body's
+        root_progress, body_progress = _span(progress, 0, 2 * steps), _span(progress, steps, 2 * steps)
         row = sample_root(root_stage, codes, request.samples, plan=plan, text_emb=text_emb, targets=targets,
-                          sampler=sampler, steps=steps, guidance=guidance, generator=generator, progress=root_report)
+                          sampler=sampler, steps=steps, guidance=guidance, generator=generator,
+                          progress=root_progress)
         context = root_context(row, codes)
         if targets is not None and bool((targets.mask <= context.mask).all()):
             targets = None  # the user's targets are all on the root row, which the context now carries
     den = WindowDenoiser(model, codes, plan, text_emb, targets, guidance, context)
     x = torch.randn(request.samples, plan.frames, J, C, generator=generator)
-    return model.denormalize(_ddim(den, x, sampler, steps, generator, report), codes)
+    return model.denormalize(_ddim(den, x, sampler, steps, generator, body_progress), codes)
+
+
+def _span(progress: Callable[[int, int], None] | None, offset: int, total: int):
+    """``progress`` for a part of a longer run: step i of the part is step ``offset + i`` of ``total``."""
+    return None if progress is None else (lambda i, n: progress(offset + i, total))
 
 
 def uses_root_stage(targets: FeatureTargets | None, codes: CodeBatch) -> bool:

@@ -16,16 +16,13 @@ from pathlib import Path
 
 import torch
 
-from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
 from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.anyrig.root_stage import RootStageConfig, RootStageDenoiser
 from kinema.model.config import reject_unknown_keys
 from kinema.model.skeleton_codes import rest_dim
-from kinema.text import get_text_encoder
-from kinema.train.anyrig.data import AnyRigClips, Batch
+from kinema.train.anyrig.data import Batch
 from kinema.train.anyrig.trainer import AnyRigTrainer
-from kinema.train.optim import make_ema
 
 MASK_KINDS = ("prefix", "frames", "channels")
 
@@ -90,36 +87,38 @@ class RootStageTrainer(AnyRigTrainer):
     """Train a `RootStageDenoiser` for the any-rig model ``cfg.model`` (see the module docstring)."""
 
     def __init__(
-        self, cfg: RootStageTrainConfig, data: str | Path, out: str | Path, *, text_cache: Path | None = Path(
-            "cache/text"), log=print
+        self,
+        cfg: RootStageTrainConfig,
+        data: str | Path,
+        out: str | Path,
+        *,
+        text_cache: Path | None = Path("cache/text"),
+        log=print,
     ) -> None:
         base = load_anyrig(cfg.model)
-        self.model_config, self.cfg, self.out, self.log = base.config, cfg, Path(out), log
-        self.data_path = str(data)
-        self.clips = AnyRigClips(data, base.config, split="train", variants=cfg.variants, seed=cfg.seed, log=log)
-        encoder = get_text_encoder(base.text_encoder_id, cache_dir=text_cache)
+        self.base_text_encoder = base.text_encoder_id
         self.stage_config = RootStageConfig(
             code_dim=2 + rest_dim(base.config), width=cfg.width, layers=cfg.layers, heads=cfg.heads,
-            text_dim=encoder.dim,
+            text_dim=base.config.text_dim,
         )
-        with torch.random.fork_rng():
-            torch.manual_seed(cfg.seed)
-            self.model = RootStageDenoiser(self.stage_config)
-        mean, std = self.clips.stats()
-        self.model.set_normalization(mean[0], std[0])
-        self.ema = make_ema(self.model)
-        self.opt = torch.optim.AdamW(self.model.parameters(), lr=cfg.lr, betas=(0.9, 0.99),
-                                     weight_decay=cfg.weight_decay)
-        self.schedule = NoiseSchedule()
-        captions = sorted({c for clip in self.clips.clips for c in clip.captions})
-        self.text = dict(zip(captions, encoder.encode(captions), strict=True))
-        self.text_dim = encoder.dim
-        self.step, self.elapsed = 0, 0.0
+        super().__init__(base.config, cfg, data, out, text_cache=text_cache, log=log)
+
+    def new_model(self) -> RootStageDenoiser:
+        return RootStageDenoiser(self.stage_config)
+
+    def set_normalization(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        self.model.set_normalization(mean[0], std[0])  # the root row's
+
+    def text_encoder_id(self) -> str:
+        return self.base_text_encoder
+
+    def config_dict(self) -> dict:
+        return self.stage_config.to_dict()
 
     def info(self) -> dict:
         return {
             "kind": "anyrig-root-stage",
-            "model_config": self.stage_config.to_dict(),
+            "model_config": self.config_dict(),
             "anyrig_config": self.model_config.to_dict(),
             "train_config": asdict(self.cfg),
             "data": self.data_path,

@@ -81,17 +81,17 @@ class AnyRigTrainer:
         self.clips = AnyRigClips(data, model_config, split="train", variants=cfg.variants, seed=cfg.seed, log=log)
         with torch.random.fork_rng():  # the initial weights come from the seed, not the process's random state
             torch.manual_seed(cfg.seed)
-            self.model = AnyRigDenoiser(model_config)
-        self.model.set_normalization(*self.clips.stats())
+            self.model = self.new_model()
+        self.set_normalization(*self.clips.stats())
         self.ema = make_ema(self.model)
         self.opt = torch.optim.AdamW(
             self.model.parameters(), lr=cfg.lr, betas=(0.9, 0.99), weight_decay=cfg.weight_decay
         )
         self.schedule = NoiseSchedule()
-        encoder = get_text_encoder(cfg.text_encoder, cache_dir=text_cache)
+        encoder = get_text_encoder(self.text_encoder_id(), cache_dir=text_cache)
         if encoder.dim != model_config.text_dim:
             raise KinemaError(
-                f"text encoder {cfg.text_encoder} gives {encoder.dim}-d embeddings; the model "
+                f"text encoder {self.text_encoder_id()} gives {encoder.dim}-d embeddings; the model "
                 f"config expects text_dim {model_config.text_dim}"
             )
         captions = sorted({c for clip in self.clips.clips for c in clip.captions})
@@ -99,13 +99,29 @@ class AnyRigTrainer:
         self.text_dim = encoder.dim
         self.step, self.elapsed = 0, 0.0
 
+    # ------------------------------------------------------------------ what is trained (subclasses change it)
+    def new_model(self) -> torch.nn.Module:
+        """The network this run trains, freshly initialised."""
+        return AnyRigDenoiser(self.model_config)
+
+    def set_normalization(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        """Give the network the data's statistics ``(2, 13)`` (root row, other joints)."""
+        self.model.set_normalization(mean, std)
+
+    def text_encoder_id(self) -> str:
+        return self.cfg.text_encoder
+
+    def config_dict(self) -> dict:
+        """The trained network's config as saved (a resumed run must match it)."""
+        return self.model_config.to_dict()
+
     # ------------------------------------------------------------------ checkpoints
     def info(self) -> dict:
         rigs = {rid: rig.to_dict() for rid, rig in self.clips.rigs.items()}
         return {
             "kind": "anyrig",
             "pipeline": "anyrig",  # the MotionPipeline that loads it (kinema.generate.loading)
-            "model_config": self.model_config.to_dict(),
+            "model_config": self.config_dict(),
             "train_config": asdict(self.cfg),
             "fps": self.model_config.fps,
             "text_encoder": self.cfg.text_encoder,
@@ -126,7 +142,7 @@ class AnyRigTrainer:
             return False
         ck = load_checkpoint(self.out)
         info = ck["info"]
-        if info.get("model_config") != self.info()["model_config"]:
+        if info.get("model_config") != self.config_dict():
             raise KinemaError(f"{self.out}: the checkpoint's model config differs from the requested one")
         self.model.load_state_dict(ck["model"])
         self.ema.load_state_dict(ck["ema"])
