@@ -123,3 +123,16 @@ def test_the_cli_trains_a_root_stage_and_export_packs_it(creature_cache, trained
     assert main(["export", str(trained), "--out", str(tmp_path / "m"), "--root-stage", str(out)]) == 0
     assert "with a root stage" in capsys.readouterr().out
     assert load_anyrig(tmp_path / "m").root_stage is not None
+
+
+def test_a_packed_model_is_repacked_with_another_root_stage(packed, trained, tmp_path) -> None:
+    run, _ = packed
+    first = export_model(trained, tmp_path / "first", dtype="float32")
+    again = export_model(first, tmp_path / "again", dtype="float32", root_stage=run)
+    info = load_anyrig(again).info
+    assert info["export"]["source"] == load_anyrig(first).info["export"]["source"] != str(first)
+    assert info["export"]["repacked_from"] == str(first) and load_anyrig(again).root_stage is not None
+    a, b = load_anyrig(first).denoiser.state_dict(), load_anyrig(again).denoiser.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)  # the body's weights are the same
+    export_model(again, again, dtype="float32")  # re-packed in place without the stage: dropped
+    assert load_anyrig(again).root_stage is None and not (again / "root_stage.safetensors").exists()

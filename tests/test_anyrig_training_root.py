@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import replace
 
 import creature_fixtures
@@ -99,3 +100,55 @@ def test_the_seed_fixes_the_initial_weights(creature_cache, tmp_path) -> None:
         assert torch.equal(v, again.model.state_dict()[k]), k
     other = AnyRigTrainer(cfg, replace(tc, seed=1), creature_cache, tmp_path / "c", text_cache=None, log=lambda s: None)
     assert any(not torch.equal(a, b) for a, b in zip(first.model.parameters(), other.model.parameters(), strict=True))
+
+
+def test_an_on_the_spot_walk_of_unknown_travel_teaches_no_ground_velocity(tmp_path) -> None:
+    """A locomotion clip the build could not give travel to (flag ``in_place``: no feet, a swim) does go
+    somewhere: told as "A spot walks." its still root is neither a target nor a constraint (body or root
+    stage); told as "A spot walks in place." (the record's ``in_place_caption``) it is."""
+    from kinema.data.multirig_build import Description, assemble, write_build
+    from kinema.data.sources import SourceFile
+    from kinema.train.anyrig.data import GROUND_VELOCITY, AnyRigClips
+
+    skel = quadruped()
+    files = [SourceFile(Path("spot.bvh"), "spot.bvh", "bvh", {"walk": walking(skel, frames=24, speed=0.0)}),
+             SourceFile(Path("read.bvh"), "read.bvh", "bvh", {"walk": walking(skel, frames=24, speed=0.05)})]
+
+    def describe(f, name, motion, travel):
+        noun = f.rel[:-4]
+        if noun == "read":
+            return Description([f"A {noun} walks.", f"The {noun} walks."])
+        caps = [f"A {noun} walks.", f"The {noun} walks.", f"A {noun} walks in place."]
+        return Description(caps, flags=["in_place"], record={"in_place_caption": 2})
+
+    write_build(tmp_path / "cache", assemble(files, 20.0, describe), {"dataset": "synthetic"})
+    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
+    clips = AnyRigClips(tmp_path / "cache", cfg, split="all", variants=1, log=lambda s: None)
+    root = Rig.from_skeleton(skel).root
+    seen = set()
+    batch = clips.window_batch(clips.clips * 20, torch.Generator().manual_seed(0))
+    for b, caption in enumerate(batch.captions):
+        given = bool(batch.channel_mask[b, root, list(GROUND_VELOCITY)].all())
+        assert given is (not caption.startswith(("A spot", "The spot")) or caption.endswith("in place.")), caption
+        assert not batch.channel_mask[b, root, list(GROUND_VELOCITY)].any() or given
+        assert bool(batch.channel_mask[b, root, ROOT_HEADING_RATE])
+        seen.add((caption, given))
+    assert len(seen) == 5  # every caption of both clips (augmented copies too) was drawn
+
+
+def test_the_loss_ignores_the_ground_velocity_of_an_unknown_travel_clip(creature_cache, tmp_path) -> None:
+    cfg = get_anyrig_config("anyrig-tiny", text_dim=32)
+    tc = AnyRigTrainConfig(steps=1, variants=0, text_encoder="hash-test-32", warmup=1)
+    tr = AnyRigTrainer(cfg, tc, creature_cache, tmp_path / "r", text_cache=None, log=lambda s: None)
+    skel = quadruped()
+    rig = Rig.from_skeleton(skel)
+    caption = tr.clips.clips[0].captions[:1]
+    losses = {}
+    for known in (True, False):
+        for speed in (0.0, 0.3):
+            clip = make_clip(walking(skel, frames=40, speed=0.0), rig, cfg, caption, "q", [known])
+            clip.features[:, rig.root, ROOT_FORWARD] = speed
+            batch = tr.clips.window_batch([clip] * 4, torch.Generator().manual_seed(0))
+            losses[known, speed] = float(tr.loss(tr.model, batch, torch.Generator().manual_seed(1)))
+    assert losses[False, 0.0] == losses[False, 0.3]
+    assert losses[True, 0.0] != pytest.approx(losses[True, 0.3], rel=1e-4)

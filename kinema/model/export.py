@@ -49,6 +49,9 @@ def export_model(
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
+    ``src`` may be a model folder written by this function (re-packing: another dtype, sampling default or
+    root stage); its checkpoint.json keeps the weights' first source, with ``repacked_from``.
+
     ``ema=False`` packs the raw (optimiser) weights instead: after a short fine-tune the EMA (decay
     0.995 every 10 steps, a ~2000-step horizon) still mostly holds the starting weights.
 
@@ -82,10 +85,13 @@ def export_model(
         if sampling_steps <= 0:
             raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")
         info["sampler"] = dict(info["sampler"], num_inference_steps=int(sampling_steps))
-    info["export"] = {"source": str(ckpt), "weights": weights.name, "dtype": dtype, **(extra_info or {})}
+    packed = info.pop("export", None)  # ``src`` is itself a model folder: keep where its weights came from
+    source = {"source": str(ckpt)} if packed is None else {"source": packed["source"], "repacked_from": str(ckpt)}
+    info["export"] = {**source, "weights": weights.name, "dtype": dtype, **(extra_info or {})}
     if info.get("kind") == "anyrig":
         info["rig_files"] = rig_files(info)
     stage = None
+    info.pop("root_stage", None)  # a re-packed folder's stage stays only when given again
     if root_stage is not None:
         if info.get("kind") != "anyrig":
             raise KinemaError(f"--root-stage: {ckpt} is not an any-rig model; only those have a root stage")

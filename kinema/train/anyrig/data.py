@@ -42,6 +42,23 @@ LOOP_TOL = 0.05
 #: 1 - this share of all training frames (see `clamp_root_rates`)
 ROOT_RATE_TAIL = 0.005
 ROOT_RATES = (ROOT_LATERAL, ROOT_FORWARD, ROOT_HEADING_RATE)
+#: the root row's ground velocity, unknown on a clip flagged ``TRAVEL_UNKNOWN``
+GROUND_VELOCITY = (ROOT_LATERAL, ROOT_FORWARD)
+#: build flag of a locomotion clip the source animates on the spot and whose travel the build could not
+#: recover (kinema.data.quaternius: no feet, feet that are knees, a swim). "A person runs." does travel, by
+#: how much is unknown, so with that caption the root's ground velocity is not a real channel (neither
+#: learned as 0 nor given as a constraint); with the caption the record's ``in_place_caption`` names ("A
+#: person runs in place.") the still root is what the caption says, and stays real.
+TRAVEL_UNKNOWN = "in_place"
+
+
+def travel_known(rec: dict) -> list[bool]:
+    """Per caption of a build record: whether the clip's root travel is what that caption describes (see
+    `TRAVEL_UNKNOWN`)."""
+    n = len(rec["captions"])
+    if TRAVEL_UNKNOWN not in rec.get("flags", ()):
+        return [True] * n
+    return [i == rec.get("in_place_caption") for i in range(n)]
 
 
 @dataclass
@@ -52,6 +69,16 @@ class Clip:
     captions: list[str]
     rig: str
     loops: bool
+    travel_known: list[bool]  # per caption (`travel_known`)
+
+    def channels_for(self, caption: int) -> torch.Tensor:
+        """The real channels ``(J, 13)`` of the clip told by caption number ``caption``: without the root's
+        ground velocity where that caption names travel the clip does not show."""
+        if self.travel_known[caption]:
+            return self.channel_mask
+        out = self.channel_mask.clone()
+        out[int(self.codes.flags[:, 0].argmax()), list(GROUND_VELOCITY)] = False
+        return out
 
     @property
     def num_joints(self) -> int:
@@ -71,10 +98,17 @@ def _loops(f: torch.Tensor) -> bool:
     return f.shape[0] > 4 and float((f[0, :, POS] - f[-1, :, POS]).abs().max()) < LOOP_TOL
 
 
-def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str) -> Clip:
+def make_clip(
+    motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, known: list[bool] | None = None
+) -> Clip:
+    """One clip's features and real channels; ``known``: per caption, whether the clip's root travel is
+    what it describes (default: every caption; see `travel_known`)."""
     rep = JointRepresentation(rig, motion.fps)
     f = rep.from_motion(motion).float()
-    return Clip(f, rep.channel_mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f))
+    known = [True] * len(captions) if known is None else list(known)
+    if len(known) != len(captions):
+        raise ValueError(f"{len(known)} travel flags for {len(captions)} captions")
+    return Clip(f, rep.channel_mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f), known)
 
 
 class AnyRigClips:
@@ -106,10 +140,11 @@ class AnyRigClips:
             rig = rigs.setdefault(rec["rig"], Rig.from_skeleton(m.skeleton))
             if first.setdefault(rec["rig"], rec.get("skeleton")) == rec.get("skeleton"):
                 own.setdefault(rec["rig"], []).append(m.global_transforms()[::-1])  # the stored skeleton's clips
-            self.clips.append(make_clip(m, rig, config, rec["captions"], rec["rig"]))
+            known = travel_known(rec)
+            self.clips.append(make_clip(m, rig, config, rec["captions"], rec["rig"], known))
             for _ in range(variants):
                 a = augment(m, gen, keep=(*rig.contacts, rig.root))
-                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, rec["captions"], rec["rig"]))
+                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, rec["captions"], rec["rig"], known))
         #: (channels of ROOT_RATES, 2): the low and high bound each root rate was clamped to
         self.root_bounds = clamp_root_rates(self.clips)
         self.config = config
@@ -172,8 +207,9 @@ class AnyRigClips:
             w = window(c, W, gen)
             x[b, : w.shape[0], : c.num_joints] = w
             frame_mask[b, : w.shape[0]] = True
-            channel_mask[b, : c.num_joints] = c.channel_mask
-            captions.append(c.captions[int(torch.randint(len(c.captions), (1,), generator=gen))])
+            k = int(torch.randint(len(c.captions), (1,), generator=gen))
+            channel_mask[b, : c.num_joints] = c.channels_for(k)
+            captions.append(c.captions[k])
             root = int(c.codes.flags[:, 0].argmax())
             turn = float(torch.rand(1, generator=gen)) * 2 * math.pi
             x[b, :, root, ROOT_HEADING] = _turn(x[b, :, root, ROOT_HEADING], turn)
