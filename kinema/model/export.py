@@ -74,17 +74,7 @@ def export_model(
         raise KinemaError(f"{ckpt / 'checkpoint.json'}: field 'sampler' must be an object (damaged checkpoint?)")
     for key in _TRAINING_ONLY:
         info.pop(key, None)
-    if guidance is not None:
-        info["guidance"] = guidance.to_dict()
-    if grounding:
-        if info.get("kind") == "anyrig":
-            raise KinemaError(f"{ckpt}: an any-rig model keeps no training captions; it cannot save a grounding")
-        base = read_grounding(info, ckpt).to_dict()
-        info["grounding"] = Grounding.from_dict({**base, **grounding}, "grounding").to_dict()
-    if sampling_steps is not None:
-        if sampling_steps <= 0:
-            raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")
-        info["sampler"] = dict(info["sampler"], num_inference_steps=int(sampling_steps))
+    _replace_defaults(info, ckpt, guidance, grounding, sampling_steps)
     packed = info.pop("export", None)  # ``src`` is itself a model folder: keep where its weights came from
     source = {"source": str(ckpt)} if packed is None else {"source": packed["source"], "repacked_from": str(ckpt)}
     info["export"] = {**source, "weights": weights.name, "dtype": dtype, **(extra_info or {})}
@@ -98,6 +88,23 @@ def export_model(
         info["root_stage"], stage = _root_stage(root_stage, info)
     state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
     return _write_folder(Path(out), info, state, stage)
+
+
+def _replace_defaults(
+    info: dict, ckpt: Path, guidance: Guidance | None, grounding: dict | None, sampling_steps: int | None
+) -> None:
+    """Replace, in ``info``, the generation defaults saved with the model that the export was given."""
+    if guidance is not None:
+        info["guidance"] = guidance.to_dict()
+    if grounding:
+        if info.get("kind") == "anyrig":
+            raise KinemaError(f"{ckpt}: an any-rig model keeps no training captions; it cannot save a grounding")
+        base = read_grounding(info, ckpt).to_dict()
+        info["grounding"] = Grounding.from_dict({**base, **grounding}, "grounding").to_dict()
+    if sampling_steps is not None:
+        if sampling_steps <= 0:
+            raise KinemaError(f"sampling steps must be positive, got {sampling_steps}")
+        info["sampler"] = dict(info["sampler"], num_inference_steps=int(sampling_steps))
 
 
 def _root_stage(src: str | Path, info: dict) -> tuple[dict, dict[str, torch.Tensor]]:
