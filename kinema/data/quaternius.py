@@ -15,10 +15,7 @@ kinema.data.multirig_build. Flags per clip:
   ground speed (body sizes/s). Feet are the rig's contact joints (kinema.rig) except tail tips that
   touch the floor (`NOT_FEET`);
 - ``in_place``: a locomotion clip still on the spot: a swim (fish have no feet to read travel from), a
-  file that fails the forward check below, or a clip whose feet do not slide. Its record's
-  ``in_place_caption`` is the index of its caption that says so ("A person runs in place."): the one
-  caption its still root is true for (the others name a gait whose travel is unknown; see
-  kinema.train.anyrig.data.TRAVEL_UNKNOWN).
+  file that fails the forward check below, or a clip whose feet do not slide.
 
 Idles, attacks, jumps and every other clip keep the source's root as it is (no travel invented). Each
 rig's forward axis is checked against its walk: the cosine between the walk's recovered travel and the
@@ -126,11 +123,9 @@ class Describer:
                 on_spot = False
                 flags.append("travel_recovered")
                 record = {"recovered_speed": round(speed, 4)}
-        captions = creature_captions(f.rel, name, in_place=on_spot)
         if on_spot:
             flags.append("in_place")
-            if action in LOCOMOTION:  # the caption that describes the clip as it is: "A person runs in place."
-                record = {"in_place_caption": len(captions) - 1}
+        captions = creature_captions(f.rel, name, in_place=on_spot)
         return Description(captions, action, subject_for(f.rel), flags, moved, record)
 
 

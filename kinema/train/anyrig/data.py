@@ -45,20 +45,16 @@ ROOT_RATES = (ROOT_LATERAL, ROOT_FORWARD, ROOT_HEADING_RATE)
 #: the root row's ground velocity, unknown on a clip flagged ``TRAVEL_UNKNOWN``
 GROUND_VELOCITY = (ROOT_LATERAL, ROOT_FORWARD)
 #: build flag of a locomotion clip the source animates on the spot and whose travel the build could not
-#: recover (kinema.data.quaternius: no feet, feet that are knees, a swim). "A person runs." does travel, by
-#: how much is unknown, so with that caption the root's ground velocity is not a real channel (neither
-#: learned as 0 nor given as a constraint); with the caption the record's ``in_place_caption`` names ("A
-#: person runs in place.") the still root is what the caption says, and stays real.
+#: recover (kinema.data.quaternius: no feet, feet that are knees, a swim). Such a clip does travel, by how
+#: much is unknown, so the root's ground velocity is not one of its real channels (neither learned as 0 nor
+#: given as a constraint) under any of its captions, "in place" included: taught zero under the one
+#: caption that says "runs in place.", the root stage carried the zero over to "walks." (card, stop 46).
 TRAVEL_UNKNOWN = "in_place"
 
 
-def travel_known(rec: dict) -> list[bool]:
-    """Per caption of a build record: whether the clip's root travel is what that caption describes (see
-    `TRAVEL_UNKNOWN`)."""
-    n = len(rec["captions"])
-    if TRAVEL_UNKNOWN not in rec.get("flags", ()):
-        return [True] * n
-    return [i == rec.get("in_place_caption") for i in range(n)]
+def travel_known(rec: dict) -> bool:
+    """Whether the root travel of a build record's clip is real (see `TRAVEL_UNKNOWN`)."""
+    return TRAVEL_UNKNOWN not in rec.get("flags", ())
 
 
 @dataclass
@@ -69,12 +65,13 @@ class Clip:
     captions: list[str]
     rig: str
     loops: bool
-    travel_known: list[bool]  # per caption (`travel_known`)
+    travel_known: bool  # `travel_known`
 
-    def channels_for(self, caption: int) -> torch.Tensor:
-        """The real channels ``(J, 13)`` of the clip told by caption number ``caption``: without the root's
-        ground velocity where that caption names travel the clip does not show."""
-        if self.travel_known[caption]:
+    @property
+    def trained_channels(self) -> torch.Tensor:
+        """The channels ``(J, 13)`` the clip teaches: its real channels, without the root's ground velocity
+        where its travel is unknown."""
+        if self.travel_known:
             return self.channel_mask
         out = self.channel_mask.clone()
         out[int(self.codes.flags[:, 0].argmax()), list(GROUND_VELOCITY)] = False
@@ -98,17 +95,11 @@ def _loops(f: torch.Tensor) -> bool:
     return f.shape[0] > 4 and float((f[0, :, POS] - f[-1, :, POS]).abs().max()) < LOOP_TOL
 
 
-def make_clip(
-    motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, known: list[bool] | None = None
-) -> Clip:
-    """One clip's features and real channels; ``known``: per caption, whether the clip's root travel is
-    what it describes (default: every caption; see `travel_known`)."""
+def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, travel: bool = True) -> Clip:
+    """One clip's features and real channels; ``travel``: whether its root travel is real (`travel_known`)."""
     rep = JointRepresentation(rig, motion.fps)
     f = rep.from_motion(motion).float()
-    known = [True] * len(captions) if known is None else list(known)
-    if len(known) != len(captions):
-        raise ValueError(f"{len(known)} travel flags for {len(captions)} captions")
-    return Clip(f, rep.channel_mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f), known)
+    return Clip(f, rep.channel_mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f), travel)
 
 
 class AnyRigClips:
@@ -165,8 +156,9 @@ class AnyRigClips:
         return out
 
     def stats(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean and std ``(2, 13)`` (root row, other joints) over every real channel of every frame; the
-        heading's cos/sin get mean 0 and std sqrt(1/2), as training turns clips to random headings."""
+        """Mean and std ``(2, 13)`` (root row, other joints) over every trained channel of every frame (an
+        unknown travel is not a zero, `TRAVEL_UNKNOWN`); the heading's cos/sin get mean 0 and std sqrt(1/2),
+        as training turns clips to random headings."""
         mean, std = torch.zeros(2, NUM_CHANNELS), torch.ones(2, NUM_CHANNELS)
         for row in (0, 1):
             xs, ms = [], []
@@ -174,7 +166,7 @@ class AnyRigClips:
                 is_root = c.codes.flags[:, 0] > 0.5
                 sel = is_root if row == 0 else ~is_root
                 xs.append(c.features[:, sel].reshape(-1, NUM_CHANNELS).double())
-                ms.append(c.channel_mask[sel].expand(c.features.shape[0], -1, -1).reshape(-1, 13))
+                ms.append(c.trained_channels[sel].expand(c.features.shape[0], -1, -1).reshape(-1, 13))
             x, m = torch.cat(xs), torch.cat(ms).double()
             n = m.sum(0).clamp_min(1)
             mu = (x * m).sum(0) / n
@@ -208,7 +200,7 @@ class AnyRigClips:
             x[b, : w.shape[0], : c.num_joints] = w
             frame_mask[b, : w.shape[0]] = True
             k = int(torch.randint(len(c.captions), (1,), generator=gen))
-            channel_mask[b, : c.num_joints] = c.channels_for(k)
+            channel_mask[b, : c.num_joints] = c.trained_channels
             captions.append(c.captions[k])
             root = int(c.codes.flags[:, 0].argmax())
             turn = float(torch.rand(1, generator=gen)) * 2 * math.pi
