@@ -65,8 +65,8 @@ def main() -> None:
         if not found:
             print(f"{path} {content}: not in {args.data}; skipped")
             continue
-        rec, own = cache.clips[found[0]], cache.motion(found[0]).to(torch.float64)
-        rig = Rig.from_skeleton(own.skeleton)
+        rec = cache.clips[found[0]]
+        rig = Rig.from_skeleton(cache.motion(found[0]).skeleton)
         rep = JointRepresentation(rig, model.fps)
         prompt = prompt_for(rec, bool(in_place))
         for seed in args.seeds:

@@ -60,22 +60,11 @@ def travel_known(rec: dict) -> bool:
 @dataclass
 class Clip:
     features: torch.Tensor  # (T, J, 13) float32, un-normalised
-    channel_mask: torch.Tensor  # (J, 13) bool
+    channel_mask: torch.Tensor  # (J, 13) bool: the channels the clip teaches (`make_clip`)
     codes: SkeletonCodes
     captions: list[str]
     rig: str
     loops: bool
-    travel_known: bool  # `travel_known`
-
-    @property
-    def trained_channels(self) -> torch.Tensor:
-        """The channels ``(J, 13)`` the clip teaches: its real channels, without the root's ground velocity
-        where its travel is unknown."""
-        if self.travel_known:
-            return self.channel_mask
-        out = self.channel_mask.clone()
-        out[int(self.codes.flags[:, 0].argmax()), list(GROUND_VELOCITY)] = False
-        return out
 
     @property
     def num_joints(self) -> int:
@@ -96,10 +85,15 @@ def _loops(f: torch.Tensor) -> bool:
 
 
 def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, travel: bool = True) -> Clip:
-    """One clip's features and real channels; ``travel``: whether its root travel is real (`travel_known`)."""
+    """One clip's features and the channels it teaches: its real channels, without the root's ground
+    velocity when its travel is unknown (``travel`` False, `travel_known`)."""
     rep = JointRepresentation(rig, motion.fps)
     f = rep.from_motion(motion).float()
-    return Clip(f, rep.channel_mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f), travel)
+    mask = rep.channel_mask
+    if not travel:
+        mask = mask.clone()
+        mask[rig.root, list(GROUND_VELOCITY)] = False
+    return Clip(f, mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f))
 
 
 class AnyRigClips:
@@ -131,11 +125,11 @@ class AnyRigClips:
             rig = rigs.setdefault(rec["rig"], Rig.from_skeleton(m.skeleton))
             if first.setdefault(rec["rig"], rec.get("skeleton")) == rec.get("skeleton"):
                 own.setdefault(rec["rig"], []).append(m.global_transforms()[::-1])  # the stored skeleton's clips
-            known = travel_known(rec)
-            self.clips.append(make_clip(m, rig, config, rec["captions"], rec["rig"], known))
+            caps, known = rec["captions"], travel_known(rec)
+            self.clips.append(make_clip(m, rig, config, caps, rec["rig"], known))
             for _ in range(variants):
                 a = augment(m, gen, keep=(*rig.contacts, rig.root))
-                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, rec["captions"], rec["rig"], known))
+                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, caps, rec["rig"], known))
         #: (channels of ROOT_RATES, 2): the low and high bound each root rate was clamped to
         self.root_bounds = clamp_root_rates(self.clips)
         self.config = config
@@ -156,7 +150,7 @@ class AnyRigClips:
         return out
 
     def stats(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean and std ``(2, 13)`` (root row, other joints) over every trained channel of every frame (an
+        """Mean and std ``(2, 13)`` (root row, other joints) over every channel the clips teach, every frame (an
         unknown travel is not a zero, `TRAVEL_UNKNOWN`); the heading's cos/sin get mean 0 and std sqrt(1/2),
         as training turns clips to random headings."""
         mean, std = torch.zeros(2, NUM_CHANNELS), torch.ones(2, NUM_CHANNELS)
@@ -166,7 +160,7 @@ class AnyRigClips:
                 is_root = c.codes.flags[:, 0] > 0.5
                 sel = is_root if row == 0 else ~is_root
                 xs.append(c.features[:, sel].reshape(-1, NUM_CHANNELS).double())
-                ms.append(c.trained_channels[sel].expand(c.features.shape[0], -1, -1).reshape(-1, 13))
+                ms.append(c.channel_mask[sel].expand(c.features.shape[0], -1, -1).reshape(-1, 13))
             x, m = torch.cat(xs), torch.cat(ms).double()
             n = m.sum(0).clamp_min(1)
             mu = (x * m).sum(0) / n
@@ -200,7 +194,7 @@ class AnyRigClips:
             x[b, : w.shape[0], : c.num_joints] = w
             frame_mask[b, : w.shape[0]] = True
             k = int(torch.randint(len(c.captions), (1,), generator=gen))
-            channel_mask[b, : c.num_joints] = c.trained_channels
+            channel_mask[b, : c.num_joints] = c.channel_mask
             captions.append(c.captions[k])
             root = int(c.codes.flags[:, 0].argmax())
             turn = float(torch.rand(1, generator=gen)) * 2 * math.pi
