@@ -17,10 +17,11 @@ from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.export import export_model
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.pipeline.request import GenerationRequest
-from kinema.representation.joint import ROOT_HEADING_RATE, ROOT_PLACEMENT, JointRepresentation
+from kinema.representation.joint import ROOT_HEADING_RATE, ROOT_HEIGHT, ROOT_PLACEMENT, JointRepresentation
 from kinema.rig import Rig
 from kinema.text import get_text_encoder
-from kinema.train.anyrig.root_stage import RootStageTrainConfig, RootStageTrainer, root_masks
+from kinema.train.anyrig.data import GROUND_VELOCITY
+from kinema.train.anyrig.root_stage import RootStageTrainConfig, RootStageTrainer, root_loss, root_masks
 
 creature_cache, trained = creature_fixtures.creature_cache, creature_fixtures.trained  # module-scoped fixtures
 
@@ -98,6 +99,30 @@ def test_root_context_and_training_masks() -> None:
     m = root_masks(frame_mask, channels, torch.Generator().manual_seed(0), 0.9)
     assert not m[:, 12:].any() and not m[..., 12].any()  # never on padding frames or a masked channel
     assert 20 <= int((m.flatten(1).sum(1) > 0).sum()) < 40  # most windows get a mask, not all
+
+
+def test_the_path_loss_charges_a_steady_velocity_error_more_than_a_jittering_one() -> None:
+    B, T = 2, 40
+    x0 = torch.randn(B, T, 13)
+    real = torch.ones(B, T, 13)
+    real[1, 30:] = 0.0  # padding frames
+    real[..., 12] = 0.0  # a channel that holds no feature
+    sign = torch.ones(T)
+    sign[1::2] = -1.0
+    steady, jitter, other = x0.clone(), x0.clone(), x0.clone()
+    steady[..., list(GROUND_VELOCITY)] += 0.1  # the idles' creep: the same error on every frame
+    jitter[..., list(GROUND_VELOCITY)] += 0.1 * sign[:, None]  # as large a frame, adding up to nothing
+    other[..., ROOT_HEIGHT] += 0.1  # not a velocity channel (the path term ignores it)
+    pad = x0.clone()
+    pad[1, 30:] += 5.0  # errors on padding and on the empty channel cost nothing
+    pad[..., 12] += 5.0
+    plain = [float(root_loss(p, x0, real)) for p in (steady, jitter)]
+    assert plain[0] == pytest.approx(plain[1])
+    path = [float(root_loss(p, x0, real, path_weight=1.0)) for p in (steady, jitter, other)]
+    assert path[0] > 8 * path[1] and path[1] > plain[1]
+    assert path[2] == pytest.approx(float(root_loss(other, x0, real)))
+    assert float(root_loss(pad, x0, real, velocity_weight=4.0, path_weight=1.0)) == 0.0
+    assert float(root_loss(steady, x0, real, velocity_weight=4.0)) == pytest.approx(4 * plain[0])
 
 
 def test_export_refuses_a_foreign_root_stage(packed, trained, tmp_path) -> None:

@@ -23,6 +23,10 @@ def register(sub) -> None:
     p.add_argument("--width", type=positive_int, help="token width (default 128)")
     p.add_argument("--layers", type=positive_int, help="blocks (default 4)")
     p.add_argument("--variants", type=int, help="rig-augmented copies per clip (default 2)")
+    p.add_argument("--velocity-weight", type=positive_float,
+                   help="x the loss on the root's ground velocity (default 1)")
+    p.add_argument("--path-weight", type=float,
+                   help="weight of the ground-path loss: the velocity error summed over the window (default 0)")
     p.add_argument("--ckpt-every", type=positive_int)
     p.add_argument("--log-every", type=positive_int)
     p.add_argument("--seed", type=int)
@@ -37,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     from kinema.train.anyrig.root_stage import RootStageTrainConfig, RootStageTrainer
 
     start_run(args)
-    names = ("steps", "lr", "batch_size", "width", "layers", "variants", "ckpt_every", "log_every", "seed")
+    names = ("steps", "lr", "batch_size", "width", "layers", "variants", "velocity_weight", "path_weight",
+             "ckpt_every", "log_every", "seed")
     settings = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
     cfg = RootStageTrainConfig(model=str(model_folder(args.model, "--model")), **settings)
     trainer = RootStageTrainer(cfg, args.data, args.out, text_cache=args.cache_dir,
