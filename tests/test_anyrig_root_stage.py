@@ -17,7 +17,13 @@ from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.export import export_model
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
 from kinema.pipeline.request import GenerationRequest
-from kinema.representation.joint import ROOT_HEADING_RATE, ROOT_HEIGHT, ROOT_PLACEMENT, JointRepresentation
+from kinema.representation.joint import (
+    CONTACT,
+    ROOT_HEADING_RATE,
+    ROOT_HEIGHT,
+    ROOT_PLACEMENT,
+    JointRepresentation,
+)
 from kinema.rig import Rig
 from kinema.text import get_text_encoder
 from kinema.train.anyrig.data import GROUND_VELOCITY
@@ -106,7 +112,7 @@ def test_the_path_loss_charges_a_steady_velocity_error_more_than_a_jittering_one
     x0 = torch.randn(B, T, 13)
     real = torch.ones(B, T, 13)
     real[1, 30:] = 0.0  # padding frames
-    real[..., 12] = 0.0  # a channel that holds no feature
+    real[..., CONTACT] = 0.0  # a channel that holds no feature (the root has no contact)
     sign = torch.ones(T)
     sign[1::2] = -1.0
     steady, jitter, other = x0.clone(), x0.clone(), x0.clone()
@@ -115,7 +121,7 @@ def test_the_path_loss_charges_a_steady_velocity_error_more_than_a_jittering_one
     other[..., ROOT_HEIGHT] += 0.1  # not a velocity channel (the path term ignores it)
     pad = x0.clone()
     pad[1, 30:] += 5.0  # errors on padding and on the empty channel cost nothing
-    pad[..., 12] += 5.0
+    pad[..., CONTACT] += 5.0
     plain = [float(root_loss(p, x0, real)) for p in (steady, jitter)]
     assert plain[0] == pytest.approx(plain[1])
     path = [float(root_loss(p, x0, real, path_weight=1.0)) for p in (steady, jitter, other)]

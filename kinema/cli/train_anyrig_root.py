@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import positive_float, positive_int
+from kinema.cli._args import non_negative_float, positive_float, positive_int
 from kinema.cli.train_anyrig import model_folder, start_run
 from kinema.runtime import text_cache_dir
 
@@ -25,7 +25,7 @@ def register(sub) -> None:
     p.add_argument("--variants", type=int, help="rig-augmented copies per clip (default 2)")
     p.add_argument("--velocity-weight", type=positive_float,
                    help="x the loss on the root's ground velocity (default 1)")
-    p.add_argument("--path-weight", type=float,
+    p.add_argument("--path-weight", type=non_negative_float,
                    help="weight of the ground-path loss: the velocity error summed over the window (default 0)")
     p.add_argument("--ckpt-every", type=positive_int)
     p.add_argument("--log-every", type=positive_int)

@@ -156,16 +156,16 @@ def root_loss(pred: torch.Tensor, x0: torch.Tensor, real: torch.Tensor, *, veloc
     """The masked MSE of normalised root rows ``(B, T, 13)`` (``real``: {0, 1} of the same shape), the
     ground velocity's squared error times ``velocity_weight``, plus ``path_weight`` times the ground path's:
     the running sum of the ground velocity's error (the displacement it adds up to) squared over the
-    window's frames. A steady error of e a frame adds up to n e over n frames, where the idles' 4-s creep
-    comes from (card, stop 47), and costs about n / 3 times its per-frame square there; uncorrelated
-    per-frame errors cost about half theirs."""
+    window's frames. A steady error of e a frame adds up to n e over n frames (the shipped stage's idles
+    creep so: a steady 0.03 body sizes/s on held-out rigs) and costs about n / 3 times its per-frame square
+    there; uncorrelated per-frame errors cost about half theirs."""
+    vel = list(GROUND_VELOCITY)
     err = (pred - x0) * real
     w = torch.ones(err.shape[-1], dtype=err.dtype)
-    w[list(GROUND_VELOCITY)] = velocity_weight
+    w[vel] = velocity_weight
     total = (err**2 * w).sum()
     if path_weight:
-        n = real[..., list(GROUND_VELOCITY)].amax(-1).sum(1).clamp_min(1.0)  # (B,) frames with a real velocity
-        path = err[..., list(GROUND_VELOCITY)].cumsum(1)
+        n = real[..., vel].amax(-1).sum(1).clamp_min(1.0)  # (B,) frames with a real velocity
+        path = err[..., vel].cumsum(1)
         total = total + path_weight * (path**2 / n[:, None, None]).sum()
     return total / real.sum().clamp_min(1.0)
-
