@@ -100,6 +100,17 @@ def check_file(model, cache: MotionCache, key: str, *, seconds: float, steps: in
     return out
 
 
+def _cell_of(r: dict):
+    """A table cell of row ``r``: ``median / worst`` of a measure, marked ok or **no** against its goal."""
+
+    def cell(k: str, d: int = 2) -> str:
+        v, w = r[k], r[f"{k}_worst"]
+        mark = "" if r[f"{k}_ok"] is None else (" ok" if r[f"{k}_ok"] else " **no**")
+        return "-" if v is None else f"{v:.{d}f} / {w:.{d}f}{mark}"
+
+    return cell
+
+
 def table(rows: list[dict]) -> str:
     head = (
         "| file | split | ties | forward share (median / worst) | net turn deg | idle drift | run/walk ground "
@@ -107,12 +118,7 @@ def table(rows: list[dict]) -> str:
     )
     lines = [head, "|" + "---|" * 9]
     for r in rows:
-
-        def f(k, d=2):
-            v, w = r[k], r[f"{k}_worst"]
-            mark = "" if r[f"{k}_ok"] is None else (" ok" if r[f"{k}_ok"] else " **no**")
-            return "-" if v is None else f"{v:.{d}f} / {w:.{d}f}{mark}"
-
+        f = _cell_of(r)
         sp, own = r["speed"], r["speed_own"]
         spd = f"{sp.get('walk', 0):.2f} / {sp.get('run', float('nan')):.2f} ({own.get('walk', float('nan')):.2f} / "
         spd += f"{own.get('run', float('nan')):.2f})"

@@ -7,8 +7,8 @@ import pytest
 import torch
 from rig_fixtures import hexapod, quadruped, snake2, walking
 
-from kinema.anyrig.feet import lock_translated_feet, translated_feet
-from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe, floor_root_children, with_floor_translations
+from kinema.anyrig.feet import floor_root_children, lock_translated_feet, translated_feet, with_floor_translations
+from kinema.anyrig.pipeline import AnyRigModel, JointTarget, Keyframe
 from kinema.anyrig.post import pin_root, root_pins, unmet_warnings
 from kinema.anyrig.sampling import FeatureTargets, sample_features, window_starts, window_weights
 from kinema.anyrig.targets import post_targets

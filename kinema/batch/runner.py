@@ -77,8 +77,8 @@ def _plan(jobs_path: Path, manifest: Manifest, out: Path, shas: ModelShas, defau
     for line, text, task in read_jobs(jobs_path):
         summary.total += 1
         if isinstance(task, KinemaError):
-            manifest.append({"id": _raw_id(text, line), "line": line, "status": "failed", "input": text, "error": str(task),
-                             "finished_at": _now()})
+            manifest.append({"id": _raw_id(text, line), "line": line, "status": "failed", "input": text,
+                             "error": str(task), "finished_at": _now()})
             summary.failed += 1
             summary.errors.append(f"line {line}: {task}")
             continue

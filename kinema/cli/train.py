@@ -11,7 +11,8 @@ from kinema.runtime import text_cache_dir
 
 def register(sub) -> None:
     """Add the `train` sub-command (runtime options: --threads, --device, --bf16, --minutes; docs/training.md)."""
-    p = sub.add_parser("train", help="train a motion diffusion model (also: `kinema train plot --out RUN`: loss curves)")
+    p = sub.add_parser("train",
+                       help="train a motion diffusion model (also: `kinema train plot --out RUN`: loss curves)")
     p.add_argument("action", nargs="?", default="run", choices=["run", "plot"],
                    help="'plot' writes loss curves of an existing run (give the run folder with --out)")
     p.add_argument("--config", help="model preset: tiny, small (default), small-1stage, paper")
