@@ -108,6 +108,82 @@ class CosineAdam:
 OPTIMISE_ITERATIONS = 30
 
 
+class _EditLoss:
+    """The loss of stage (a) as a function of the parameters ``aa`` ``(T, J, 3)`` (axis-angle) and ``dr``
+    ``(T, 3)`` (root offset), set up once for ``motion`` and ``targets``: constraint residuals in
+    centimetres and degrees, the smoothed root through its waypoints, planted contacts that do not slide,
+    the acceleration of the change in joint positions and closeness to the input. Only the ``sup``
+    frames (where the envelope ``env`` is non-zero) are moved and run through forward kinematics."""
+
+    def __init__(self, motion: Motion, targets: PostTargets, env: torch.Tensor, param_sigma: float,
+                 closeness: float, smoothness: float) -> None:
+        skel, T = motion.skeleton, motion.num_frames
+        self.skel, self.T, self.J = skel, T, skel.num_joints
+        self.closeness, self.smoothness, self.cm = closeness, smoothness, 0.01
+        self.L0, self.r0 = motion.local_rotations, motion.root_translation
+        _, P0 = motion.global_transforms()
+        self.sup = sup = torch.nonzero(env > 0).flatten()  # frames the deltas may move
+        slot = torch.full((T,), -1, dtype=torch.long)
+        slot[sup] = torch.arange(sup.numel())
+        self.L0m = quat_to_matrix(self.L0[sup])
+        _, self.P0s = forward_kinematics_matrices(self.L0m, self.r0[sup], skel.offsets, skel.parents)
+        pos = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_positions.items()]
+        rot = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_rotations.items()]
+        pf, self.pj, self.pv = (torch.cat(x) for x in zip(*pos, strict=True)) if pos else (None, None, None)
+        qf, self.qj, qv = (torch.cat(x) for x in zip(*rot, strict=True)) if rot else (None, None, None)
+        self.pf = None if pf is None else slot[pf]
+        self.qf, self.Rv = (None, None) if qf is None else (slot[qf], quat_to_matrix(qv))
+        self.pelvis = pelvis = skel.roles.get("pelvis", 0)
+        self.S_sup = self.S_fixed = None
+        if targets.root_xz is not None:
+            S_rows = smoothing_matrix(T, targets.root_sigma * motion.fps)[targets.root_xz[0]]
+            self.S_sup = S_sup = S_rows[:, sup]
+            self.S_fixed = S_rows @ P0[:, pelvis][:, [0, 2]] - S_sup @ P0[sup, pelvis][:, [0, 2]] - targets.root_xz[1]
+        self.planted = None
+        if targets.contacts is not None:
+            planted = torch.zeros(T, 4, dtype=torch.bool)
+            planted[targets.contacts[0]] = targets.contacts[1] > 0.5
+            self.planted = planted[1:] & planted[:-1]
+            self.cj = torch.tensor(contact_joints(skel))
+            self.xz0 = P0[:, self.cj][..., [0, 2]]
+        # the deltas on the support frames: Gaussian-smoothed parameters (smooth by construction: Adam's
+        # per-coordinate steps would otherwise leave jagged edits) times the envelope, one (Ns, T) matrix
+        self.spread = env[sup, None] * smoothing_matrix(T, param_sigma)[sup]
+
+    def deltas(self, aa: torch.Tensor, dr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The rotation and root deltas on the support frames."""
+        return (self.spread @ aa.reshape(self.T, self.J * 3)).reshape(-1, self.J, 3), self.spread @ dr
+
+    def __call__(self, aa: torch.Tensor, dr: torch.Tensor) -> torch.Tensor:
+        skel, T, cm = self.skel, self.T, self.cm
+        d_rot, d_root = self.deltas(aa, dr)
+        G, P = forward_kinematics_matrices(matmul3(self.L0m, axis_angle_to_matrix(d_rot)), self.r0[self.sup] + d_root,
+                                           skel.offsets, skel.parents)
+        loss = P.new_zeros(())
+        if self.pf is not None:
+            loss = loss + (((P[self.pf, self.pj] - self.pv) / cm) ** 2).sum()
+        if self.qf is not None:
+            loss = loss + (((G[self.qf, self.qj] - self.Rv) ** 2).sum() / 2 / math.radians(1.0) ** 2)
+        if self.S_sup is not None:
+            loss = loss + (((self.S_sup @ P[:, self.pelvis][:, [0, 2]] + self.S_fixed) / cm) ** 2).sum()
+        if self.planted is not None and T > 1:
+            xz = self.xz0.index_copy(0, self.sup, P[:, self.cj][..., [0, 2]])
+            loss = loss + (((xz[1:] - xz[:-1]) / cm) ** 2).sum(-1)[self.planted].sum()
+        if T > 2:
+            change = P.new_zeros(T, self.J, 3).index_copy(0, self.sup, P - self.P0s)
+            acc = change[2:] - 2 * change[1:-1] + change[:-2]
+            loss = loss + self.smoothness * ((acc / cm) ** 2).sum()
+        loss = loss + self.closeness * ((d_rot / math.radians(1.0)) ** 2).sum()
+        loss = loss + self.closeness * ((d_root / cm) ** 2).sum()
+        return loss
+
+    def applied(self, aa: torch.Tensor, dr: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The input's local rotations and root translation with the deltas applied (every frame)."""
+        d_rot, d_root = self.deltas(aa, dr)
+        d_rot = torch.zeros(self.T, self.J, 3, dtype=torch.float64).index_copy(0, self.sup, d_rot)
+        return quat_normalize(quat_mul(self.L0, axis_angle_to_quat(d_rot))), self.r0.index_add(0, self.sup, d_root)
+
+
 def optimise(
     motion: Motion,
     targets: PostTargets,
@@ -119,88 +195,28 @@ def optimise(
 ) -> tuple[Motion, dict]:
     """Stage (a): a short Adam optimisation pulling the motion towards the targets (float64 in/out).
 
-    The deltas vanish outside the envelope of the constrained frames, so the loss runs forward
-    kinematics on those frames only (the others keep their input positions, entering the root-path and
-    contact terms as constants), with rotation matrices, one matrix product per depth level
+    The deltas vanish outside the envelope of the constrained frames, so the loss (`_EditLoss`) runs
+    forward kinematics on those frames only (the others keep their input positions, entering the
+    root-path and contact terms as constants), with rotation matrices, one matrix product per depth level
     (kinema.kinematics.forward_kinematics_matrices): the same loss as joint-by-joint quaternion FK over
     every frame, to float rounding, at a fraction of the tensor operations. A rotation target's term
     ``4 (1 - <q, q_target>^2)`` is written ``|R - R_target|_F^2 / 2`` (both are 4 sin^2(angle / 2))."""
     skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
-    sigma = targets.root_sigma * fps
-    env = _support(targets, T, blend_seconds * fps, math.ceil(3 * sigma))
-    param_sigma = max(blend_seconds * fps / 4, 0.5)
-    L0, r0 = motion.local_rotations, motion.root_translation
-    _, P0 = motion.global_transforms()
-    sup = torch.nonzero(env > 0).flatten()  # frames the deltas may move
-    slot = torch.full((T,), -1, dtype=torch.long)
-    slot[sup] = torch.arange(sup.numel())
-    L0m = quat_to_matrix(L0[sup])
-    _, P0s = forward_kinematics_matrices(L0m, r0[sup], skel.offsets, skel.parents)
-    pos = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_positions.items()]
-    rot = [(f, torch.full_like(f, j), v) for j, (f, v) in targets.joint_rotations.items()]
-    pf, pj, pv = (torch.cat(x) for x in zip(*pos, strict=True)) if pos else (None, None, None)
-    qf, qj, qv = (torch.cat(x) for x in zip(*rot, strict=True)) if rot else (None, None, None)
-    pf = None if pf is None else slot[pf]
-    qf, Rv = (None, None) if qf is None else (slot[qf], quat_to_matrix(qv))
-    pelvis = skel.roles.get("pelvis", 0)
-    S_sup = S_fixed = None
-    if targets.root_xz is not None:
-        S_rows = smoothing_matrix(T, sigma)[targets.root_xz[0]]
-        S_sup = S_rows[:, sup]
-        S_fixed = S_rows @ P0[:, pelvis][:, [0, 2]] - S_sup @ P0[sup, pelvis][:, [0, 2]] - targets.root_xz[1]
-    planted = None
-    if targets.contacts is not None:
-        planted = torch.zeros(T, 4, dtype=torch.bool)
-        planted[targets.contacts[0]] = targets.contacts[1] > 0.5
-        planted = planted[1:] & planted[:-1]
-        cj = torch.tensor(contact_joints(skel))
-        xz0 = P0[:, cj][..., [0, 2]]
-
+    env = _support(targets, T, blend_seconds * fps, math.ceil(3 * targets.root_sigma * fps))
+    loss_fn = _EditLoss(motion, targets, env, max(blend_seconds * fps / 4, 0.5), closeness, smoothness)
     aa = torch.zeros(T, skel.num_joints, 3, dtype=torch.float64, requires_grad=True)
     dr = torch.zeros(T, 3, dtype=torch.float64, requires_grad=True)
     opt = CosineAdam([aa, dr], lr=lr, iterations=iterations)
-    cm, J, history = 0.01, skel.num_joints, []
-
-    # the deltas on the support frames: Gaussian-smoothed parameters (smooth by construction: Adam's
-    # per-coordinate steps would otherwise leave jagged edits) times the envelope, one (Ns, T) matrix
-    spread = env[sup, None] * smoothing_matrix(T, param_sigma)[sup]
-
-    def deltas() -> tuple[torch.Tensor, torch.Tensor]:
-        return (spread @ aa.reshape(T, J * 3)).reshape(-1, J, 3), spread @ dr
-
-    def loss_fn() -> torch.Tensor:
-        d_rot, d_root = deltas()
-        G, P = forward_kinematics_matrices(matmul3(L0m, axis_angle_to_matrix(d_rot)), r0[sup] + d_root,
-                                           skel.offsets, skel.parents)
-        loss = P.new_zeros(())
-        if pf is not None:
-            loss = loss + (((P[pf, pj] - pv) / cm) ** 2).sum()
-        if qf is not None:
-            loss = loss + (((G[qf, qj] - Rv) ** 2).sum() / 2 / math.radians(1.0) ** 2)
-        if S_sup is not None:
-            loss = loss + (((S_sup @ P[:, pelvis][:, [0, 2]] + S_fixed) / cm) ** 2).sum()
-        if planted is not None and T > 1:
-            xz = xz0.index_copy(0, sup, P[:, cj][..., [0, 2]])
-            loss = loss + (((xz[1:] - xz[:-1]) / cm) ** 2).sum(-1)[planted].sum()
-        if T > 2:
-            change = P.new_zeros(T, J, 3).index_copy(0, sup, P - P0s)
-            acc = change[2:] - 2 * change[1:-1] + change[:-2]
-            loss = loss + smoothness * ((acc / cm) ** 2).sum()
-        loss = loss + closeness * ((d_rot / math.radians(1.0)) ** 2).sum()
-        loss = loss + closeness * ((d_root / cm) ** 2).sum()
-        return loss
-
+    history = []
+    moves = loss_fn.sup.numel() > 0
     with single_thread():
-        for _ in range(iterations if sup.numel() else 0):
-            loss = loss_fn()
+        for _ in range(iterations if moves else 0):
+            loss = loss_fn(aa, dr)
             opt.step(torch.autograd.grad(loss, [aa, dr]))
             history.append(float(loss.detach()))
     with torch.no_grad():
-        d_rot, d_root = deltas()
-        d_rot = torch.zeros(T, J, 3, dtype=torch.float64).index_copy(0, sup, d_rot)
-        L = quat_normalize(quat_mul(L0, axis_angle_to_quat(d_rot)))
-        r = r0.index_add(0, sup, d_root)
-        final = float(loss_fn()) if iterations and sup.numel() else 0.0
+        L, r = loss_fn.applied(aa, dr)
+        final = float(loss_fn(aa, dr)) if iterations and moves else 0.0
     info = {"iterations": len(history), "loss_start": history[0] if history else 0.0, "loss_end": final}
     return Motion(skel, fps, r, L, motion.foot_contacts), info
 
