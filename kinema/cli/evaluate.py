@@ -16,6 +16,7 @@ from kinema.cli._args import (
 )
 from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
 from kinema.cli.evaluate_sfcontrol import run_sfcontrol
+from kinema.errors import KinemaError
 from kinema.runtime import text_cache_dir
 
 
@@ -68,49 +69,21 @@ def _apply_sampling_options(model, args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from kinema.data.dataset import MotionDataset
-    from kinema.errors import KinemaError
     from kinema.evaluate.phrasings import PROBE_ROLES
-    from kinema.evaluate.report import format_phrasings_table, format_table, format_timeline_table, write_report
+    from kinema.evaluate.report import write_report
     from kinema.evaluate.runner import run_suite
-    from kinema.evaluate.suite import build_suite, load_suite, save_suite
-    from kinema.evaluate.timeline import build_timeline_cases
+    from kinema.evaluate.suite import save_suite
     from kinema.generate import load_model, resolve_model_path
 
     if args.protocol == "sfcontrol":
         return run_sfcontrol(args)
     t0 = time.perf_counter()
-    if args.cases < 1 or args.timeline_cases < 0:
-        raise KinemaError("--cases must be at least 1 and --timeline-cases at least 0")
-    if not 0.0 < args.text_fraction <= 1.0:
-        raise KinemaError(f"--text-fraction must be in (0, 1], got {args.text_fraction:g}")
-    if args.phrasings < 0:
-        raise KinemaError(f"--phrasings must be at least 0 (samples per probe prompt), got {args.phrasings}")
-    if args.steps is not None and args.steps < 1:
-        raise KinemaError("--steps must be at least 1")
-    if args.filmstrips < 0 or args.mm[0] < 0:
-        raise KinemaError("--filmstrips and --mm PROMPTS must not be negative")
+    _check_options(args)
     resolve_model_path(args.model)  # fail early on a missing model, before building anything
     out = args.out or Path("out/eval") / (Path(str(args.model)).resolve().name or "model")
     if out.exists() and not out.is_dir():
         raise KinemaError(f"{out}: exists and is not a folder")
-    if args.suite is not None and args.suite.exists():
-        cases = load_suite(args.suite)
-        print(f"suite: {len(cases)} cases from {args.suite}")
-    else:
-        if not args.data.is_dir():
-            raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
-        cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed,
-                            text_fraction=args.text_fraction)
-        if args.timeline_cases:
-            try:
-                cases += build_timeline_cases(MotionDataset(args.data, args.split), args.data.resolve(), args.split,
-                                              args.timeline_cases, args.seed, first_id=len(cases))
-            except ValueError as err:
-                raise KinemaError(str(err)) from None
-        if args.suite is not None:
-            save_suite(cases, args.suite)
-        print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
+    cases = _suite_cases(args)
     model = load_model(args.model, text_cache=text_cache_dir())
     if args.phrasings:  # the probes' measures need these joints: fail now, not after the suite
         try:
@@ -124,7 +97,55 @@ def run(args: argparse.Namespace) -> int:
                         progress=not args.no_progress, retrieval=args.retrieval, mm_prompts=args.mm[0],
                         mm_samples=args.mm[1], text_cache=text_cache_dir(),
                         guidance=tuple(args.guidance) if args.guidance else None, phrasings=args.phrasings)
-    data = write_report(results, out, filmstrips=args.filmstrips)
+    _print_report(write_report(results, out, filmstrips=args.filmstrips), out)
+    print(f"wall time {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """One-line errors for option values out of range, before anything is loaded."""
+    if args.cases < 1 or args.timeline_cases < 0:
+        raise KinemaError("--cases must be at least 1 and --timeline-cases at least 0")
+    if not 0.0 < args.text_fraction <= 1.0:
+        raise KinemaError(f"--text-fraction must be in (0, 1], got {args.text_fraction:g}")
+    if args.phrasings < 0:
+        raise KinemaError(f"--phrasings must be at least 0 (samples per probe prompt), got {args.phrasings}")
+    if args.steps is not None and args.steps < 1:
+        raise KinemaError("--steps must be at least 1")
+    if args.filmstrips < 0 or args.mm[0] < 0:
+        raise KinemaError("--filmstrips and --mm PROMPTS must not be negative")
+
+
+def _suite_cases(args: argparse.Namespace) -> list:
+    """The evaluation cases: read from ``--suite`` when that file exists, else built from ``--data`` (and
+    saved to ``--suite`` when given)."""
+    from kinema.data.dataset import MotionDataset
+    from kinema.evaluate.suite import build_suite, load_suite, save_suite
+    from kinema.evaluate.timeline import build_timeline_cases
+
+    if args.suite is not None and args.suite.exists():
+        cases = load_suite(args.suite)
+        print(f"suite: {len(cases)} cases from {args.suite}")
+        return cases
+    if not args.data.is_dir():
+        raise KinemaError(f"{args.data}: dataset folder does not exist (run `kinema data build` first)")
+    cases = build_suite(args.data, args.split, num_cases=args.cases, seed=args.seed, text_fraction=args.text_fraction)
+    if args.timeline_cases:
+        try:
+            cases += build_timeline_cases(MotionDataset(args.data, args.split), args.data.resolve(), args.split,
+                                          args.timeline_cases, args.seed, first_id=len(cases))
+        except ValueError as err:
+            raise KinemaError(str(err)) from None
+    if args.suite is not None:
+        save_suite(cases, args.suite)
+    print(f"suite: {len(cases)} cases from {args.data} ({args.split}), seed {args.seed}")
+    return cases
+
+
+def _print_report(data: dict, out: Path) -> None:
+    """The report's tables and warnings on stdout, and where the files are."""
+    from kinema.evaluate.report import format_phrasings_table, format_table, format_timeline_table
+
     print()
     print(format_table(data))
     if data.get("timeline"):
@@ -136,5 +157,3 @@ def run(args: argparse.Namespace) -> int:
     for w in data["warnings"]:
         print(f"warning: {w}")
     print(f"wrote {out / 'report.md'}, {out / 'report.json'}, {out / 'suite.json'} and {out / 'plots'}/")
-    print(f"wall time {time.perf_counter() - t0:.1f} s")
-    return 0
