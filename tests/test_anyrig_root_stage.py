@@ -167,3 +167,53 @@ def test_a_packed_model_is_repacked_with_another_root_stage(packed, trained, tmp
     assert all(torch.equal(a[k], b[k]) for k in a)  # the body's weights are the same
     export_model(again, again, dtype="float32")  # re-packed in place without the stage: dropped
     assert load_anyrig(again).root_stage is None and not (again / "root_stage.safetensors").exists()
+
+
+def test_content_shares_fix_the_share_of_a_batch_drawn_from_a_content(creature_cache, trained, tmp_path) -> None:
+    """``{"sway": 0.5}``: at least half of every batch are sway windows (the rest are drawn from all clips
+    alike, sways too); with no shares the batch is the uniform draw it always was; a content the build
+    lacks, or shares over 1, are one-line errors."""
+    base = RootStageTrainConfig(model=str(trained), variants=0, width=32, layers=1, heads=2, batch_size=16)
+
+    def sways(cfg: RootStageTrainConfig, name: str) -> list[int]:
+        tr = RootStageTrainer(cfg, creature_cache, tmp_path / name, text_cache=None, log=lambda s: None)
+        gen = torch.Generator().manual_seed(0)
+        return [sum("sway" in c for c in tr.sample_batch(gen).captions) for _ in range(20)]
+
+    uniform = sways(base, "u")
+    shared = sways(RootStageTrainConfig(**{**base.__dict__, "content_shares": {"sway": 0.5}}), "s")
+    assert min(shared) >= 8 and sum(shared) > sum(uniform) + 20 * 2  # about 12 a batch against 8
+    assert 0 < sum(uniform) < 20 * 16  # both contents are drawn without shares
+    only = sways(RootStageTrainConfig(**{**base.__dict__, "content_shares": {"sway": 1.0}}), "o")
+    assert only == [16] * 20
+    with pytest.raises(KinemaError, match=r"no clips of content idle \(the build has: sway, walk\)"):
+        RootStageTrainer(RootStageTrainConfig(**{**base.__dict__, "content_shares": {"idle": 0.25}}),
+                         creature_cache, tmp_path / "x", text_cache=None, log=lambda s: None)
+    with pytest.raises(KinemaError, match="add up to at most 1"):
+        RootStageTrainConfig(content_shares={"sway": 0.6, "walk": 0.6})
+    saved = RootStageTrainConfig.from_dict({**base.__dict__, "content_shares": {"sway": 0.5}})
+    assert saved.content_shares == {"sway": 0.5}
+
+
+def test_the_cli_takes_content_shares_and_refuses_a_bad_one(creature_cache, trained, tmp_path, capsys) -> None:
+    import json
+
+    from kinema.cli import main
+
+    out = tmp_path / "root"
+    args = ["train-anyrig-root", "--model", str(trained), "--data", str(creature_cache), "--out", str(out),
+            "--steps", "1", "--width", "32", "--layers", "1", "--batch-size", "4", "--variants", "0",
+            "--threads", "1", "--cache-dir", str(tmp_path / "text")]
+    assert main([*args, "--content-share", "sway=0.5"]) == 0
+    assert "4 windows a batch (50% sway)" in capsys.readouterr().out
+    ckpt = out / (out / "latest").read_text().strip()
+    saved = json.loads(next(p for p in ckpt.glob("*.json") if "train_config" in p.read_text()).read_text())
+    assert saved["train_config"]["content_shares"] == {"sway": 0.5}
+    for bad in ("sway", "sway=2", "=0.5"):
+        with pytest.raises(SystemExit):
+            main([*args[:6], str(tmp_path / "bad"), *args[7:], "--content-share", bad])
+        err = capsys.readouterr().err
+        assert "expected CONTENT=SHARE" in err and "Traceback" not in err
+    assert main([*args[:6], str(tmp_path / "none"), *args[7:], "--content-share", "idle=0.25"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no clips of content idle" in err and len(err.splitlines()) == 1

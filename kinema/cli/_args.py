@@ -50,6 +50,15 @@ def non_negative_float(text: str) -> float:
     return x
 
 
+def content_share(text: str) -> tuple[str, float]:
+    """argparse type: ``CONTENT=SHARE``, a build's content name and a share in (0, 1]."""
+    name, sep, share = text.partition("=")
+    x = _number(share) if sep else math.nan
+    if not (name and sep and 0.0 < x <= 1.0):
+        raise argparse.ArgumentTypeError(f"expected CONTENT=SHARE with a share in (0, 1], e.g. idle=0.25, got {text!r}")
+    return name, x
+
+
 def finite_float(text: str) -> float:
     """argparse type: any finite number (angles)."""
     x = _number(text)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import non_negative_float, positive_float, positive_int
+from kinema.cli._args import content_share, non_negative_float, positive_float, positive_int
 from kinema.cli.train_anyrig import model_folder, start_run
 from kinema.runtime import text_cache_dir
 
@@ -27,6 +27,8 @@ def register(sub) -> None:
                    help="x the loss on the root's ground velocity (default 1)")
     p.add_argument("--path-weight", type=non_negative_float,
                    help="weight of the ground-path loss: the velocity error summed over the window (default 0)")
+    p.add_argument("--content-share", type=content_share, action="append", metavar="CONTENT=SHARE",
+                   help="draw this share of every batch from the clips of this content, e.g. idle=0.25 (repeatable)")
     p.add_argument("--ckpt-every", type=positive_int)
     p.add_argument("--log-every", type=positive_int)
     p.add_argument("--seed", type=int)
@@ -44,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
     names = ("steps", "lr", "batch_size", "width", "layers", "variants", "velocity_weight", "path_weight",
              "ckpt_every", "log_every", "seed")
     settings = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+    if args.content_share:
+        settings["content_shares"] = dict(args.content_share)
     cfg = RootStageTrainConfig(model=str(model_folder(args.model, "--model")), **settings)
     trainer = RootStageTrainer(cfg, args.data, args.out, text_cache=args.cache_dir,
                                log=lambda s: print(s, flush=True))

@@ -65,6 +65,7 @@ class Clip:
     captions: list[str]
     rig: str
     loops: bool
+    content: str = ""  # the build's content name ("idle", "walk"); samplers may weight by it
 
     @property
     def num_joints(self) -> int:
@@ -84,7 +85,8 @@ def _loops(f: torch.Tensor) -> bool:
     return f.shape[0] > 4 and float((f[0, :, POS] - f[-1, :, POS]).abs().max()) < LOOP_TOL
 
 
-def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, travel: bool = True) -> Clip:
+def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_id: str, travel: bool = True,
+              content: str = "") -> Clip:
     """One clip's features and the channels it teaches: its real channels, without the root's ground
     velocity when its travel is unknown (``travel`` False, `travel_known`)."""
     rep = JointRepresentation(rig, motion.fps)
@@ -93,7 +95,7 @@ def make_clip(motion, rig: Rig, config: AnyRigConfig, captions: list[str], rig_i
     if not travel:
         mask = mask.clone()
         mask[rig.root, list(GROUND_VELOCITY)] = False
-    return Clip(f, mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f))
+    return Clip(f, mask, skeleton_codes(rig, config), list(captions), rig_id, _loops(f), content)
 
 
 class AnyRigClips:
@@ -125,11 +127,11 @@ class AnyRigClips:
             rig = rigs.setdefault(rec["rig"], Rig.from_skeleton(m.skeleton))
             if first.setdefault(rec["rig"], rec.get("skeleton")) == rec.get("skeleton"):
                 own.setdefault(rec["rig"], []).append(m.global_transforms()[::-1])  # the stored skeleton's clips
-            caps, known = rec["captions"], travel_known(rec)
-            self.clips.append(make_clip(m, rig, config, caps, rec["rig"], known))
+            caps, known, content = rec["captions"], travel_known(rec), rec.get("content", "")
+            self.clips.append(make_clip(m, rig, config, caps, rec["rig"], known, content))
             for _ in range(variants):
                 a = augment(m, gen, keep=(*rig.contacts, rig.root))
-                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, caps, rec["rig"], known))
+                self.clips.append(make_clip(a, Rig.from_skeleton(a.skeleton), config, caps, rec["rig"], known, content))
         #: (channels of ROOT_RATES, 2): the low and high bound each root rate was clamped to
         self.root_bounds = clamp_root_rates(self.clips)
         self.config = config

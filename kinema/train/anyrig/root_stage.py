@@ -2,7 +2,10 @@
 
 The data, captions, rig augmentation, clamped root rates and checkpoints are those of the any-rig
 trainer (kinema.train.anyrig.trainer); a batch is ``batch_size`` windows drawn from all clips alike
-(the stage reads one row per frame, so a 48-joint fox costs what a 6-joint fish does), and the loss
+(the stage reads one row per frame, so a 48-joint fox costs what a 6-joint fish does), except that
+``content_shares`` may fix the share of each batch drawn from the clips of a content (``{"idle": 0.25}``:
+a quarter of every batch stands still, against the 7 % of windows idles are among the creatures' clips),
+and the loss
 is the masked MSE on the root row's real channels. Constraint masks (probability ``p_constrained``)
 are what sampling gives the stage: a prefix of whole frames (window blending, live streams), a few
 whole frames (keyframes), or some channels on every frame (a root path's ground velocity, a heading).
@@ -11,17 +14,17 @@ The stage belongs to one any-rig model: its config fixes the rig codes (RestPE) 
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import torch
 
-from kinema.errors import KinemaError
+from kinema.errors import DataError, KinemaError
 from kinema.model.anyrig.loading import load_anyrig
 from kinema.model.anyrig.root_stage import RootStageConfig, RootStageDenoiser
 from kinema.model.config import reject_unknown_keys
 from kinema.model.skeleton_codes import rest_dim
-from kinema.train.anyrig.data import GROUND_VELOCITY, Batch
+from kinema.train.anyrig.data import GROUND_VELOCITY, Batch, Clip
 from kinema.train.anyrig.trainer import AnyRigTrainer
 
 MASK_KINDS = ("prefix", "frames", "channels")
@@ -46,6 +49,7 @@ class RootStageTrainConfig:
     grad_clip: float = 1.0
     velocity_weight: float = 1.0  # x the loss on the root's ground velocity (`root_loss`)
     path_weight: float = 0.0  # of the ground-path term of `root_loss`
+    content_shares: dict[str, float] = field(default_factory=dict)  # content -> share of each batch
     width: int = 128
     layers: int = 4
     heads: int = 4
@@ -55,6 +59,11 @@ class RootStageTrainConfig:
     def from_dict(cls, d: dict) -> RootStageTrainConfig:
         reject_unknown_keys(cls, d, "root stage training settings")
         return cls(**d)
+
+    def __post_init__(self) -> None:
+        shares = self.content_shares
+        if any(not 0.0 < s <= 1.0 for s in shares.values()) or sum(shares.values()) > 1.0:
+            raise KinemaError(f"content_shares: expected shares in (0, 1] that add up to at most 1, got {shares}")
 
 
 def root_rows(batch: Batch) -> tuple[torch.Tensor, torch.Tensor]:
@@ -104,6 +113,7 @@ class RootStageTrainer(AnyRigTrainer):
             text_dim=base.config.text_dim,
         )
         super().__init__(base.config, cfg, data, out, text_cache=text_cache, log=log)
+        self.by_content = content_pools(self.clips.clips, cfg.content_shares, data)
 
     def new_model(self) -> RootStageDenoiser:
         return RootStageDenoiser(self.stage_config)
@@ -131,11 +141,16 @@ class RootStageTrainer(AnyRigTrainer):
         raise KinemaError("a root stage trains from scratch (it is small); --init-from does not apply")
 
     def sample_batch(self, gen: torch.Generator) -> Batch:
-        idx = torch.randint(len(self.clips.clips), (self.cfg.batch_size,), generator=gen)
-        return self.clips.window_batch([self.clips.clips[int(i)] for i in idx], gen)
+        B, picks = self.cfg.batch_size, []
+        for content, share in sorted(self.cfg.content_shares.items()):
+            pool = self.by_content[content]
+            picks += [pool[int(i)] for i in torch.randint(len(pool), (round(share * B),), generator=gen)]
+        picks += [int(i) for i in torch.randint(len(self.clips.clips), (B - len(picks),), generator=gen)]
+        return self.clips.window_batch([self.clips.clips[i] for i in picks], gen)
 
     def batch_note(self) -> str:
-        return f"{self.cfg.batch_size} windows a batch"
+        shares = ", ".join(f"{s:.0%} {c}" for c, s in sorted(self.cfg.content_shares.items()))
+        return f"{self.cfg.batch_size} windows a batch" + (f" ({shares})" if shares else "")
 
     def loss(self, model: RootStageDenoiser, batch: Batch, gen: torch.Generator) -> torch.Tensor:
         x, channels = root_rows(batch)
@@ -149,6 +164,17 @@ class RootStageTrainer(AnyRigTrainer):
         mask = root_masks(batch.frame_mask, channels, gen, self.cfg.p_constrained)
         pred = model(x_t, t, text, batch.codes, batch.frame_mask, x0, mask)
         return root_loss(pred, x0, real, velocity_weight=self.cfg.velocity_weight, path_weight=self.cfg.path_weight)
+
+
+def content_pools(clips: list[Clip], shares: dict[str, float], data: str | Path) -> dict[str, list[int]]:
+    """The indices of the clips of each content named in ``shares``; a content no clip has is an error."""
+    pools = {c: [i for i, clip in enumerate(clips) if clip.content == c] for c in shares}
+    missing = sorted(c for c, idx in pools.items() if not idx)
+    if missing:
+        have = sorted({clip.content for clip in clips})
+        raise DataError(f"{data}: content_shares: no clips of content {', '.join(missing)} (the build has: "
+                        f"{', '.join(have)})")
+    return pools
 
 
 def root_loss(pred: torch.Tensor, x0: torch.Tensor, real: torch.Tensor, *, velocity_weight: float = 1.0,
