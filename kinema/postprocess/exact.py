@@ -242,14 +242,24 @@ REACH_ROUNDS = 4
 
 def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3) -> Motion:
     """Stage (b): set constrained quantities exactly, blending the edits into neighbouring frames."""
-    skel, T, fps = motion.skeleton, motion.num_frames, motion.fps
-    radius = max(blend_seconds * fps, 1.0)
+    radius = max(blend_seconds * motion.fps, 1.0)
+    L, r, pinned = _pin_keyframes(motion, targets, radius)
+    r = _move_body(motion.skeleton, motion.fps, L, r, targets, pinned, radius)
+    m = Motion(motion.skeleton, motion.fps, r, L, motion.foot_contacts)
+    skel = motion.skeleton
+    for j in sorted(set(targets.joint_positions) | set(targets.joint_rotations), key=lambda j: skel.depths[j]):
+        m = _hit_end_effector(m, j, targets, pinned, radius)
+    return m
+
+
+def _pin_keyframes(motion: Motion, targets: PostTargets, radius: float):
+    """Step 1: full-body keyframes and root-joint positions set exactly. Returns the local rotations, the
+    root translation and the frames now pinned (``(T,)`` bool: later steps leave them alone)."""
+    skel, T = motion.skeleton, motion.num_frames
     L, r = motion.local_rotations.clone(), motion.root_translation.clone()
     J, root = skel.num_joints, 0
     parents = [max(p, 0) for p in skel.parents]
     F = targets.full_body_frames(J)
-
-    # 1. full-body keyframes and root-joint positions
     if F.numel():
         Gt = _keyframe_rotations(skel, motion.global_rotations[F], targets, F)  # (K, J, 4)
         Lt = quat_mul(quat_inverse(Gt[:, parents]), Gt)
@@ -267,51 +277,57 @@ def exact_pass(motion: Motion, targets: PostTargets, blend_seconds: float = 0.3)
     if root_frames.numel():
         shift, _ = spread_corrections(root_frames, root_shift, T, radius)
         r = r + shift
+    return L, r, pinned
 
-    # 1b + 2. targets beyond a limb's reach move the body towards them (a narrow bump of the root,
-    # kinema.postprocess.reach); smoothed-root waypoints then get a broad minimum-acceleration x/z
-    # displacement. A bump shifts the smoothed root a little, so the two alternate a few rounds: with
-    # both a waypoint and an end effector on one frame, this converges to a pose satisfying both.
+
+def _move_body(skel, fps: float, L: torch.Tensor, r: torch.Tensor, targets: PostTargets, pinned: torch.Tensor,
+               radius: float) -> torch.Tensor:
+    """Steps 1b + 2, the root translation moved: targets beyond a limb's reach move the body towards them
+    (a narrow bump of the root, kinema.postprocess.reach); smoothed-root waypoints then get a broad
+    minimum-acceleration x/z displacement. A bump shifts the smoothed root a little, so the two alternate a
+    few rounds: with both a waypoint and an end effector on one frame, this converges to a pose satisfying
+    both."""
     has_root = targets.root_xz is not None and targets.root_xz[0].numel()
     for _ in range(REACH_ROUNDS if has_root else 1):
         if targets.joint_positions:
             r = r + reach_shift(Motion(skel, fps, r, L), targets.joint_positions, pinned, radius)
         if has_root:
             r = root_waypoints(skel, L, r, targets, fps, radius, pinned)
+    return r
 
-    # 3. end effectors (never on keyframe frames, never the root translation)
-    m = Motion(skel, fps, r, L, motion.foot_contacts)
-    roles = skel.roles
-    toes = {roles.get(f"{s}_toe"): s for s in ("left", "right")}
-    for j in sorted(set(targets.joint_positions) | set(targets.joint_rotations), key=lambda j: skel.depths[j]):
-        G, P = m.global_transforms()
-        mask = (~pinned)[:, None].to(torch.float64)
-        rot_field = rot_env = None
-        if j in targets.joint_rotations:
-            f, q = _keep_out(*targets.joint_rotations[j], pinned)
-            if f.numel():
-                rc = quat_to_axis_angle(quat_mul(q, quat_inverse(G[f, j])))
-                rot_field, rot_env = spread_corrections(f, rc, T, radius)
-                rot_field, rot_env = rot_field * mask, rot_env * mask[:, 0]
-        pos = _keep_out(*targets.joint_positions[j], pinned) if j in targets.joint_positions else None
-        if pos is not None and pos[0].numel() and j != root and (j in toes or skel.depths[j] >= 2):
-            f, v = pos
-            shift, env = spread_corrections(f, v - P[f, j], T, radius)
-            shift, env = shift * mask, env * mask[:, 0]
-            end_rot = None
-            if rot_field is not None:
-                env = torch.maximum(env, rot_env)
-                end_rot = quat_mul(axis_angle_to_quat(rot_field), G[:, j])
-            if j in toes:  # move the whole foot: the ankle takes the toe's shift, foot rotation kept
-                chain = limb_chain(skel, f"{toes[j]}_leg")
-                target = P[:, chain[2]] + shift
-                m = solve_ik(m, chain, target, weight=(env > 0).to(torch.float64))
-                if end_rot is not None:
-                    m = _set_global_rotation(m, j, end_rot, rot_env)
-            else:
-                m = solve_ik(m, j, P[:, j] + shift, weight=(env > 0).to(torch.float64), end_rotation=end_rot)
-        elif rot_field is not None:
-            m = _set_global_rotation(m, j, quat_mul(axis_angle_to_quat(rot_field), G[:, j]), rot_env)
+
+def _hit_end_effector(m: Motion, j: int, targets: PostTargets, pinned: torch.Tensor, radius: float) -> Motion:
+    """Step 3: joint ``j``'s position and rotation targets set by IK, never on pinned frames, never by
+    moving the root translation (a toe moves its whole foot: the ankle takes the toe's shift)."""
+    skel, T, root = m.skeleton, m.num_frames, 0
+    toes = {skel.roles.get(f"{s}_toe"): s for s in ("left", "right")}
+    G, P = m.global_transforms()
+    mask = (~pinned)[:, None].to(torch.float64)
+    rot_field = rot_env = None
+    if j in targets.joint_rotations:
+        f, q = _keep_out(*targets.joint_rotations[j], pinned)
+        if f.numel():
+            rc = quat_to_axis_angle(quat_mul(q, quat_inverse(G[f, j])))
+            rot_field, rot_env = spread_corrections(f, rc, T, radius)
+            rot_field, rot_env = rot_field * mask, rot_env * mask[:, 0]
+    pos = _keep_out(*targets.joint_positions[j], pinned) if j in targets.joint_positions else None
+    if pos is not None and pos[0].numel() and j != root and (j in toes or skel.depths[j] >= 2):
+        f, v = pos
+        shift, env = spread_corrections(f, v - P[f, j], T, radius)
+        shift, env = shift * mask, env * mask[:, 0]
+        end_rot = None
+        if rot_field is not None:
+            env = torch.maximum(env, rot_env)
+            end_rot = quat_mul(axis_angle_to_quat(rot_field), G[:, j])
+        if j in toes:  # move the whole foot: the ankle takes the toe's shift, foot rotation kept
+            chain = limb_chain(skel, f"{toes[j]}_leg")
+            m = solve_ik(m, chain, P[:, chain[2]] + shift, weight=(env > 0).to(torch.float64))
+            if end_rot is not None:
+                m = _set_global_rotation(m, j, end_rot, rot_env)
+            return m
+        return solve_ik(m, j, P[:, j] + shift, weight=(env > 0).to(torch.float64), end_rotation=end_rot)
+    if rot_field is not None:
+        m = _set_global_rotation(m, j, quat_mul(axis_angle_to_quat(rot_field), G[:, j]), rot_env)
     return m
 
 
