@@ -210,19 +210,38 @@ def build_humanoids(
     clips = humanoid_clips(root, human, base_fps, report)
     if not clips:
         raise DataError(f"{root}: no humanoid action clip found (humanoids need the slots of docs/retarget.md)")
+    feats, records = _merge(features, records, clips, base_fps)
+    stats = _train_stats(feats, records, layout)
+    all_features = torch.from_numpy(np.concatenate(feats, axis=0))
+    if not torch.isfinite(all_features).all():
+        raise DataError("humanoid features contain NaN or inf")
+    meta = _build_meta(meta, base, root, report, records, int(all_features.shape[0]))
+    files = {
+        "clips.json": [{k: r[k] for k in RECORD_KEYS} for r in records],
+        "skeleton.json": skel_dict,
+        "stats.json": stats.to_dict(),
+    }
+    write_build_folder(out_dir, all_features, files, meta, fps=base_fps, dim=layout.dim, t0=t0)
+    return meta, report
+
+
+def _merge(features: torch.Tensor, records: list[dict], clips, fps: float) -> tuple[list[np.ndarray], list[dict]]:
+    """The base build's clips (features, records) followed by the humanoid ``clips``' (each with its mirror),
+    every record's ``start`` set to its place in the concatenated features."""
     feats = [features[r["start"] : r["start"] + r["length"]].numpy() for r in records]
     records = [dict(r) for r in records]
     for clip, content in clips:
-        for f, rec in _records(clip, content, base_fps):
+        for f, rec in _records(clip, content, fps):
             feats.append(f)
             records.append(rec)
     start = 0
     for f, rec in zip(feats, records, strict=True):
         rec["start"], start = start, start + f.shape[0]
-    stats = _train_stats(feats, records, layout)
-    all_features = torch.from_numpy(np.concatenate(feats, axis=0))
-    if not torch.isfinite(all_features).all():
-        raise DataError("humanoid features contain NaN or inf")
+    return feats, records
+
+
+def _build_meta(meta: dict, base: Path, root: Path, report: HumanoidReport, records: list[dict], frames: int) -> dict:
+    """The base build's meta with the humanoid clips' source, licence, what was left out and the new counts."""
     new = [r for r in records if r["dataset"] == DATASET]
     meta = dict(meta)
     meta.update(
@@ -250,14 +269,8 @@ def build_humanoids(
     meta["counts"] = {
         "source_clips": sum(not r["mirrored"] for r in records),
         "clips": len(records),
-        "frames": int(all_features.shape[0]),
+        "frames": frames,
         "hours": sum(r["duration_s"] for r in records) / 3600.0,
         "splits": _split_counts(records),
     }
-    files = {
-        "clips.json": [{k: r[k] for k in RECORD_KEYS} for r in records],
-        "skeleton.json": skel_dict,
-        "stats.json": stats.to_dict(),
-    }
-    write_build_folder(out_dir, all_features, files, meta, fps=base_fps, dim=layout.dim, t0=t0)
-    return meta, report
+    return meta
