@@ -353,12 +353,7 @@ def run_suite(
     run = _SuiteRun(modes, ["ground_truth", *modes])
     ret = _load_retrieval(retrieval, warn)
     n_mm = min(mm_prompts, sum(c["kind"] == "text" for c in cases)) if ret is not None and mm_samples > 1 else 0
-    bar = _bar(len(cases) + n_mm, progress, "evaluate")
-    for i, case in enumerate(cases):
-        _run_case(model, i, case, _dataset(case, model, datasets), run, seed, steps, guidance)
-        bar.update(1)
-    mm = _multimodality(model, cases, run, n_mm, mm_samples, seed, steps, guidance, bar)
-    bar.close()
+    mm = _generate_cases(model, cases, run, n_mm, mm_samples, seed, steps, guidance, datasets, progress)
     summary = summarize(run.records, run.rows, run.devs)
     text_info = {"cases": len(run.text_ids), "r_batch_size": R_BATCH, "mm_prompts": len(mm[modes[0]]),
                  "mm_samples": mm_samples, "retrieval": None}  # fmt: skip
@@ -367,12 +362,10 @@ def run_suite(
         _add_text_metrics(summary, ret, cases, run, mm, seed, warn, text_cache)
     tl_table = _timeline_table(run, ret, text_cache)
     t_phr = time.perf_counter()
-    phr = None
-    if phrasings:
-        phr = run_phrasings(
-            model, cases, run.motions, datasets, ret, samples=phrasings, seed=seed, steps=steps, guidance=guidance,
-            text_cache=text_cache, embed=_embed, warn=warn, progress=progress,
-        )  # fmt: skip
+    phr = run_phrasings(
+        model, cases, run.motions, datasets, ret, samples=phrasings, seed=seed, steps=steps, guidance=guidance,
+        text_cache=text_cache, embed=_embed, warn=warn, progress=progress,
+    ) if phrasings else None  # fmt: skip
     timing = {
         "wall_seconds": time.perf_counter() - t_start,
         "generate_seconds": run.gen_seconds,
@@ -386,3 +379,17 @@ def run_suite(
             "by_keyframes": tables["by_keyframes"], "timeline": tl_table, "phrasings": phr, "cases": run.records,
             "warnings": warn}  # fmt: skip
     return EvalResults(finite(data), run.motions, list(cases))
+
+
+def _generate_cases(model, cases, run: _SuiteRun, n_mm: int, mm_samples: int, seed: int, steps, guidance,
+                    datasets: dict, progress: bool):
+    """Generate and score every case into ``run``, then ``n_mm`` x ``mm_samples`` multimodality samples
+    (returned, per mode), under one progress bar."""
+    bar = _bar(len(cases) + n_mm, progress, "evaluate")
+    for i, case in enumerate(cases):
+        _run_case(model, i, case, _dataset(case, model, datasets), run, seed, steps, guidance)
+        bar.update(1)
+    mm = _multimodality(model, cases, run, n_mm, mm_samples, seed, steps, guidance, bar)
+    bar.close()
+    return mm
+
