@@ -53,6 +53,7 @@ from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.pipeline.timeline import parse_timeline, segment_bounds
 from kinema.representation.joint import ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation
+from kinema.retarget.fbx import read_fbx
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -101,12 +102,14 @@ class AnyRigPipeline(MotionPipeline):
             return Rig.from_skeleton(rig)
         if rig is None or not isinstance(rig, str | Path):
             ids = ", ".join(r.name for r in self.rigs()) or "none"
-            raise KinemaError(f"rig: the any-rig model {self.path.name!r} needs a rig: a GLB/glTF or BVH file or a "
-                              f"training rig id ({ids})")
+            raise KinemaError(f"rig: the any-rig model {self.path.name!r} needs a rig: a GLB/glTF, FBX or BVH file "
+                              f"or a training rig id ({ids})")
         path = Path(rig)
         if path.is_file():
             if path.suffix.lower() in (".glb", ".gltf"):
                 return Rig.from_skeleton(read_gltf(path, fps=self.fps).skeleton)
+            if path.suffix.lower() == ".fbx":
+                return Rig.from_skeleton(read_fbx(path, fps=self.fps, keep_helpers=False).skeleton)
             return Rig.from_skeleton(load_motion(path).skeleton)
         known = self.loaded.train_rigs
         if str(rig) in known:
@@ -220,7 +223,7 @@ class AnyRigPipeline(MotionPipeline):
 
     def rig_ties(self, rig, rig_m: Rig):
         """The joint ties of ``rig`` in its units (kinema.anyrig.tied): from its own clips when it is an
-        animated GLB/glTF or BVH file, stored in the checkpoint for a training rig id, else its rest pose."""
+        animated GLB/glTF, FBX or BVH file, stored in the checkpoint for a training rig id, else its rest pose."""
         known = str(rig) in self.loaded.train_rigs and isinstance(rig, str | Path) and not Path(rig).is_file()
         stored = self.loaded.info.get("rig_ties", {}).get(str(rig)) if known else None
         return ties_for(rig_m, rig_clips(rig, self.fps), stored)

@@ -3,7 +3,8 @@
 ufbx converts the file to Y up, metres and right-handed axes while loading, so every FBX (Blender's,
 Maya's, Mixamo's, Autodesk's) arrives in kinema's frame. What is read:
 
-- joints: every node that is a bone (or a skin cluster's bone), plus the nodes between two of them;
+- joints: every node that is a bone (or a skin cluster's bone), plus the nodes between two of them,
+  less the helper joints (IK and pole targets) with ``keep_helpers=False`` (the any-rig model's reading);
   when that leaves several trees, their common parent (the armature node) becomes joint 0, else a
   synthetic ``root`` at the origin;
 - the rest pose: each joint's world transform at bind time (its skin cluster's), else its node's
@@ -99,7 +100,7 @@ def _bind_matrices(scene, h: _Held) -> dict[int, np.ndarray]:
     return out
 
 
-def _joint_nodes(scene, h: _Held) -> tuple[list[int | None], list[int], dict]:
+def _joint_nodes(scene, h: _Held, keep_helpers: bool = True) -> tuple[list[int | None], list[int], dict]:
     """(joint node ids parent-first, kinema parents, id -> node); a None id is a synthetic root."""
     nodes = h.items(scene.nodes)
     by_id = {n.element_id: n for n in nodes}
@@ -115,6 +116,8 @@ def _joint_nodes(scene, h: _Held) -> tuple[list[int | None], list[int], dict]:
             p = parent[p]
         if p is not None:
             ids.update(chain)
+    if not keep_helpers:
+        ids = _without_helpers(ids, parent, scene, h)
     tops = sorted(i for i in ids if parent[i] not in ids)
     top = tops[0] if len(tops) == 1 else None
     common = {parent[i] for i in tops}
@@ -132,6 +135,21 @@ def _joint_nodes(scene, h: _Held) -> tuple[list[int | None], list[int], dict]:
         parents.append(p)
         todo.extend((c, len(order) - 1) for c in reversed(kids[i]))
     return order, parents, by_id
+
+
+def _without_helpers(ids: set, parent: dict, scene, h: _Held) -> set:
+    """``ids`` less the helper joints (IK and pole targets), as kinema.io.gltf drops them: joints that
+    carry no skin weight and have no weighted joint below them; all of ``ids`` when none is weighted."""
+    needed: set = set()
+    for cluster in h.items(scene.skin_clusters):
+        node = h(cluster.bone_node)
+        if node is None or not (h.array(cluster.weights, np.float64) > 0).any():
+            continue
+        i = node.element_id
+        while i is not None and i not in needed:
+            needed.add(i)
+            i = parent[i]
+    return (needed & ids) or ids
 
 
 def _rest(world: np.ndarray, parents: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -236,8 +254,8 @@ def _animation(scene, order, skeleton: Skeleton, fps: float | None, h: _Held) ->
     return Motion.from_global(skeleton, rate, P[:, 0], G, positions=P)
 
 
-def _read(scene, path: Path, fps: float | None, h: _Held) -> FbxAsset:
-    order, parents, by_id = _joint_nodes(scene, h)
+def _read(scene, path: Path, fps: float | None, h: _Held, keep_helpers: bool = True) -> FbxAsset:
+    order, parents, by_id = _joint_nodes(scene, h, keep_helpers)
     if len(order) < 2:
         raise KinemaError(f"{path}: has no armature (no bones); kinema reads rigged FBX characters")
     names, seen = [], set()
@@ -254,8 +272,10 @@ def _read(scene, path: Path, fps: float | None, h: _Held) -> FbxAsset:
     return FbxAsset(path, skeleton, _animation(scene, order, skeleton, fps, h))
 
 
-def read_fbx(path: str | Path, *, fps: float | None = None) -> FbxAsset:
-    """The rig, skin and first animation of an FBX file (see the module docstring)."""
+def read_fbx(path: str | Path, *, fps: float | None = None, keep_helpers: bool = True) -> FbxAsset:
+    """The rig, skin and first animation of an FBX file (see the module docstring). ``keep_helpers``
+    False drops the helper joints (IK and pole targets: no skin weight, no weighted joint below), as
+    the any-rig model reads a GLB; a character to retarget onto keeps every bone."""
     path = Path(path)
     if not path.is_file():
         raise KinemaError(f"{path}: no such file")
@@ -272,4 +292,4 @@ def read_fbx(path: str | Path, *, fps: float | None = None) -> FbxAsset:
     _KEPT.append((scene, held))  # never freed: see the module docstring
     ctypes.pythonapi.Py_IncRef(ctypes.py_object(scene))  # not even when the interpreter clears modules at exit
     ctypes.pythonapi.Py_IncRef(ctypes.py_object(held))
-    return _read(scene, path, fps, held)
+    return _read(scene, path, fps, held, keep_helpers)
