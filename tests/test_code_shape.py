@@ -14,7 +14,6 @@ MAX_LINES = 60
 KNOWN_LONG = {
     "evaluate/phrasings.py:run_phrasings": 64,
     "model/denoiser.py:forward": 63,
-    "cli/data.py:register": 63,
     "evaluate/report.py:_markdown": 61,
 }
 

@@ -30,7 +30,24 @@ def register(sub) -> None:
         description="Build and inspect training datasets (see docs/dataset.md).",
     )
     dsub = p.add_subparsers(dest="data_command", required=True)
+    _register_build(dsub)
 
+    s = dsub.add_parser("stats", help="what a build holds: per content/style/split, or per rig")
+    s.add_argument("dir", help="a folder written by `kinema data build`, or a manifest file")
+    s.set_defaults(func=_stats)
+
+    m = dsub.add_parser("manifest", help="list several builds as one multi-rig training set")
+    m.add_argument("dirs", nargs="+", help="build folders (motion caches or bandai-namco builds)")
+    m.add_argument("--out", required=True, help="manifest file to write (JSON)")
+    m.add_argument("--include-props", action="store_true", help="keep clips flagged 'prop' (excluded by default)")
+    m.set_defaults(func=data_multirig.manifest)
+
+
+_positive_int = positive_int
+
+
+def _register_build(dsub) -> None:
+    """`kinema data build`: one dataset (or folder) into a feature cache."""
     b = dsub.add_parser("build", help="turn a motion dataset into a feature cache for training")
     b.add_argument(
         "dataset", choices=DATASETS, help="bandai-namco, quaternius, quaternius-humanoids (their humanoid actions on "
@@ -75,19 +92,6 @@ def register(sub) -> None:
     )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     b.set_defaults(func=_build)
-
-    s = dsub.add_parser("stats", help="what a build holds: per content/style/split, or per rig")
-    s.add_argument("dir", help="a folder written by `kinema data build`, or a manifest file")
-    s.set_defaults(func=_stats)
-
-    m = dsub.add_parser("manifest", help="list several builds as one multi-rig training set")
-    m.add_argument("dirs", nargs="+", help="build folders (motion caches or bandai-namco builds)")
-    m.add_argument("--out", required=True, help="manifest file to write (JSON)")
-    m.add_argument("--include-props", action="store_true", help="keep clips flagged 'prop' (excluded by default)")
-    m.set_defaults(func=data_multirig.manifest)
-
-
-_positive_int = positive_int
 
 
 def _build(args) -> int:
