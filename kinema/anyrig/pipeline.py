@@ -29,6 +29,7 @@ from kinema.anyrig.feet import (
 )
 from kinema.anyrig.finishing import finish_motion
 from kinema.anyrig.heading import heading_from_rate
+from kinema.anyrig.rig_file import read_rig_file
 from kinema.anyrig.sampling import sample_features, uses_root_stage
 from kinema.anyrig.tied import rig_clips, ties_for
 from kinema.anyrig.windows import WindowPlan, segment_overlap, segment_plan, single_plan
@@ -42,8 +43,6 @@ from kinema.constraints.character import (
 )
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
-from kinema.io.gltf import read_gltf
-from kinema.io.registry import load_motion
 from kinema.limits import check_rig_joints
 from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.skeleton_codes import batch_codes, skeleton_codes
@@ -53,7 +52,6 @@ from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.pipeline.timeline import parse_timeline, segment_bounds
 from kinema.representation.joint import ROOT_HEADING_COS, ROOT_HEADING_SIN, JointRepresentation
-from kinema.retarget.fbx import read_fbx
 from kinema.rig import Rig
 from kinema.skeleton import Skeleton
 
@@ -106,11 +104,7 @@ class AnyRigPipeline(MotionPipeline):
                               f"or a training rig id ({ids})")
         path = Path(rig)
         if path.is_file():
-            if path.suffix.lower() in (".glb", ".gltf"):
-                return Rig.from_skeleton(read_gltf(path, fps=self.fps).skeleton)
-            if path.suffix.lower() == ".fbx":
-                return Rig.from_skeleton(read_fbx(path, fps=self.fps, keep_helpers=False).skeleton)
-            return Rig.from_skeleton(load_motion(path).skeleton)
+            return Rig.from_skeleton(read_rig_file(path, self.fps).skeleton)
         known = self.loaded.train_rigs
         if str(rig) in known:
             return Rig.from_dict(known[str(rig)])

@@ -31,18 +31,15 @@ largest joint -> anchor distance over ``max_distance`` after the pass; at most 1
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import torch
 
+from kinema.anyrig.rig_file import read_rig_file
 from kinema.geometry.rotations import quat_inverse, quat_rotate
-from kinema.io.gltf import read_gltf
-from kinema.io.registry import load_motion
 from kinema.kinematics import forward_kinematics
 from kinema.motion.core import Motion
 from kinema.postprocess.ik import two_bone_ik
-from kinema.retarget.fbx import read_fbx
 from kinema.rig import Rig
 from kinema.rig.ties import RigTies, Tie, find_ties, rest_ties, tie_ratios
 from kinema.skeleton import Skeleton
@@ -167,21 +164,10 @@ def ties_for(rig: Rig, clips: list[Motion] | None, stored: dict | None) -> RigTi
     return rest_ties(rig.skeleton, rig.root)
 
 
-@functools.lru_cache(maxsize=8)
-def _file_clips(path: str, mtime: float, fps: float) -> tuple[Motion, ...]:
-    p = Path(path)
-    if p.suffix.lower() in (".glb", ".gltf"):
-        return tuple(read_gltf(p, fps=fps).motions.values())
-    if p.suffix.lower() == ".fbx":
-        motion = read_fbx(p, fps=fps, keep_helpers=False).motion
-        return () if motion is None else (motion,)
-    return (load_motion(p),)
-
-
 def rig_clips(rig, fps: float) -> list[Motion] | None:
     """The animations of a rig given as a GLB/glTF, FBX or BVH file (at ``fps``; read once per file version),
     None for any other rig (a skeleton, a rig object, a training rig id)."""
     if not isinstance(rig, str | Path) or not Path(rig).is_file():
         return None
     p = Path(rig)
-    return list(_file_clips(str(p.absolute()), p.stat().st_mtime, float(fps)))
+    return list(read_rig_file(p, fps).clips)
