@@ -25,6 +25,7 @@ from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIO
 from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
 from kinema.human.segments import JOIN_STRENGTH, SegmentPlan, plan_segments, stack_targets
+from kinema.model.actions import reworded
 from kinema.model.grounding import Grounded, Grounding, as_grounding, ground
 from kinema.model.loading import LoadedModel, load_denoiser
 from kinema.model.vocabulary import KnownPrompts, PromptMatch
@@ -271,8 +272,15 @@ class HumanPipeline(MotionPipeline):
     def ground_prompts(self, prompts: list[str], grounding=None) -> dict[str, Grounded]:
         """Per distinct non-empty prompt, the embedding to condition on (kinema.model.grounding)."""
         settings = self.grounding_settings(grounding)
-        return {p: ground(p, self.encode_text(p), self.known_prompts, settings)
+        return {p: ground(p, self.encode_text(p), self.known_prompts, settings, self.encode_reworded(p))
                 for p in dict.fromkeys(prompts) if p.strip()}
+
+    def encode_reworded(self, prompt: str) -> torch.Tensor | None:
+        """The embedding of ``prompt`` with its action synonyms in the captions' words
+        (kinema.model.actions.reworded), or None when that changes nothing: what grounding and the
+        unknown-prompt warning fall back on for a prompt too far from the captions in its own words."""
+        text = reworded(prompt)
+        return None if text == prompt else self.encode_text(text)
 
     def prompt_condition(self, prompt: str, texts: dict[str, Grounded] | None) -> torch.Tensor | None:
         """The conditioning embedding ``(1, E)`` of a prompt (None for no text), grounded by the model's
@@ -288,7 +296,7 @@ class HumanPipeline(MotionPipeline):
         if self.known_prompts is None:
             return []
         distinct = dict.fromkeys(p for p in prompts if p.strip())
-        return [self.known_prompts.match(p, self.encode_text(p)[0]) for p in distinct]
+        return [self.known_prompts.match(p, self.encode_text(p)[0], self.encode_reworded(p)) for p in distinct]
 
     def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
         return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,

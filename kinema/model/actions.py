@@ -76,6 +76,17 @@ ACTION_WORDS: dict[str, tuple[str, ...]] = {
 
 _PATTERNS = {a: re.compile(r"\b(?:" + "|".join(forms) + r")\b", re.IGNORECASE) for a, forms in ACTION_WORDS.items()}
 
+#: per action, the word its one-word synonyms become in :func:`reworded` (the form captions use)
+ACTION_VERBS: dict[str, str] = {
+    "walk": "walks", "run": "runs", "turn": "turns", "bow": "bows", "wave": "waves", "raise": "raises",
+    "guide": "guides", "call": "calls", "kick": "kicks", "spin": "spins", "slash": "slashes", "dance": "dances",
+    "punch": "punches", "jump": "jumps", "sit": "sits", "get up": "gets up", "crouch": "crouches",
+    "lie down": "lies down", "reach": "reaches", "crawl": "crawls", "climb": "climbs", "swim": "swims",
+    "roll": "rolls", "fall": "falls", "throw": "throws", "catch": "catches", "pick up": "picks up",
+    "carry": "carries", "push": "pushes", "pull": "pulls", "clap": "claps", "nod": "nods", "salute": "salutes",
+    "stretch": "stretches", "hug": "hugs", "fight": "fights",
+}
+
 
 def actions_in(text: str) -> frozenset[str]:
     """The actions ``text`` names (keys of :data:`ACTION_WORDS`); empty when it names none."""
@@ -89,3 +100,19 @@ def clips_per_action(clip_captions: Iterable[Iterable[str]]) -> dict[str, int]:
         for action in frozenset().union(*(actions_in(c) for c in captions)):
             counts[action] = counts.get(action, 0) + 1
     return dict(sorted(counts.items()))
+
+
+def reworded(text: str) -> str:
+    """``text`` with every one-word form of an action replaced by that action's verb (:data:`ACTION_VERBS`):
+    "Someone jabs with the left hand." -> "Someone punches with the left hand.".
+
+    Why: the unknown-prompt threshold and grounding compare sentence embeddings, and MiniLM puts a synonym
+    the action words list far from the captions' own verb ("Someone jabs with the left hand." is 0.63 from
+    "A person punches with their left hand.", under the 0.70 threshold, though 'jab' is listed as a punch).
+    Only a fallback for prompts that are otherwise unknown (kinema.model.vocabulary, kinema.model.grounding):
+    a prompt near enough to the captions in its own words keeps them ("jogs" is not made "runs").
+    Multi-word forms ("puts both hands up") are left as written."""
+    out = text
+    for action, pattern in _PATTERNS.items():
+        out = pattern.sub(lambda m, v=ACTION_VERBS[action]: m.group(0) if " " in m.group(0) else v, out)
+    return out

@@ -182,20 +182,32 @@ def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts) -> to
     return same
 
 
-def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, settings: Grounding) -> Grounded:
-    """The embedding ``(1, E)`` to condition on for ``prompt`` (its own ``embedding`` ``(1, E)`` or ``(E,)``)."""
+def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, settings: Grounding,
+           reworded: torch.Tensor | None = None) -> Grounded:
+    """The embedding ``(1, E)`` to condition on for ``prompt`` (its own ``embedding`` ``(1, E)`` or ``(E,)``).
+
+    ``reworded``: the embedding of the prompt with its action synonyms replaced by the captions' verbs
+    (kinema.model.actions.reworded; None when that changes nothing). It stands in for the prompt's own, to
+    judge whether the prompt is known and to pick the captions, only where the prompt's own embedding is
+    below the unknown threshold and the reworded one is nearer ("Someone jabs with the left hand.")."""
     e = embedding.float().reshape(1, -1)
     if settings.off or known is None:
         return Grounded(e, "off")
     best, _ = known.nearest(e[0], 1)
     if prompt.strip() in known.caption_set or float(best[0]) >= EXACT_ABOVE:
         return Grounded(e, "exact")
+    ref = e
+    if reworded is not None and float(best[0]) < UNKNOWN_BELOW:
+        r = reworded.float().reshape(1, -1)
+        r_best, _ = known.nearest(r[0], 1)
+        if float(r_best[0]) > float(best[0]):
+            ref, best = r, r_best
     actions = actions_in(prompt)
     if float(best[0]) < UNKNOWN_BELOW or known.untrained(actions):
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
     same = _candidates(prompt, actions, known)
-    sims = torch.where(same, known.embeddings @ unit[0], -math.inf)
+    sims = torch.where(same, known.embeddings @ torch.nn.functional.normalize(ref, dim=-1)[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
     if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
         return Grounded(e, "unmatched")

@@ -241,9 +241,15 @@ class KnownPrompts:
         top = sims.topk(min(k, len(self.captions)))
         return top.values, top.indices
 
-    def match(self, prompt: str, embedding: torch.Tensor) -> PromptMatch:
-        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``."""
+    def match(self, prompt: str, embedding: torch.Tensor, reworded: torch.Tensor | None = None) -> PromptMatch:
+        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``; ``reworded``:
+        the embedding of the prompt with its action synonyms replaced (kinema.model.actions.reworded), whose
+        nearest captions count instead when the prompt's own are below the threshold and these are nearer."""
         sims, idx = self.nearest(embedding, NEAREST)
+        if reworded is not None and float(sims[0]) < UNKNOWN_BELOW:
+            r_sims, r_idx = self.nearest(reworded, NEAREST)
+            if float(r_sims[0]) > float(sims[0]):
+                sims, idx = r_sims, r_idx
         nearest = [(self.captions[int(i)], float(v)) for v, i in zip(sims, idx, strict=True)]
         actions = actions_in(prompt)
         notes = self.action_notes(actions)
