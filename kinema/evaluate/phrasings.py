@@ -349,7 +349,19 @@ def run_phrasings(
     probes = run_probes(
         model, PROBES, samples=samples, seed=seed, steps=steps, guidance=guidance, on_probe=lambda: bar.update(1)
     )
-    src = cases[0]["source"]
+    out = _probe_report(model, probes, samples, datasets, cases[0]["source"])
+    pairs, rows = generate_heldout(
+        model, cases, motions, datasets, seed=seed, steps=steps, guidance=guidance, on_case=lambda: bar.update(1)
+    )
+    bar.close()
+    if pairs:
+        out["heldout"] = _heldout_report(pairs, rows, retrieval, embed, text_cache, warn)
+    return out
+
+
+def _probe_report(model, probes: list, samples: int, datasets: dict, src: dict) -> dict:
+    """The probes' part of the ``phrasings`` report: rows, summary, the captured reference and what the
+    captions lead to expect (speeds checked against it); ``heldout`` None until the held-out cases run."""
     out = {
         "samples": samples,
         "seconds": PROBE_SECONDS,
@@ -365,12 +377,26 @@ def run_phrasings(
             out["summary"][f"{key}_follows_captures"] = follows_captures(
                 out["summary"][key], out["expected"]["groups"][key], SEPARATION
             )
-    pairs, rows = generate_heldout(
-        model, cases, motions, datasets, seed=seed, steps=steps, guidance=guidance, on_case=lambda: bar.update(1)
-    )
-    bar.close()
-    if not pairs:
-        return out
+    return out
+
+
+def _heldout_report(pairs: list, rows, retrieval, embed, text_cache, warn: list[str]) -> dict:
+    """The held-out text cases' part: the (template, held-out) prompt pairs and, with a retrieval model,
+    R@k, FID and content accuracy per row."""
+    keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid", "content_acc")
+    out = {
+        "cases": len(pairs),
+        "pairs": pairs,
+        "distinct_template": None,
+        "distinct_heldout": None,
+        "rows": {row: dict.fromkeys(keys) for row in rows},
+        "ranks": None,
+    }
+    if retrieval is not None:
+        texts = ([p["prompt"] for p in pairs], [p["heldout_prompt"] for p in pairs])
+        contents = [p["content"] for p in pairs]
+        out.update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn, contents))
+    return out
     keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid", "content_acc")
     out["heldout"] = {
         "cases": len(pairs),

@@ -91,23 +91,7 @@ def _markdown(data: dict) -> str:
         "## Distribution", "",
         "| Method | Diversity | Multimodality | Coverage AUC | Novelty AUC |", "|---|---:|---:|---:|---:|",
     ]
-    for row in rows:
-        v = data["table"][row]
-        out.append(f"| {ROW_LABELS.get(row, row)} | {_fmt(v.get('diversity'), 1, 3)} | "
-                   f"{_fmt(v.get('multimodality'), 1, 3)} | {_fmt(v.get('coverage_auc'), 1, 3)} | "
-                   f"{_fmt(v.get('novelty_auc'), 1, 3)} |")
-    out += ["", "## By case kind", "",
-            "| Kind | Method | Cases | Skate (cm/s) | Contact | Full-body (cm) | EE pos (cm) | EE rot (deg) | "
-            "Root 2D (cm) | Pelvis p95 (cm) |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    kinds = list(dict.fromkeys(k for row in rows for k in data["by_kind"].get(row, {})))
-    for kind in kinds:
-        for row in rows:
-            v = data["by_kind"][row].get(kind)
-            if v:
-                cells = [_fmt(v[k]) if k != "contact_acc" else _fmt(v[k], 1, 3)
-                         for k in ("foot_skate_cm_s", "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
-                                   "root2d_pos_cm", "pelvis_p95_cm")]
-                out.append(f"| {kind} | {ROW_LABELS.get(row, row)} | {v['cases']} | " + " | ".join(cells) + " |")
+    out += _distribution_rows(data, rows) + _by_kind_section(data, rows)
     if data.get("timeline"):
         n = next(iter(data["timeline"].values()))["segments"]
         out += ["", "## Timelines", "", format_timeline_table(data), "",
@@ -130,6 +114,34 @@ def _markdown(data: dict) -> str:
     if data["warnings"]:
         out += ["## Warnings", ""] + [f"- {w}" for w in data["warnings"]] + [""]
     return "\n".join(out)
+
+
+def _distribution_rows(data: dict, rows: list[str]) -> list[str]:
+    """One line per method of the distribution table (diversity, multimodality, coverage, novelty)."""
+    out = []
+    for row in rows:
+        v = data["table"][row]
+        out.append(f"| {ROW_LABELS.get(row, row)} | {_fmt(v.get('diversity'), 1, 3)} | "
+                   f"{_fmt(v.get('multimodality'), 1, 3)} | {_fmt(v.get('coverage_auc'), 1, 3)} | "
+                   f"{_fmt(v.get('novelty_auc'), 1, 3)} |")
+    return out
+
+
+def _by_kind_section(data: dict, rows: list[str]) -> list[str]:
+    """The "By case kind" section: skate, contact and constraint errors per case kind and method."""
+    out = ["", "## By case kind", "",
+           "| Kind | Method | Cases | Skate (cm/s) | Contact | Full-body (cm) | EE pos (cm) | EE rot (deg) | "
+           "Root 2D (cm) | Pelvis p95 (cm) |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    kinds = list(dict.fromkeys(k for row in rows for k in data["by_kind"].get(row, {})))
+    for kind in kinds:
+        for row in rows:
+            v = data["by_kind"][row].get(kind)
+            if v:
+                cells = [_fmt(v[k]) if k != "contact_acc" else _fmt(v[k], 1, 3)
+                         for k in ("foot_skate_cm_s", "contact_acc", "fullbody_pos_cm", "ee_pos_cm", "ee_rot_deg",
+                                   "root2d_pos_cm", "pelvis_p95_cm")]
+                out.append(f"| {kind} | {ROW_LABELS.get(row, row)} | {v['cases']} | " + " | ".join(cells) + " |")
+    return out
 
 
 # ----------------------------------------------------------------------------- plots

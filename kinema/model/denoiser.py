@@ -165,40 +165,52 @@ class Denoiser(nn.Module):
         B, T, D = x_t.shape
         if D != self.config.feature_dim:
             raise ValueError(f"x_t has {D} channels, the model expects {self.config.feature_dim}")
-        dtype = x_t.dtype
         t = t.expand(B) if t.dim() == 0 else t
+        text_emb, c_dir = self._text_and_heading(x_t, text_emb, text_mask, c_dir)
+        x_tilde, mask = self._imputed(x_t, x_tgt, mask)
+        out = self._run_stages(x_tilde, mask, (t, text_emb, c_dir, pad_mask))
+        if pad_mask is not None:
+            out = torch.where(pad_mask.to(torch.bool)[..., None], out, torch.zeros_like(out))
+        return out
+
+    def _text_and_heading(self, x_t, text_emb, text_mask, c_dir) -> tuple[torch.Tensor, torch.Tensor]:
+        """The ``(B, text_dim)`` text condition (zeros for no text and for rows ``text_mask`` drops) and the
+        ``(B, 2)`` heading (``(1, 0)`` when not given), in ``x_t``'s dtype."""
+        B = x_t.shape[0]
         if text_emb is None:
             text_emb = x_t.new_zeros(B, self.config.text_dim)
         else:
-            text_emb = text_emb.to(dtype)
+            text_emb = text_emb.to(x_t.dtype)
             if text_mask is not None:
                 keep = text_mask.to(torch.bool)[:, None]
                 text_emb = torch.where(keep, text_emb, torch.zeros_like(text_emb))
         if c_dir is None:
             c_dir = x_t.new_tensor([1.0, 0.0]).expand(B, 2)
-        if mask is None:
-            mask = torch.zeros_like(x_t)
-            x_tilde = x_t
-        else:
-            if x_tgt is None:
-                raise ValueError("a constraint mask needs constraint targets x_tgt")
-            mask = mask.to(dtype)
-            x_tilde = impute(x_t, x_tgt.to(dtype), mask)
-        cond = (t, text_emb, c_dir, pad_mask)
+        return text_emb, c_dir
 
+    @staticmethod
+    def _imputed(x_t, x_tgt, mask) -> tuple[torch.Tensor, torch.Tensor]:
+        """``x_t`` with the constrained entries replaced by their targets, and the mask (zeros for none)."""
+        if mask is None:
+            return x_t, torch.zeros_like(x_t)
+        if x_tgt is None:
+            raise ValueError("a constraint mask needs constraint targets x_tgt")
+        mask = mask.to(x_t.dtype)
+        return impute(x_t, x_tgt.to(x_t.dtype), mask), mask
+
+    def _run_stages(self, x_tilde: torch.Tensor, mask: torch.Tensor, cond: tuple) -> torch.Tensor:
+        """The normalised x0 ``(B, T, D)``: one stage, or the root stage and then the body stage on the
+        local root the root stage predicts (Kimodo's two stages)."""
         if not self.config.two_stage:
-            out = self.stage(torch.cat([x_tilde, mask], dim=-1), *cond)
-        else:
-            root_n = self.root_stage(torch.cat([x_tilde, mask], dim=-1), *cond)  # (B, T, 5)
-            root = root_n * self.feat_std[:ROOT_DIM] + self.feat_mean[:ROOT_DIM]
-            local = padded_local_root(root, pad_mask, self.config.fps)  # (B, T, 4)
-            local_n = (local - self.local_mean) / self.local_std
-            body_in = torch.cat([local_n, x_tilde[..., ROOT_DIM:], mask], dim=-1)
-            body_n = self.body_stage(body_in, *cond)  # (B, T, D - 5)
-            out = torch.cat([root_n, body_n], dim=-1)
-        if pad_mask is not None:
-            out = torch.where(pad_mask.to(torch.bool)[..., None], out, torch.zeros_like(out))
-        return out
+            return self.stage(torch.cat([x_tilde, mask], dim=-1), *cond)
+        pad_mask = cond[3]
+        root_n = self.root_stage(torch.cat([x_tilde, mask], dim=-1), *cond)  # (B, T, 5)
+        root = root_n * self.feat_std[:ROOT_DIM] + self.feat_mean[:ROOT_DIM]
+        local = padded_local_root(root, pad_mask, self.config.fps)  # (B, T, 4)
+        local_n = (local - self.local_mean) / self.local_std
+        body_in = torch.cat([local_n, x_tilde[..., ROOT_DIM:], mask], dim=-1)
+        body_n = self.body_stage(body_in, *cond)  # (B, T, D - 5)
+        return torch.cat([root_n, body_n], dim=-1)
 
     def forward_guided(
         self,
