@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinema.cli._args import positive_float, positive_int
+from kinema.cli._args import positive_float, positive_int, unit_float
 from kinema.runtime import text_cache_dir
 
 
@@ -36,6 +36,13 @@ def register(sub) -> None:
     p.add_argument("--crop-min-fraction", type=float,
                    help="shortest training window as a fraction of the longest clip in its length bucket "
                         "(0 < X <= 1; default 0.5); docs/training.md")
+    p.add_argument("--high-noise-share", type=unit_float,
+                   help="chance that a row whose clip reaches beyond --high-noise-min-std normalised units is "
+                        "trained at a step where the noise hides it, so it is learned from the text (0-1; "
+                        "default 0 = off; for fine-tunes on clips far outside the statistics; docs/training.md)")
+    p.add_argument("--high-noise-min-std", type=positive_float,
+                   help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
+                        "(default 8)")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -89,7 +96,8 @@ def _config_from_args(args: argparse.Namespace):
         "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
         "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
-        "crop_min_fraction": args.crop_min_fraction,
+        "crop_min_fraction": args.crop_min_fraction, "high_noise_share": args.high_noise_share,
+        "high_noise_min_std": args.high_noise_min_std,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

@@ -36,6 +36,7 @@ from kinema.train.batching import BatchSampler, step_generator
 from kinema.train.checkpoint import load_checkpoint, load_init_weights, load_optimizer_tensors, save_checkpoint
 from kinema.train.constraints import max_keyframes_at, sample_batch_masks
 from kinema.train.losses import LossWeights, motion_loss
+from kinema.train.noise_levels import high_noise_timesteps
 from kinema.train.optim import build_optimizer, lr_at, make_ema, update_ema
 from kinema.train.text_whitening import whiten_text_projections
 
@@ -81,6 +82,11 @@ class TrainConfig:
     # bucket: 0.5 as before issue 18; smaller lets a run's speed be learned apart from its clip's length
     # (docs/training.md: the captured runs all cover the ~8 m capture room, so slow runs are long clips)
     crop_min_fraction: float = 0.5
+    # > 0: rows whose clip reaches beyond high_noise_min_std normalised units get, with this probability,
+    # a training step where the noise hides that clip's largest value (kinema.train.noise_levels): clips far
+    # outside the normalisation are otherwise read from the noisy input, never made from the text
+    high_noise_share: float = 0.0
+    high_noise_min_std: float = 8.0
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -285,6 +291,7 @@ class Trainer:
         else:
             mask = torch.zeros_like(x0)
         t = self.schedule.sample_timesteps(B, g)
+        t = high_noise_timesteps(t, x0, self.schedule, cfg.high_noise_share, cfg.high_noise_min_std, g)
         noise = torch.randn(x0.shape, generator=g)
         x_t = self.schedule.q_sample(x0, t, noise)
         text = self.text_table[batch.caption_index]
