@@ -3,7 +3,7 @@
     python scripts/humanoid_action_probes.py --model default --seeds 0 1 2 [--json out.json]
 
 For every phrasing of kinema.data.humanoid_actions.HELD_OUT_PROMPTS (no training caption uses them) and
-"A person dances.", generate 4 s (defaults: 50 DDIM steps, post-processing, grounding) at each seed and
+"A person dances.", generate 4 s (``--seconds``; defaults: 50 DDIM steps, post-processing, grounding) at each seed and
 measure on the output (metres, Y up):
 
 - kick (named side): the named foot's highest point above the pelvis at that frame (> 0 = above hip
@@ -122,20 +122,22 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default="default")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--seconds", type=float, default=4.0,
+                    help="length of each generated motion (default 4; the humanoid clips are 2.5-7.5 s, kicks 3)")
     ap.add_argument("--json", help="write every row and the summary here")
     ap.add_argument("--as-learned", action="store_true",
                     help="measure as if every action the captions name were learned (evidence for kinema export "
                          "--action-probes)")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    rows = run(args.model, args.seeds, as_learned=args.as_learned)
+    rows = run(args.model, args.seeds, seconds=args.seconds, as_learned=args.as_learned)
     s = summary(rows)
     for k, v in s.items():
         print(f"{k}: {v}")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"model": args.model, "seeds": args.seeds, "as_learned": args.as_learned, "rows": rows,
-                       "summary": s}, f, indent=1)
+            json.dump({"model": args.model, "seeds": args.seeds, "seconds": args.seconds,
+                       "as_learned": args.as_learned, "rows": rows, "summary": s}, f, indent=1)
     return 0
 
 

@@ -238,6 +238,27 @@ def test_fine_tune_starts_from_the_given_weights(tiny_data, tmp_path):
     assert fresh.keyframe_cap(0) == 1  # a run from scratch ramps the keyframe count up
 
 
+def test_a_resumed_fine_tune_keeps_its_starting_models_statistics(tiny_data, tmp_path):
+    """A fine-tune trains in its starting model's normalisation; resumed, it must go on in it (it used to
+    switch to the dataset's own statistics, while the weights' buffers kept the old ones)."""
+    Trainer(_cfg(steps=2), tiny_data, tmp_path / "base").run(progress=False)
+    info_path = tmp_path / "base" / "ckpt-00000002" / "checkpoint.json"
+    info = json.loads(info_path.read_text())
+    info["stats"]["std"] = [2.0 * x for x in info["stats"]["std"]]  # a model trained in other statistics
+    info_path.write_text(json.dumps(info))
+    cfg = dict(steps=4, seed=3, phase1_fraction=0.0, init_from=str(tmp_path / "base"), ckpt_every=2)
+    ft = Trainer(_cfg(**cfg), tiny_data, tmp_path / "ft")
+    ft.init_weights(ft.cfg.init_from)
+    ft.run(progress=False, stop_after=2)
+    again = Trainer(_cfg(**cfg), tiny_data, tmp_path / "ft")
+    assert not torch.equal(again.stats.std, ft.stats.std)  # a new Trainer starts in the dataset's
+    assert again.resume() and again.step == 2
+    assert torch.equal(again.stats.std, ft.stats.std) and again.batches.stats is again.stats
+    again.run(progress=False)
+    saved = json.loads((tmp_path / "ft" / "ckpt-00000004" / "checkpoint.json").read_text())["stats"]["std"]
+    assert saved == info["stats"]["std"]
+
+
 def test_fine_tune_refuses_a_different_architecture(tiny_data, tmp_path, capsys):
     from kinema.cli import main
 

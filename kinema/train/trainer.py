@@ -31,6 +31,7 @@ from kinema.diffusion.schedule import NoiseSchedule
 from kinema.errors import KinemaError
 from kinema.model.config import get_config, reject_unknown_keys
 from kinema.model.denoiser import Denoiser, local_root_stats
+from kinema.representation.stats import NormStats
 from kinema.text import get_text_encoder
 from kinema.train.batching import BatchSampler, step_generator
 from kinema.train.checkpoint import load_checkpoint, load_init_weights, load_optimizer_tensors, save_checkpoint
@@ -195,10 +196,17 @@ class Trainer:
         }
 
     def resume(self) -> bool:
-        """Load the newest checkpoint of ``out_dir``; False when there is none."""
+        """Load the newest checkpoint of ``out_dir``; False when there is none.
+
+        The run continues in the normalisation statistics it saved, not the dataset's: a fine-tune
+        (``init_from``) trains in its starting model's statistics, and before this a resumed fine-tune
+        went on in the dataset's own (issue 38's run h38i switched at step 1250 of 4000, unnoticed, while
+        the model's buffers and so generation kept the starting model's)."""
         if not (self.out_dir / "latest").exists():
             return False
         ck = load_checkpoint(self.out_dir)
+        if ck["info"]["stats"] != self.stats.to_dict():  # a fine-tune: its starting model's statistics
+            self.stats = self.batches.stats = NormStats.from_dict(ck["info"]["stats"])
         self.model.load_state_dict(ck["model"])
         if ck["ema"] is not None:
             self.ema.load_state_dict(ck["ema"])
