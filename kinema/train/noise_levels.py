@@ -7,9 +7,10 @@ Quaternius humanoid actions lie far out: a kick's foot 36 standard deviations, a
 roll's pelvis rotation 139. Such a value still stands above the noise at almost every step
 (``sqrt(alpha_bar_t) * 36 > 1`` up to t ~ 980 of 1000 on the cosine schedule), so the model learns to read
 it from its noisy input and never to make it from the text. Measured on a fine-tune after 1000 steps
-(kick clip, its caption): the x0 prediction lifts the foot 0.37-0.45 m above the hips (the clip's 0.36)
-up to t = 900, with or without the text, and keeps it 0.3-0.8 m below the hips from t = 960, with or
-without the text; sampling from noise never kicks.
+(scripts/kick_denoising_probe.py: kick clip, its caption): the x0 prediction lifts the foot 0.26-0.37 m
+above the hips (the clip's 0.36) up to t = 900, with or without the text, and keeps it 0.36-0.80 m below
+the hips from t = 960, with or without the text; sampling from noise never kicks. A run with this option
+lifts it 0.60 m at t = 999 with the text and keeps it down without (docs/training.md, "Stop 50").
 
 :func:`high_noise_timesteps` redraws, with probability ``share``, the training step of each row whose
 clip reaches beyond ``min_std`` normalised units, from the steps where that clip's largest value is
