@@ -31,10 +31,8 @@ def drowned_from(schedule: NoiseSchedule, peak: torch.Tensor) -> torch.Tensor:
     the smallest ``t`` with ``sqrt(alpha_bar_t) * peak <= 1`` (the last step when none does)."""
     root_ab = schedule.alphas_cumprod.sqrt().to(peak.dtype)  # (T,), decreasing
     hidden = root_ab[None, :] * peak[:, None] <= 1.0  # (B, T), False then True along T
-    T = schedule.num_train_steps
-    first = torch.where(hidden.any(dim=1), hidden.to(torch.int64).argmax(dim=1), torch.full_like(peak, T - 1,
-                                                                                                   dtype=torch.int64))
-    return first
+    last = torch.full(peak.shape, schedule.num_train_steps - 1, dtype=torch.int64)
+    return torch.where(hidden.any(dim=1), hidden.to(torch.int64).argmax(dim=1), last)
 
 
 def high_noise_timesteps(
