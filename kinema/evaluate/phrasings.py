@@ -397,17 +397,3 @@ def _heldout_report(pairs: list, rows, retrieval, embed, text_cache, warn: list[
         contents = [p["content"] for p in pairs]
         out.update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn, contents))
     return out
-    keys = ("r1_template", "r3_template", "r1_heldout", "r3_heldout", "fid", "content_acc")
-    out["heldout"] = {
-        "cases": len(pairs),
-        "pairs": pairs,
-        "distinct_template": None,
-        "distinct_heldout": None,
-        "rows": {row: dict.fromkeys(keys) for row in rows},
-        "ranks": None,
-    }
-    if retrieval is not None:
-        texts = ([p["prompt"] for p in pairs], [p["heldout_prompt"] for p in pairs])
-        contents = [p["content"] for p in pairs]
-        out["heldout"].update(heldout_retrieval(retrieval, *texts, rows, embed, text_cache, warn, contents))
-    return out
