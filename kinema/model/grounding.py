@@ -193,21 +193,17 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     e = embedding.float().reshape(1, -1)
     if settings.off or known is None:
         return Grounded(e, "off")
-    best, _ = known.nearest(e[0], 1)
-    if prompt.strip() in known.caption_set or float(best[0]) >= EXACT_ABOVE:
+    best, _, ref = known.nearest_judged(e, reworded, 1)
+    # a reworded prompt was below the unknown threshold in its own words, so never a caption's twin
+    if prompt.strip() in known.caption_set or (ref is e and float(best[0]) >= EXACT_ABOVE):
         return Grounded(e, "exact")
-    ref = e
-    if reworded is not None and float(best[0]) < UNKNOWN_BELOW:
-        r = reworded.float().reshape(1, -1)
-        r_best, _ = known.nearest(r[0], 1)
-        if float(r_best[0]) > float(best[0]):
-            ref, best = r, r_best
     actions = actions_in(prompt)
     if float(best[0]) < UNKNOWN_BELOW or known.untrained(actions):
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
     same = _candidates(prompt, actions, known)
-    sims = torch.where(same, known.embeddings @ torch.nn.functional.normalize(ref, dim=-1)[0], -math.inf)
+    ref_unit = torch.nn.functional.normalize(ref.float().reshape(1, -1), dim=-1)
+    sims = torch.where(same, known.embeddings @ ref_unit[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
     if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
         return Grounded(e, "unmatched")

@@ -241,15 +241,24 @@ class KnownPrompts:
         top = sims.topk(min(k, len(self.captions)))
         return top.values, top.indices
 
-    def match(self, prompt: str, embedding: torch.Tensor, reworded: torch.Tensor | None = None) -> PromptMatch:
-        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``; ``reworded``:
-        the embedding of the prompt with its action synonyms replaced (kinema.model.actions.reworded), whose
-        nearest captions count instead when the prompt's own are below the threshold and these are nearer."""
-        sims, idx = self.nearest(embedding, NEAREST)
+    def nearest_judged(
+        self, embedding: torch.Tensor, reworded: torch.Tensor | None, k: int
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """:meth:`nearest` of a prompt's ``embedding``, or of ``reworded`` (the embedding of the prompt with
+        its action synonyms in the captions' verbs, kinema.model.actions.reworded; None when that changes
+        nothing) where the prompt's own nearest caption is below :data:`UNKNOWN_BELOW` and the reworded
+        one's is nearer; and the embedding that decided (``embedding`` itself or ``reworded``)."""
+        sims, idx = self.nearest(embedding, k)
         if reworded is not None and float(sims[0]) < UNKNOWN_BELOW:
-            r_sims, r_idx = self.nearest(reworded, NEAREST)
+            r_sims, r_idx = self.nearest(reworded, k)
             if float(r_sims[0]) > float(sims[0]):
-                sims, idx = r_sims, r_idx
+                return r_sims, r_idx, reworded
+        return sims, idx, embedding
+
+    def match(self, prompt: str, embedding: torch.Tensor, reworded: torch.Tensor | None = None) -> PromptMatch:
+        """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``, judged in the
+        captions' words where its own are too far (``reworded``, :meth:`nearest_judged`)."""
+        sims, idx, _ = self.nearest_judged(embedding, reworded, NEAREST)
         nearest = [(self.captions[int(i)], float(v)) for v, i in zip(sims, idx, strict=True)]
         actions = actions_in(prompt)
         notes = self.action_notes(actions)
