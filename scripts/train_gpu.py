@@ -7,7 +7,8 @@ What it does, in order (each step prints one line):
 
 1. picks the device (``--device auto``: CUDA when available);
 2. builds the dataset from ``--root`` (default ../shared/datasets/bandai-namco) into ``--data`` unless a
-   build is already there (``--limit N`` for a small subset);
+   build is already there (``--limit N`` for a small subset), or rebuilds it from ``--pack`` (a build packed
+   small enough to travel with the repository: ``scripts/device_dataset.py``);
 3. picks the model: ``--config auto`` times one synthetic training step of each preset on the device,
    widest first (paper, large, medium, small), and takes the first that fits in memory and can do at
    least ``--min-steps`` steps in the budget; on a CPU ``auto`` means ``tiny``;
@@ -16,6 +17,12 @@ What it does, in order (each step prints one line):
    inside the budget (the learning-rate schedule completes), and the budget is also a hard stop that writes
    a checkpoint (``kinema train --resume --out RUN --data DATA`` continues it);
 5. exports the EMA weights (``kinema export``) to ``--models/NAME`` and loads the folder back to prove it.
+
+Fine-tuning (``--init-from FOLDER``, e.g. ``kinema/assets/models/default``) takes that model's
+preset, crop length, text encoder and statistics, and the options of ``kinema train`` that a fine-tune
+sets (``--lr --warmup --phase1-fraction --high-noise-share --seed``); ``--slim DIR`` copies the last
+checkpoint without its optimiser state, in float16 (what a device's file limit lets back) so that
+``kinema export DIR/NAME`` works where it lands.
 
 Copy ``models/NAME`` back and use it with ``kinema generate --model models/NAME``. Why a script and not a
 CLI sub-command: it strings together commands that exist (data build, train, export) with choices that
@@ -59,6 +66,18 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--foot-contact", type=float, default=0.0, help="kinema train --foot-contact")
     p.add_argument("--cache-dir", type=Path, default=Path("cache/text"), help="text embedding cache")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: kinema.runtime)")
+    p.add_argument("--pack", type=Path, default=None,
+                   help="rebuild --data from this pack (scripts/device_dataset.py) when it holds no build yet")
+    p.add_argument("--init-from", type=Path, default=None,
+                   help="fine-tune this model, run or checkpoint folder (kinema train --init-from; the\n"
+                        "shipped model is kinema/assets/models/default)")
+    p.add_argument("--lr", type=float, default=None, help="peak learning rate (default: TrainConfig's)")
+    p.add_argument("--warmup", type=int, default=None, help="warm-up steps (default: a tenth of the run, <= 500)")
+    p.add_argument("--phase1-fraction", type=float, default=None, help="kinema train --phase1-fraction")
+    p.add_argument("--high-noise-share", type=float, default=0.0, help="kinema train --high-noise-share")
+    p.add_argument("--seed", type=int, default=0, help="kinema train --seed")
+    p.add_argument("--slim", type=Path, default=None,
+                   help="copy the run's last checkpoint (weights, EMA, info), its config and log here")
     return p.parse_args(argv)
 
 
@@ -68,6 +87,12 @@ def ensure_data(args) -> Path:
 
     if (args.data / "meta.json").exists():
         print(f"[data] using {args.data}")
+        return args.data
+    if args.pack is not None:
+        sys.path.insert(0, str(REPO / "scripts"))
+        from device_dataset import unpack
+
+        unpack(args.pack, args.data)
         return args.data
     import os
 
@@ -110,8 +135,18 @@ def synthetic_step_s(preset: str, num_joints: int, batch: int, frames: int, devi
             torch.cuda.empty_cache()
 
 
+def starting_config(init_from: Path) -> dict:
+    """The training config saved with the model a fine-tune starts from (its preset, crop length, text
+    encoder: what its weights fit)."""
+    from kinema.model.loading import find_checkpoint, read_checkpoint_info
+
+    return read_checkpoint_info(find_checkpoint(init_from))["train_config"]
+
+
 def choose_preset(args, device, num_joints: int, batch: int, frames: int, bf16: bool) -> str:
     """``args.config``, or on 'auto' the widest GPU preset that fits memory and ``--min-steps`` in the budget."""
+    if args.init_from:
+        return starting_config(args.init_from)["model"]
     if args.config != "auto":
         return args.config
     if device.type != "cuda":
@@ -138,14 +173,23 @@ def train(args, data: Path, device, preset: str, batch: int, deadline: float) ->
                          f"`kinema train --resume --out {run_dir} --data {data}`")
     cfg = TrainConfig(model=preset, batch_size=batch, steps=10**9, ckpt_every=2000, log_every=50,
                       text_whiten=args.text_whiten, content_balance=args.content_balance,
-                      foot_contact=args.foot_contact)
+                      foot_contact=args.foot_contact, high_noise_share=args.high_noise_share, seed=args.seed)
+    for key in ("lr", "phase1_fraction"):
+        if getattr(args, key) is not None:
+            setattr(cfg, key, getattr(args, key))
+    if args.init_from:
+        start = starting_config(args.init_from)
+        cfg.init_from, cfg.max_seconds, cfg.text_encoder = str(args.init_from.resolve()), start["max_seconds"], \
+            start["text_encoder"]
     if args.text_encoder:
         cfg.text_encoder = args.text_encoder
     trainer = Trainer(cfg, data, run_dir, cache_dir=args.cache_dir, device=device, bf16=device.type == "cuda")
+    if cfg.init_from:
+        print(f"[train] fine-tuning from {trainer.init_weights(cfg.init_from)}")
     step_s = trainer.time_steps(max(1, args.calibrate))
     left = deadline - time.monotonic()
     steps = max(1, int(0.95 * left / step_s))
-    cfg.warmup = min(cfg.warmup, max(1, steps // 10))  # a short run still gets its whole schedule
+    cfg.warmup = args.warmup if args.warmup is not None else min(cfg.warmup, max(1, steps // 10))
     cfg.ckpt_every = min(cfg.ckpt_every, max(1, steps // 4))
     trainer.set_total_steps(steps)
     print(f"[train] {preset} ({trainer.model.num_parameters() / 1e6:.1f} M parameters) on {device}, "
@@ -154,6 +198,24 @@ def train(args, data: Path, device, preset: str, batch: int, deadline: float) ->
     how = "time budget spent" if trainer.stopped_by_budget else "schedule complete"
     print(f"[train] stopped at step {trainer.step} of {steps} ({how}); run folder {run_dir}")
     return run_dir
+
+
+def slim_copy(run_dir: Path, dest: Path) -> None:
+    """The run's last checkpoint without its optimiser state, weights and EMA in float16 (the precision
+    models ship in), with the run's config and log, as a run folder (under half the checkpoint's size)."""
+    import shutil
+
+    from safetensors.torch import load_file, save_file
+
+    last = (run_dir / "latest").read_text().strip()
+    (dest / last).mkdir(parents=True, exist_ok=True)
+    for name in ("model.safetensors", "ema.safetensors"):
+        state = load_file(str(run_dir / last / name))
+        save_file({k: v.half() if v.is_floating_point() else v for k, v in state.items()}, str(dest / last / name))
+    shutil.copy2(run_dir / last / "checkpoint.json", dest / last / "checkpoint.json")
+    for name in ("latest", "train_config.json", "log.jsonl"):
+        shutil.copy2(run_dir / name, dest / name)
+    print(f"[slim] {dest}")
 
 
 def main(argv=None) -> int:
@@ -172,6 +234,8 @@ def main(argv=None) -> int:
     num_joints = int(json.loads((data / "meta.json").read_text())["layout"]["num_joints"])
     preset = choose_preset(args, device, num_joints, batch, 200, device.type == "cuda")
     run_dir = train(args, data, device, preset, batch, deadline)
+    if args.slim is not None:
+        slim_copy(run_dir, args.slim / run_dir.name)
     from kinema.model.export import export_model
     from kinema.model.loading import load_denoiser
 

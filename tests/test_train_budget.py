@@ -167,3 +167,38 @@ def test_gpu_script_cpu_smoke_run(bandai_root, tmp_path):
 
     motions = kinema.load_model(model_dir).generate("A person walks.", seconds=1.0, steps=2, postprocess=False)
     assert motions[0].num_frames == 20
+
+
+def test_gpu_script_fine_tunes_from_a_pack_and_leaves_a_slim_run(tiny_data, tiny_checkpoint, tmp_path):
+    """The fine-tune a GPU session runs: the dataset rebuilt from a pack (scripts/device_dataset.py), the
+    starting model's preset and statistics, the fine-tune's options, and a slim float16 copy of the last
+    checkpoint that `kinema export` turns into a model where it lands."""
+    pack = tmp_path / "data.pack"
+    subprocess.run([sys.executable, str(REPO / "scripts/device_dataset.py"), "pack", str(tiny_data), str(pack)],
+                   check=True, capture_output=True, timeout=300)
+    cmd = [sys.executable, str(REPO / "scripts/train_gpu.py"), "--minutes", "0.1", "--device", "cpu",
+           "--init-from", str(tiny_checkpoint), "--pack", str(pack), "--data", str(tmp_path / "data"),
+           "--runs", str(tmp_path / "runs"), "--models", str(tmp_path / "models"), "--name", "ft",
+           "--text-encoder", "hash-test-32", "--calibrate", "2", "--threads", "1", "--lr", "3e-4",
+           "--warmup", "2", "--phase1-fraction", "0", "--high-noise-share", "0.5", "--seed", "3",
+           "--slim", str(tmp_path / "slim")]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert "[train] fine-tuning from" in proc.stdout and "[train] tiny" in proc.stdout
+    saved = json.loads((tmp_path / "runs/ft/train_config.json").read_text())
+    assert (saved["lr"], saved["warmup"], saved["phase1_fraction"], saved["high_noise_share"], saved["seed"]) == \
+           (3e-4, 2, 0.0, 0.5, 3)
+    slim = tmp_path / "slim/ft"
+    last = slim / (slim / "latest").read_text().strip()
+    assert sorted(p.name for p in last.iterdir()) == ["checkpoint.json", "ema.safetensors", "model.safetensors"]
+    from safetensors.torch import load_file
+
+    assert all(v.dtype == torch.float16 for v in load_file(str(last / "model.safetensors")).values()
+               if v.is_floating_point())
+    out = tmp_path / "exported"
+    exp = subprocess.run([sys.executable, "-m", "kinema", "export", str(slim), "--weights", "raw", "--out", str(out)],
+                         capture_output=True, text=True, timeout=300)
+    assert exp.returncode == 0, exp.stderr[-2000:]
+    start = json.loads((tiny_checkpoint / (tiny_checkpoint / "latest").read_text().strip() / "checkpoint.json")
+                       .read_text())
+    assert json.loads((out / "checkpoint.json").read_text())["stats"] == start["stats"]  # the starting model's

@@ -127,7 +127,9 @@ class Trainer:
         self.device = torch.device(device if device is not None else "cpu")
         if self.device.type == "cuda" and self.device.index is None and self.world > 1:
             self.device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))  # one GPU per rank
-        if self.device.type == "cuda":
+        if self.device.type == "cuda":  # a bare "cuda" means the current device (set_device wants an index)
+            self.device = torch.device("cuda", self.device.index if self.device.index is not None
+                                       else torch.cuda.current_device())
             torch.cuda.set_device(self.device)
         self.bf16, self.compile = bool(bf16), bool(compile)
         self.stopped_by_budget = False  # set by run(): whether its time budget ended it
