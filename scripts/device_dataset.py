@@ -31,9 +31,8 @@ import torch
 from safetensors.numpy import load_file
 
 from kinema.data.build_folder import write_build_folder
-from kinema.geometry.rotations import sixd_to_quat
 from kinema.motion.core import Motion
-from kinema.representation.kimodo_features import motion_to_features
+from kinema.representation.kimodo_features import features_to_motion, motion_to_features
 from kinema.representation.layout import FeatureLayout
 from kinema.skeleton import Skeleton
 
@@ -73,19 +72,17 @@ def pack(data: Path, out: Path, splits: list[str]) -> None:
     records = [c for c in json.loads((data / "clips.json").read_text()) if c["split"] in splits]
     clips = [c for c in records if not c["mirrored"]]  # a mirrored copy is rebuilt from its original
     feats = load_file(str(data / "features.safetensors"))["features"]
-    layout = FeatureLayout(int(meta["layout"]["num_joints"]))
     rows = np.concatenate([np.arange(c["start"], c["start"] + c["length"]) for c in clips])
-    parts = layout.split(torch.from_numpy(feats[rows]))
-    pelvis = parts["joint_pos"][:, 0].clone()
-    pelvis[:, 0] += parts["root_pos"][:, 0]
-    pelvis[:, 2] += parts["root_pos"][:, 2]
-    quat = sixd_to_quat(parts["joint_rot"])
+    # the build's own decoder (frame by frame): pelvis translation, global rotations, contacts
+    motion = features_to_motion(torch.from_numpy(feats[rows]), Skeleton.from_dict(json.loads(
+        (data / "skeleton.json").read_text())), float(meta["fps"]))
+    pelvis, quat = motion.root_translation, motion.global_transforms()[0]
     starts = np.cumsum([0] + [c["length"] for c in clips])[:-1]
     q = _continuous(quat.numpy(), starts)
     q = np.round(q * QUAT_SCALE).astype(np.int16)
     p = np.round(pelvis.numpy() / PELVIS_STEP_M).astype(np.int32)
     dq, dp = _time_differences(q, starts), _time_differences(p, starts)
-    contacts = np.packbits(parts["contacts"].numpy() > 0.5, axis=-1)
+    contacts = np.packbits(motion.foot_contacts.numpy() > 0.5, axis=-1)
     buf = io.BytesIO()
     np.savez(buf, dpelvis=dp, dquat=dq, contacts=contacts,
              lengths=np.array([c["length"] for c in clips], dtype=np.int64))
@@ -133,39 +130,38 @@ def rebuild_features(arrays: dict, records: list[dict], skeleton: Skeleton, fps:
     return torch.cat(out).to(torch.float32)
 
 
+def _rebuild(path: Path) -> tuple[torch.Tensor, list[dict], dict, dict]:
+    """A pack's rebuilt features, its clip records, its meta.json and its other files (parsed JSON)."""
+    arrays, texts = _read_pack(path)
+    files = {k: json.loads(v) for k, v in texts.items()}
+    meta = files["meta.json"]
+    features = rebuild_features(arrays, files["clips.json"], Skeleton.from_dict(files["skeleton.json"]),
+                                float(meta["fps"]), float(meta["root_sigma_s"]))
+    return features, files["clips.json"], meta, files
+
+
 def unpack(path: Path, out_dir: Path) -> None:
     """Rebuild a build folder from a pack."""
     t0 = time.time()
-    arrays, files = _read_pack(path)
-    meta = json.loads(files["meta.json"])
-    skeleton = Skeleton.from_dict(json.loads(files["skeleton.json"]))
-    fps = float(meta["fps"])
-    clips = json.loads(files["clips.json"])
-    features = rebuild_features(arrays, clips, skeleton, fps, float(meta["root_sigma_s"]))
-    meta["packed_splits"] = json.loads(files["packed_splits"])
+    features, clips, meta, files = _rebuild(path)
+    meta["packed_splits"] = files["packed_splits"]
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    write_build_folder(out_dir, features,
-                       {"clips.json": clips, "skeleton.json": json.loads(files["skeleton.json"]),
-                        "stats.json": json.loads(files["stats.json"])},
-                       meta, fps=fps, dim=features.shape[-1], t0=t0)
+    folder_files = {name: files[name] for name in ("skeleton.json", "stats.json")}
+    write_build_folder(out_dir, features, {"clips.json": clips, **folder_files}, meta, fps=float(meta["fps"]),
+                       dim=features.shape[-1], t0=t0)
     print(f"[unpack] {out_dir}: {features.shape[0]} frames in {time.time() - t0:.0f} s")
 
 
 def check(data: Path, path: Path) -> None:
     """Largest rebuilt-vs-built difference per feature group, in the build's normalised units."""
-    arrays, files = _read_pack(path)
-    meta = json.loads(files["meta.json"])
-    skeleton = Skeleton.from_dict(json.loads(files["skeleton.json"]))
-    clips = json.loads(files["clips.json"])
+    rebuilt, clips, meta, files = _rebuild(path)
     original = {c["clip_id"]: c for c in json.loads((data / "clips.json").read_text())}
     feats = load_file(str(data / "features.safetensors"))["features"]
     rows = np.concatenate([np.arange(original[c["clip_id"]]["start"], original[c["clip_id"]]["start"] + c["length"])
                            for c in clips])
-    rebuilt = rebuild_features(arrays, clips, skeleton, float(meta["fps"]), float(meta["root_sigma_s"]))
-    stats = json.loads(files["stats.json"])
-    std = torch.tensor(stats["std"], dtype=torch.float32)
+    std = torch.tensor(files["stats.json"]["std"], dtype=torch.float32)
     diff = (rebuilt - torch.from_numpy(feats[rows])).abs() / std
-    layout = FeatureLayout(skeleton.num_joints)
+    layout = FeatureLayout(int(meta["layout"]["num_joints"]))
     for name, part in layout.split(diff).items():
         print(f"[check] {name}: max {float(part.max()):.4f} std, mean {float(part.mean()):.6f} std")
 

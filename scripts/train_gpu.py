@@ -145,8 +145,6 @@ def starting_config(init_from: Path) -> dict:
 
 def choose_preset(args, device, num_joints: int, batch: int, frames: int, bf16: bool) -> str:
     """``args.config``, or on 'auto' the widest GPU preset that fits memory and ``--min-steps`` in the budget."""
-    if args.init_from:
-        return starting_config(args.init_from)["model"]
     if args.config != "auto":
         return args.config
     if device.type != "cuda":
@@ -162,8 +160,9 @@ def choose_preset(args, device, num_joints: int, batch: int, frames: int, bf16: 
     return GPU_PRESETS[-1]
 
 
-def train(args, data: Path, device, preset: str, batch: int, deadline: float) -> Path:
-    """Train ``preset`` until the run length fitted to the budget (or the hard stop); returns the run folder."""
+def train(args, data: Path, device, preset: str, batch: int, deadline: float, start: dict | None) -> Path:
+    """Train ``preset`` until the run length fitted to the budget (or the hard stop); returns the run folder.
+    ``start``: the training config of the model a fine-tune starts from (:func:`starting_config`), or None."""
     from kinema.train.trainer import TrainConfig, Trainer
 
     name = args.name or f"{preset}-{args.minutes:g}min"
@@ -177,8 +176,7 @@ def train(args, data: Path, device, preset: str, batch: int, deadline: float) ->
     for key in ("lr", "phase1_fraction"):
         if getattr(args, key) is not None:
             setattr(cfg, key, getattr(args, key))
-    if args.init_from:
-        start = starting_config(args.init_from)
+    if start is not None:  # a fine-tune: what the starting model's weights fit
         cfg.init_from, cfg.max_seconds, cfg.text_encoder = str(args.init_from.resolve()), start["max_seconds"], \
             start["text_encoder"]
     if args.text_encoder:
@@ -232,8 +230,9 @@ def main(argv=None) -> int:
     deadline = time.monotonic() + 60.0 * args.minutes  # the budget is for choosing the preset and training
     batch = args.batch_size or (128 if device.type == "cuda" else 32)
     num_joints = int(json.loads((data / "meta.json").read_text())["layout"]["num_joints"])
-    preset = choose_preset(args, device, num_joints, batch, 200, device.type == "cuda")
-    run_dir = train(args, data, device, preset, batch, deadline)
+    init = starting_config(args.init_from) if args.init_from else None
+    preset = init["model"] if init else choose_preset(args, device, num_joints, batch, 200, device.type == "cuda")
+    run_dir = train(args, data, device, preset, batch, deadline, init)
     if args.slim is not None:
         slim_copy(run_dir, args.slim / run_dir.name)
     from kinema.model.export import export_model
