@@ -69,3 +69,29 @@ def test_export_raw_weights(tiny_checkpoint, tmp_path, capsys) -> None:
     assert any(not torch.equal(ema[k], v) for k, v in raw.items())
     assert main(["export", str(tmp_path / "raw"), "--out", str(tmp_path / "again"), "--weights", "raw"]) == 2
     assert "no model.safetensors" in capsys.readouterr().err
+
+
+def test_export_mixes_a_fine_tune_with_its_starting_weights(tiny_checkpoint, tmp_path, capsys) -> None:
+    """``--mix MODEL SHARE`` packs (1 - SHARE) x the run's weights + SHARE x MODEL's EMA weights, tensor by
+    tensor, and says so in checkpoint.json; a model of another network, or a share outside [0, 1], is a
+    one-line error that writes nothing."""
+    src = find_checkpoint(tiny_checkpoint)
+    raw = load_file(str(src / "model.safetensors"))
+    ema = load_file(str(src / "ema.safetensors"))
+    out = tmp_path / "mixed"
+    args = ["export", str(tiny_checkpoint), "--out", str(out), "--weights", "raw", "--dtype", "float32",
+            "--mix", str(tiny_checkpoint), "0.25"]
+    assert main(args) == 0
+    packed = load_file(str(out / "ema.safetensors"))
+    for k, v in raw.items():
+        assert torch.allclose(packed[k], 0.75 * v + 0.25 * ema[k], atol=1e-6), k
+    assert any(not torch.allclose(packed[k], v) for k, v in raw.items())
+    mixed = json.loads((out / "checkpoint.json").read_text())["export"]["mixed_with"]
+    assert mixed["share"] == 0.25 and mixed["source"] == str(src)
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "x"), "--mix", "default", "0.5"]) == 2
+    assert "another model_config" in capsys.readouterr().err
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "x"), "--mix", str(src), "1.5"]) == 2
+    assert "[0, 1]" in capsys.readouterr().err
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "x"), "--mix", str(src), "half"]) == 2
+    assert "SHARE must be a number" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()

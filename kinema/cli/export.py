@@ -37,6 +37,10 @@ def register(sub) -> None:
                    help="with --known-prompts: per-action measurements of this model (scripts/humanoid_action_"
                         "probes.py --json); an action counts as learned when half its samples pass, instead of "
                         "by its number of training clips")
+    p.add_argument("--mix", nargs=2, metavar=("MODEL", "SHARE"),
+                   help="weight-space ensemble: pack (1 - SHARE) x the run's weights + SHARE x MODEL's ('default' or "
+                        "a folder: the model the run was fine-tuned from), e.g. --mix default 0.5 keeps part of "
+                        "what the fine-tune learned and part of what it forgot (WiSE-FT)")
     p.set_defaults(func=run)
 
 
@@ -56,16 +60,34 @@ def run(args: argparse.Namespace) -> int:
         probes = read_action_probes(args.action_probes)
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
-                      ema=args.weights == "ema", grounding=grounding_overrides(args), root_stage=args.root_stage)
+                      ema=args.weights == "ema", grounding=grounding_overrides(args), root_stage=args.root_stage,
+                      mix=_mix(args.mix))
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     stage = "" if getattr(loaded, "root_stage", None) is None else ", with a root stage"
+    mixed = loaded.info.get("export", {}).get("mixed_with")
+    if mixed is not None:
+        stage += f", {1 - mixed['share']:g} x its weights + {mixed['share']:g} x {mixed['source']}'s"
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}{stage}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
           f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")
     return 0
+
+
+def _mix(mix: list[str] | None) -> tuple[Path, float] | None:
+    """``--mix MODEL SHARE`` as (model folder, share); a share that is not a number is a one-line error."""
+    if mix is None:
+        return None
+    from kinema.errors import KinemaError
+    from kinema.generate import resolve_model_path
+
+    try:
+        share = float(mix[1])
+    except ValueError:
+        raise KinemaError(f"--mix: SHARE must be a number in [0, 1], got {mix[1]!r}") from None
+    return resolve_model_path(mix[0]), share
 
 
 def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | None) -> None:

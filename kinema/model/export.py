@@ -46,6 +46,7 @@ def export_model(
     ema: bool = True,
     grounding: dict | None = None,
     root_stage: str | Path | None = None,
+    mix: tuple[str | Path, float] | None = None,
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
@@ -60,6 +61,7 @@ def export_model(
     keys of the saved prompt-grounding default; ``extra_info`` is merged into checkpoint.json under ``"export"``.
     ``root_stage``: an any-rig model's root-stage run or checkpoint (kinema.train.anyrig.root_stage), whose
     EMA weights are packed as ``root_stage.safetensors`` with its config under ``"root_stage"``.
+    ``mix=(MODEL, SHARE)``: pack ``(1 - SHARE) * src + SHARE * MODEL``'s weights (`mix_weights`).
     Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
     """
     if dtype not in DTYPES:
@@ -78,6 +80,8 @@ def export_model(
     packed = info.pop("export", None)  # ``src`` is itself a model folder: keep where its weights came from
     source = {"source": str(ckpt)} if packed is None else {"source": packed["source"], "repacked_from": str(ckpt)}
     info["export"] = {**source, "weights": weights.name, "dtype": dtype, **(extra_info or {})}
+    if mix is not None:
+        state, info["export"]["mixed_with"] = mix_weights(state, info, ckpt, *mix)
     if info.get("kind") == "anyrig":
         info["rig_files"] = rig_files(info)
     stage = None
@@ -88,6 +92,35 @@ def export_model(
         info["root_stage"], stage = _root_stage(root_stage, info)
     state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
     return _write_folder(Path(out), info, state, stage)
+
+
+#: what two checkpoints must share for their weights to be mixed: the same network, features and statistics
+_MIX_MUST_MATCH = ("model_config", "feature_layout", "stats", "text_encoder", "fps")
+
+
+def mix_weights(
+    state: dict[str, torch.Tensor], info: dict, ckpt: Path, other: str | Path, share: float
+) -> tuple[dict[str, torch.Tensor], dict]:
+    """A weight-space ensemble of a fine-tune and the model it started from (WiSE-FT, Wortsman et al.
+    2022): every float tensor becomes ``(1 - share) * state + share * other's`` (``other``'s EMA
+    weights). Between the two ends the mix keeps part of what each learned: the fine-tune's new contents,
+    the starting model's old ones. Only checkpoints of one network in one feature space and one
+    normalisation mix (a fine-tune with ``--init-from`` keeps its starting model's statistics); anything
+    else is a one-line `KinemaError`. Returns the weights and what was mixed (for checkpoint.json)."""
+    if not 0.0 <= share <= 1.0:
+        raise KinemaError(f"--mix: the share of the other model must lie in [0, 1], got {share:g}")
+    other_ckpt = find_checkpoint(other)
+    other_info = read_checkpoint_info(other_ckpt)
+    for key in _MIX_MUST_MATCH:
+        if other_info.get(key) != info.get(key):
+            raise KinemaError(f"--mix: {other_ckpt} has another {key} than {ckpt}; only a model and its own "
+                              "fine-tune (same network, features and statistics) can be mixed")
+    theirs = read_weights(weights_file(other_ckpt, True))
+    if set(theirs) != set(state) or any(theirs[k].shape != v.shape for k, v in state.items()):
+        raise KinemaError(f"--mix: {other_ckpt}'s weights do not match {ckpt}'s tensor for tensor")
+    mixed = {k: torch.lerp(v.float(), theirs[k].float(), share) if v.is_floating_point() else v
+             for k, v in state.items()}
+    return mixed, {"source": str(other_ckpt), "step": other_info.get("step"), "share": share}
 
 
 def _replace_defaults(
