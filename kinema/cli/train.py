@@ -43,6 +43,13 @@ def register(sub) -> None:
     p.add_argument("--high-noise-min-std", type=positive_float,
                    help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
                         "(default 8)")
+    p.add_argument("--anchor", metavar="MODEL",
+                   help="fine-tune: pull the predictions on the clips of --anchor-datasets towards this frozen "
+                        "model's ('default' or a folder in the run's statistics: learning without forgetting, "
+                        "so the contents it knows stay as they were; docs/training.md)")
+    p.add_argument("--anchor-weight", type=positive_float, help="weight of the --anchor term (default 1)")
+    p.add_argument("--anchor-datasets", nargs="+", metavar="NAME",
+                   help="datasets (the build's clips.json 'dataset') whose clips are anchored (default: all)")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -98,6 +105,8 @@ def _config_from_args(args: argparse.Namespace):
         "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
         "crop_min_fraction": args.crop_min_fraction, "high_noise_share": args.high_noise_share,
         "high_noise_min_std": args.high_noise_min_std,
+        "anchor": None if args.anchor is None else _init_path(args.anchor), "anchor_weight": args.anchor_weight,
+        "anchor_datasets": args.anchor_datasets,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

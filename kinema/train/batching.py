@@ -36,6 +36,7 @@ class Batch:
     c_dir: torch.Tensor
     caption_index: torch.Tensor
     text_keep: torch.Tensor
+    clip_index: torch.Tensor  # (B,) the train clip each row was cut from
 
 
 class BatchSampler:
@@ -122,4 +123,5 @@ class BatchSampler:
             c_dir=c_dir,
             caption_index=caption_index,
             text_keep=text_keep,
+            clip_index=torch.tensor(idx),
         )

@@ -19,7 +19,7 @@ import math
 import os
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import torch
@@ -33,6 +33,7 @@ from kinema.model.config import get_config, reject_unknown_keys
 from kinema.model.denoiser import Denoiser, local_root_stats
 from kinema.representation.stats import NormStats
 from kinema.text import get_text_encoder
+from kinema.train.anchor import Anchor, anchored_clips
 from kinema.train.batching import BatchSampler, step_generator
 from kinema.train.checkpoint import load_checkpoint, load_init_weights, load_optimizer_tensors, save_checkpoint
 from kinema.train.constraints import max_keyframes_at, sample_batch_masks
@@ -88,6 +89,11 @@ class TrainConfig:
     # outside the normalisation are otherwise read from the noisy input, never made from the text
     high_noise_share: float = 0.0
     high_noise_min_std: float = 8.0
+    # fine-tuning: pull the predictions on the rows of these datasets' clips (all when empty) towards those
+    # of this frozen model (kinema.train.anchor: learning without forgetting), with this weight
+    anchor: str = ""
+    anchor_weight: float = 1.0
+    anchor_datasets: list[str] = field(default_factory=list)
 
     @classmethod
     def from_dict(cls, d: dict) -> TrainConfig:
@@ -175,6 +181,13 @@ class Trainer:
         self.weights = LossWeights(foot_contact=cfg.foot_contact)
         self.step = 0
         self.phase1_steps = int(round(cfg.steps * cfg.phase1_fraction))
+        self.anchor = None
+        if cfg.anchor:
+            _, state, stats = load_init_weights(cfg.anchor, self.model_config, self.layout, self.skeleton, self.fps)
+            teacher = Denoiser(self.model_config)
+            teacher.load_state_dict(state)
+            self.anchor = Anchor(teacher.to(self.device), stats, anchored_clips(ds.clips, cfg.anchor_datasets),
+                                 cfg.anchor_weight)
 
     # ------------------------------------------------------------------ state
     def info(self) -> dict:
@@ -313,6 +326,10 @@ class Trainer:
             pred = model(*inputs)
         loss, terms = motion_loss(pred.float(), x0, pad_mask, self.layout, self.skeleton, self.stats, self.weights,
                                   constraint_mask=mask if phase == 2 else None, fps=self.fps)
+        if self.anchor is not None:
+            with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.bf16):
+                anchor = self.anchor.term(pred.float(), inputs, batch.clip_index, pad_mask)
+            loss, terms["anchor"] = loss + anchor, anchor.detach()
         lr = lr_at(step, cfg.lr, cfg.warmup, cfg.steps)
         for group in self.optimizer.param_groups:
             group["lr"] = lr
@@ -352,6 +369,8 @@ class Trainer:
         from tqdm.auto import tqdm
 
         deadline = None if minutes is None else time.monotonic() + 60.0 * minutes
+        if self.anchor is not None:
+            self.anchor.check_stats(self.stats, self.cfg.anchor)
         self.stopped_by_budget = False
         model: torch.nn.Module = self.model
         if self.world > 1:
