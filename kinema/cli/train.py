@@ -43,22 +43,13 @@ def register(sub) -> None:
     p.add_argument("--high-noise-min-std", type=positive_float,
                    help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
                         "(default 8)")
-    p.add_argument("--anchor", metavar="MODEL",
-                   help="fine-tune: pull the predictions on the clips of --anchor-datasets towards this frozen "
-                        "model's ('default' or a folder in the run's statistics: learning without forgetting, "
-                        "so the contents it knows stay as they were; docs/training.md)")
-    p.add_argument("--anchor-weight", type=positive_float, help="weight of the --anchor term (default 1)")
-    p.add_argument("--anchor-datasets", nargs="+", metavar="NAME",
-                   help="datasets (the build's clips.json 'dataset') whose clips are anchored (default: all)")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
     p.add_argument("--text-encoder", help="text encoder id (default minilm-l6-v2)")
     p.add_argument("--cache-dir", type=Path, default=text_cache_dir(), help="text embedding cache")
     p.add_argument("--resume", action="store_true", help="continue the newest checkpoint in --out")
-    p.add_argument("--init-from", help="fine-tune: start from this model's weights (an exported model, 'default' "
-                                       "for the shipped one, or a run/checkpoint folder); optimiser and step "
-                                       "start fresh")
+    _add_fine_tune_arguments(p)
     p.add_argument("--stop-after", type=int, help="stop after this many steps of this invocation")
     p.add_argument("--minutes", type=positive_float,
                    help="time budget: stop cleanly after this many minutes of training (checkpoint written; "
@@ -74,6 +65,20 @@ def register(sub) -> None:
                    help="torch CPU threads (default: KINEMA_THREADS, else chosen by kinema.runtime; see docs/speed.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
+
+
+def _add_fine_tune_arguments(p: argparse.ArgumentParser) -> None:
+    """Where a fine-tune starts (--init-from) and what keeps it near a teacher (--anchor*)."""
+    p.add_argument("--init-from", help="fine-tune: start from this model's weights (an exported model, 'default' "
+                                       "for the shipped one, or a run/checkpoint folder); optimiser and step "
+                                       "start fresh")
+    p.add_argument("--anchor", metavar="MODEL",
+                   help="fine-tune: pull the predictions on the clips of --anchor-datasets towards this frozen "
+                        "model's ('default' or a folder in the run's statistics: learning without forgetting, "
+                        "meant to keep the contents it knows; docs/training.md)")
+    p.add_argument("--anchor-weight", type=positive_float, help="weight of the --anchor term (default 1)")
+    p.add_argument("--anchor-datasets", nargs="+", metavar="NAME",
+                   help="datasets (the build's clips.json 'dataset') whose clips are anchored (default: all)")
 
 
 # Settings a resumed run may change: the schedule (length, phase boundary, how clips are weighted) and

@@ -181,13 +181,15 @@ class Trainer:
         self.weights = LossWeights(foot_contact=cfg.foot_contact)
         self.step = 0
         self.phase1_steps = int(round(cfg.steps * cfg.phase1_fraction))
-        self.anchor = None
-        if cfg.anchor:
-            _, state, stats = load_init_weights(cfg.anchor, self.model_config, self.layout, self.skeleton, self.fps)
-            teacher = Denoiser(self.model_config)
-            teacher.load_state_dict(state)
-            self.anchor = Anchor(teacher.to(self.device), stats, anchored_clips(ds.clips, cfg.anchor_datasets),
-                                 cfg.anchor_weight)
+        self.anchor = self._anchor(ds.clips) if cfg.anchor else None
+
+    def _anchor(self, records: list[dict]) -> Anchor:
+        """The frozen teacher of ``cfg.anchor`` and which of the train clips ``records`` it anchors."""
+        cfg = self.cfg
+        _, state, stats = load_init_weights(cfg.anchor, self.model_config, self.layout, self.skeleton, self.fps)
+        teacher = Denoiser(self.model_config)
+        teacher.load_state_dict(state)
+        return Anchor(teacher.to(self.device), stats, anchored_clips(records, cfg.anchor_datasets), cfg.anchor_weight)
 
     # ------------------------------------------------------------------ state
     def info(self) -> dict:
