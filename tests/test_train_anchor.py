@@ -44,7 +44,7 @@ def test_anchored_clips_by_dataset():
 
 
 def test_the_anchor_keeps_a_fine_tune_near_its_teacher(tiny_data, tmp_path):
-    """Same data, steps and seed from the same start: the anchored run ends closer to the teacher's weights,
+    """Same data, steps and seed from the same start: the anchored run's predictions end closer to the teacher's,
     its first step's term is 0 (the student starts as the teacher) and later ones are not, and the log has it."""
     Trainer(_cfg(steps=4), tiny_data, tmp_path / "base").run(progress=False)
     base = str(tmp_path / "base")

@@ -19,6 +19,7 @@ start at a learning rate of 1e-3 it does not stop the drift; a tool, not yet a r
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -33,7 +34,7 @@ class Anchor:
     """A frozen teacher and the clips whose rows are pulled towards its predictions."""
 
     def __init__(self, teacher: Denoiser, stats: NormStats, anchored: torch.Tensor, weight: float):
-        if not weight > 0 or not torch.isfinite(torch.tensor(weight)):
+        if not (math.isfinite(weight) and weight > 0):
             raise KinemaError(f"anchor weight must be a finite number > 0, got {weight}")
         self.teacher = teacher.eval()
         for p in self.teacher.parameters():
@@ -54,10 +55,10 @@ class Anchor:
         rows = self.anchored[clip_index.cpu()].to(pred.device)
         if not bool(rows.any()):
             return pred.sum() * 0.0
-        with torch.no_grad():
-            target = self.teacher(*inputs).float()
-        valid = (pad_mask & rows[:, None]).to(pred.dtype)[..., None]
-        sq = (pred - target).square() * valid
+        with torch.no_grad():  # the teacher sees the anchored rows only (rows of a batch are independent)
+            target = self.teacher(*(x[rows] for x in inputs)).float()
+        valid = pad_mask[rows].to(pred.dtype)[..., None]
+        sq = (pred[rows] - target).square() * valid
         return self.weight * sq.sum() / (valid.sum() * pred.shape[-1]).clamp_min(1.0)
 
 
