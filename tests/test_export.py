@@ -49,6 +49,8 @@ def test_reexport_keeps_model_card_and_cli_reports_errors(tiny_checkpoint, tmp_p
     assert main(["export", str(tiny_checkpoint), "--out", str(out)]) == 0
     assert (out / "MODEL_CARD.md").read_text() == "card\n"
     assert main(["export", str(tmp_path / "missing"), "--out", str(tmp_path / "x")]) == 2
+    assert "missing: no such model folder" in capsys.readouterr().err
+    assert main(["export", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
     assert "no checkpoint found" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
     with pytest.raises(KinemaError, match="sampling steps"):

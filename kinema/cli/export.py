@@ -17,7 +17,8 @@ from kinema.runtime import text_cache_dir
 def register(sub) -> None:
     """Add the `export` sub-command to the top-level parser."""
     p = sub.add_parser("export", help="pack a trained checkpoint as an inference model folder (float16 EMA weights)")
-    p.add_argument("model", type=Path, help="run folder (its newest checkpoint) or checkpoint folder")
+    p.add_argument("model", type=Path, help="run folder (its newest checkpoint), checkpoint folder or model folder "
+                                            "('default' and 'creatures' are the shipped ones: re-packing)")
     p.add_argument("--out", type=Path, required=True, help="model folder to write, e.g. kinema/assets/models/default")
     p.add_argument("--dtype", default="float16", choices=("float16", "bfloat16", "float32"), help="weight precision")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
@@ -41,12 +42,20 @@ def register(sub) -> None:
                    help="weight-space ensemble: pack (1 - SHARE) x the run's weights + SHARE x MODEL's ('default' or "
                         "a folder: the model the run was fine-tuned from), e.g. --mix default 0.5 keeps part of "
                         "what the fine-tune learned and part of what it forgot (WiSE-FT)")
+    p.add_argument("--action-expert", type=Path, metavar="RUN",
+                   help="human models: pack this fine-tune's weights (a run or model folder trained with --init-from "
+                        "the model) beside the model's own, to denoise the prompts that name one of "
+                        "--expert-actions (kinema.model.action_expert)")
+    p.add_argument("--expert-actions", nargs="+", metavar="ACTION",
+                   help="with --action-expert: the actions it serves (names of kinema.model.actions, e.g. kick punch "
+                        "jump roll crouch nod fall 'pick up')")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from kinema.diffusion.guidance import Guidance
     from kinema.errors import KinemaError
+    from kinema.generate import resolve_model_path
     from kinema.model.export import export_model, load_weights
 
     if args.known_prompts is not None and not (args.known_prompts / "clips.json").is_file():
@@ -58,10 +67,13 @@ def run(args: argparse.Namespace) -> int:
         if args.known_prompts is None:
             raise KinemaError("--action-probes: give --known-prompts DATA too (the probes qualify its actions)")
         probes = read_action_probes(args.action_probes)
+    if (args.action_expert is None) != (args.expert_actions is None):
+        raise KinemaError("--action-expert RUN and --expert-actions ACTION ... go together")
+    expert = None if args.action_expert is None else (resolve_model_path(args.action_expert), args.expert_actions)
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
-    out = export_model(args.model, args.out, dtype=args.dtype, guidance=guidance, sampling_steps=args.steps,
-                      ema=args.weights == "ema", grounding=grounding_overrides(args), root_stage=args.root_stage,
-                      mix=_mix(args.mix))
+    out = export_model(resolve_model_path(args.model), args.out, dtype=args.dtype, guidance=guidance,
+                       sampling_steps=args.steps, ema=args.weights == "ema", grounding=grounding_overrides(args),
+                       root_stage=args.root_stage, mix=_mix(args.mix), action_expert=expert)
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)
@@ -70,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
     mixed = loaded.info.get("export", {}).get("mixed_with")
     if mixed is not None:
         stage += f", {1 - mixed['share']:g} x its weights + {mixed['share']:g} x {mixed['source']}'s"
+    if getattr(loaded, "expert", None) is not None:
+        stage += f", with an action expert for {', '.join(loaded.expert.actions)}"
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}{stage}, "
           f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
           f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")

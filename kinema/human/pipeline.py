@@ -189,12 +189,20 @@ class HumanPipeline(MotionPipeline):
         report = GenerationReport(
             seconds=t1 - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
-            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} for m in matches], objectives=obj_report,
+            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} | self._weights_used(m.prompt)
+                     for m in matches], objectives=obj_report,
             timings={"sampling": t_sampled - t0, "postprocess": t1 - t_sampled}, joints=self.skeleton.num_joints,
         )
         return GenerationResult(motions, report)
 
     # ------------------------------------------------------------------ internals
+    def _weights_used(self, prompt: str) -> dict:
+        """For a model with an action expert (kinema.model.action_expert): which weights denoised
+        ``prompt``, as ``{"weights": "action expert" | "main"}``; {} for a model without one."""
+        if self.loaded.expert is None:
+            return {}
+        return {"weights": "action expert" if self.loaded.serves_with_expert(prompt) else "main"}
+
     def _planner(self, keyjoint_model, plan: SegmentPlan, bound) -> KeyjointPlanner | None:
         """The keyjoint planner of a keyjoint-planned call (None for direct), checked against the call.
         Unset (None): the shipped planner when the call's constraints are sparse joint targets alone
@@ -333,7 +341,7 @@ class HumanPipeline(MotionPipeline):
     def _sample_pass(self, prompt: str, rows, num_frames: int, call: SamplingCall, bar, on_step,
                      strength: float = 1.0) -> list[Motion]:
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
-        rep, L = self.representation, self.loaded
+        rep, L = self.representation, self.loaded.for_prompt(prompt)  # the action expert's weights or the main ones
         targets, shift = stack_targets(rows)
         text = self.prompt_condition(prompt, call.texts)
         text = None if text is None else text.expand(len(rows), -1)

@@ -19,6 +19,9 @@ from safetensors.torch import save_file
 from kinema.atomic_files import atomic_folder
 from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
+from kinema.model.action_expert import MUST_MATCH as EXPERT_MUST_MATCH
+from kinema.model.action_expert import WEIGHTS_FILE as EXPERT_WEIGHTS_FILE
+from kinema.model.action_expert import expert_actions
 from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.grounding import Grounding
 from kinema.model.loading import (
@@ -47,6 +50,7 @@ def export_model(
     grounding: dict | None = None,
     root_stage: str | Path | None = None,
     mix: tuple[str | Path, float] | None = None,
+    action_expert: tuple[str | Path, list[str]] | None = None,
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
@@ -62,6 +66,8 @@ def export_model(
     ``root_stage``: an any-rig model's root-stage run or checkpoint (kinema.train.anyrig.root_stage), whose
     EMA weights are packed as ``root_stage.safetensors`` with its config under ``"root_stage"``.
     ``mix=(MODEL, SHARE)``: pack ``(1 - SHARE) * src + SHARE * MODEL``'s weights (`mix_weights`).
+    ``action_expert=(RUN, ACTIONS)``: pack RUN's (EMA) weights as the model's action expert for prompts that
+    name one of ACTIONS (kinema.model.action_expert; `_action_expert`).
     Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
     """
     if dtype not in DTYPES:
@@ -84,14 +90,26 @@ def export_model(
         state, info["export"]["mixed_with"] = mix_weights(state, info, ckpt, *mix)
     if info.get("kind") == "anyrig":
         info["rig_files"] = rig_files(info)
-    stage = None
-    info.pop("root_stage", None)  # a re-packed folder's stage stays only when given again
+    stage, expert = _companions(info, ckpt, root_stage, action_expert)
+    state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
+    expert = None if expert is None else {k: v.to(DTYPES[dtype]).contiguous() for k, v in expert.items()}
+    return _write_folder(Path(out), info, state, stage, expert)
+
+
+def _companions(info: dict, ckpt: Path, root_stage, action_expert) -> tuple[dict | None, dict | None]:
+    """The networks packed beside the model's own weights, entered in ``info``: an any-rig model's root stage
+    and a human model's action expert (float32 weights, or None when not given). A re-packed folder keeps
+    its own only when they are given again."""
+    stage = expert = None
+    info.pop("root_stage", None)
     if root_stage is not None:
         if info.get("kind") != "anyrig":
             raise KinemaError(f"--root-stage: {ckpt} is not an any-rig model; only those have a root stage")
         info["root_stage"], stage = _root_stage(root_stage, info)
-    state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
-    return _write_folder(Path(out), info, state, stage)
+    info.pop("action_expert", None)
+    if action_expert is not None:
+        info["action_expert"], expert = _action_expert(*action_expert, info, ckpt)
+    return stage, expert
 
 
 #: what two checkpoints must share for their weights to be mixed: the same network, features and statistics
@@ -160,16 +178,49 @@ def _root_stage(src: str | Path, info: dict) -> tuple[dict, dict[str, torch.Tens
     return entry, {k: v.float().contiguous() for k, v in state.items()}
 
 
+def _action_expert(src: str | Path, actions: list[str], info: dict, ckpt: Path) -> tuple[dict, dict[str, torch.Tensor]]:
+    """The checkpoint.json entry and (EMA) weights of ``src`` as the action expert, for ``actions``, of the
+    human model described by ``info`` (kinema.model.action_expert): only a network of the same
+    architecture, features, statistics, text encoder, fps and skeleton (a fine-tune of the model with
+    ``--init-from``) qualifies; anything else is a one-line `KinemaError`."""
+    where = "--action-expert"
+    if info.get("kind") == "anyrig":
+        raise KinemaError(f"{where}: {ckpt} is an any-rig model; action experts are for the human model")
+    actions = expert_actions(actions, "--expert-actions")
+    expert_ckpt = find_checkpoint(src)
+    expert_info = read_checkpoint_info(expert_ckpt)
+    for key in EXPERT_MUST_MATCH:
+        if expert_info.get(key) != info.get(key):
+            raise KinemaError(f"{where}: {expert_ckpt} has another {key} than {ckpt}; an action expert must be a "
+                              "fine-tune of the model (same network, features and statistics: --init-from)")
+    weights = weights_file(expert_ckpt, True)
+    packed = expert_info.get("export", {})
+    entry = {
+        "actions": list(actions),
+        "weights": EXPERT_WEIGHTS_FILE,
+        "source": packed.get("source", str(expert_ckpt)),
+        "packed_from": str(expert_ckpt),
+        "source_weights": packed.get("weights", weights.name),
+        "step": expert_info.get("step"),
+        "train_config": expert_info.get("train_config"),
+        "elapsed_s": expert_info.get("elapsed_s"),
+    }
+    return entry, {k: v.float() for k, v in read_weights(weights).items()}
+
+
 #: the files an export writes (any others in the folder, e.g. the card and its images, are kept)
-_WRITTEN = ("ema.safetensors", "checkpoint.json", "root_stage.safetensors")
+_WRITTEN = ("ema.safetensors", "checkpoint.json", "root_stage.safetensors", EXPERT_WEIGHTS_FILE)
 
 
-def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor], stage: dict | None = None) -> Path:
+def _write_folder(out: Path, info: dict, state: dict[str, torch.Tensor], stage: dict | None = None,
+                  expert: dict | None = None) -> Path:
     keep = [p for p in out.iterdir() if p.name not in _WRITTEN] if out.is_dir() else []
     with atomic_folder(out) as tmp:
         save_file(state, str(tmp / "ema.safetensors"))
         if stage is not None:
             save_file(stage, str(tmp / "root_stage.safetensors"))
+        if expert is not None:
+            save_file(expert, str(tmp / EXPERT_WEIGHTS_FILE))
         (tmp / "checkpoint.json").write_text(json.dumps(info, indent=1) + "\n")
         for p in keep:  # e.g. MODEL_CARD.md and images next to the weights survive a re-export
             (shutil.copytree if p.is_dir() else shutil.copy2)(p, tmp / p.name)

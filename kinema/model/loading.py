@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
@@ -13,6 +13,8 @@ from safetensors.torch import load_file
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import DDIMSampler
 from kinema.errors import KinemaError
+from kinema.model.action_expert import WEIGHTS_FILE as EXPERT_WEIGHTS_FILE
+from kinema.model.action_expert import ActionExpert
 from kinema.model.config import ModelConfig
 from kinema.model.denoiser import Denoiser
 from kinema.model.grounding import DEFAULT_GROUNDING, Grounding
@@ -40,7 +42,8 @@ def find_checkpoint(path: str | Path) -> Path:
 @dataclass
 class LoadedModel:
     """A denoiser in eval mode plus its skeleton, fps, feature layout, representation (the rig, layout and
-    the denoiser's own normalisation statistics), sampler, guidance and prompt-grounding defaults."""
+    the denoiser's own normalisation statistics), sampler, guidance and prompt-grounding defaults, and the
+    folder's action expert, if any (kinema.model.action_expert)."""
 
     denoiser: Denoiser
     skeleton: Skeleton
@@ -55,6 +58,18 @@ class LoadedModel:
     representation: FlatRepresentation
     grounding: Grounding = DEFAULT_GROUNDING
     precision: str = "fp32"
+    expert: ActionExpert | None = None
+
+    def for_prompt(self, prompt: str) -> LoadedModel:
+        """The model that denoises a pass of ``prompt``: this one with the action expert's weights when the
+        prompt names one of its actions, else this one."""
+        if self.expert is None or not self.expert.serves(prompt):
+            return self
+        return replace(self, denoiser=self.expert.denoiser)
+
+    def serves_with_expert(self, prompt: str) -> bool:
+        """Whether :meth:`for_prompt` runs ``prompt`` on the action expert's weights."""
+        return self.expert is not None and self.expert.serves(prompt)
 
 
 def weights_file(ckpt: Path, ema: bool = True) -> Path:
@@ -141,5 +156,15 @@ def load_denoiser(path: str | Path, ema: bool = True, precision: str = "fp32") -
         raise KinemaError(f"{ckpt}: cannot load model ({type(err).__name__}: {err})") from None
     for p in loaded.denoiser.parameters():
         p.requires_grad_(False)
+    if "action_expert" in info:
+        loaded.expert = read_action_expert(info["action_expert"], ckpt, loaded.denoiser)
+        set_precision(loaded.expert.denoiser, precision)
     set_precision(loaded.denoiser, precision)
     return loaded
+
+
+def read_action_expert(entry, ckpt: Path, main: Denoiser) -> ActionExpert:
+    """The action expert a model folder's checkpoint.json names (kinema.model.action_expert), for its main
+    network ``main``; a bad entry or weights file is a one-line `KinemaError` naming the folder."""
+    where = f"{ckpt / 'checkpoint.json'}: field 'action_expert'"
+    return ActionExpert.from_entry(entry, read_weights(ckpt / EXPERT_WEIGHTS_FILE), main, where)

@@ -1,0 +1,83 @@
+"""Action experts (kinema.model.action_expert): a model folder with a second set of weights that denoises the
+prompts naming its actions; every other prompt runs on the model's own weights, as before."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from kinema.cli import main
+from kinema.errors import KinemaError
+from kinema.generate import load_model
+from kinema.model.loading import load_denoiser
+
+KICK, WALK = "A person kicks with the left leg.", "A person walks forward."
+
+
+def _positions(model, prompt, **kw):
+    res = model.generate(prompt, seconds=1.0, seed=5, steps=4, postprocess=False, **kw)
+    return res[0].positions, res.report
+
+
+@pytest.fixture(scope="module")
+def routed(tiny_checkpoint, tiny_data, tmp_path_factory):
+    """(routed folder, main folder, expert folder): the tiny run's EMA weights as the main network, its raw
+    weights (they differ) as the expert for kicks and jumps."""
+    tmp = tmp_path_factory.mktemp("experts")
+    main_dir, expert_dir, routed_dir = tmp / "main", tmp / "expert", tmp / "routed"
+    assert main(["export", str(tiny_checkpoint), "--out", str(main_dir), "--dtype", "float32", "--known-prompts",
+                 str(tiny_data)]) == 0
+    assert main(["export", str(tiny_checkpoint), "--out", str(expert_dir), "--dtype", "float32",
+                 "--weights", "raw"]) == 0
+    assert main(["export", str(main_dir), "--out", str(routed_dir), "--dtype", "float32", "--known-prompts",
+                 str(tiny_data), "--action-expert", str(expert_dir), "--expert-actions", "kick", "jump"]) == 0
+    return routed_dir, main_dir, expert_dir
+
+
+def test_prompts_naming_an_expert_action_run_on_the_expert_weights(routed) -> None:
+    """A kick prompt gives exactly what the expert's own folder gives, a walk prompt what the main folder
+    gives, and the two networks do differ; the report says which weights served each prompt."""
+    routed_dir, main_dir, expert_dir = routed
+    model, alone_main, alone_expert = load_model(routed_dir), load_model(main_dir), load_model(expert_dir)
+    kick, report = _positions(model, KICK)
+    assert torch.allclose(kick, _positions(alone_expert, KICK)[0], atol=1e-6)
+    assert not torch.allclose(kick, _positions(alone_main, KICK)[0], atol=1e-3)
+    assert report.prompts[0]["weights"] == "action expert"
+    walk, report = _positions(model, WALK)
+    assert torch.allclose(walk, _positions(alone_main, WALK)[0], atol=1e-6)
+    assert report.prompts[0]["weights"] == "main"
+    assert "weights" not in _positions(alone_main, WALK)[1].prompts[0]  # a model without an expert says nothing
+    timeline = model.generate([(WALK, 1.0), (KICK, 1.0)], seed=5, steps=4, postprocess=False)
+    assert [p["weights"] for p in timeline.report.prompts] == ["main", "action expert"]
+    info = json.loads((routed_dir / "checkpoint.json").read_text())["action_expert"]
+    assert info["actions"] == ["jump", "kick"] and info["weights"] == "action_expert.safetensors"
+
+
+def test_bad_experts_are_refused_with_one_line(routed, tmp_path, capsys) -> None:
+    """An expert of another network, an unknown action or one flag without the other is a one-line error that
+    writes nothing; a folder whose expert entry or weights are damaged does not load."""
+    routed_dir, main_dir, expert_dir = routed
+    out = tmp_path / "x"
+    assert main(["export", str(main_dir), "--out", str(out), "--action-expert", "default",
+                 "--expert-actions", "kick"]) == 2
+    assert "another model_config" in capsys.readouterr().err
+    assert main(["export", str(main_dir), "--out", str(out), "--action-expert", str(expert_dir),
+                 "--expert-actions", "moonwalk"]) == 2
+    assert "unknown actions ['moonwalk']" in capsys.readouterr().err
+    assert main(["export", str(main_dir), "--out", str(out), "--action-expert", str(expert_dir)]) == 2
+    assert "go together" in capsys.readouterr().err
+    assert not out.exists()
+    info = json.loads((routed_dir / "checkpoint.json").read_text())
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    for f in routed_dir.iterdir():
+        (broken / f.name).write_bytes(f.read_bytes())
+    (broken / "checkpoint.json").write_text(json.dumps(info | {"action_expert": {"actions": "kick"}}))
+    with pytest.raises(KinemaError, match="field 'action_expert': expected an object with a list 'actions'"):
+        load_denoiser(broken)
+    (broken / "checkpoint.json").write_text(json.dumps(info))
+    (broken / "action_expert.safetensors").write_bytes(b"garbage")
+    with pytest.raises(KinemaError, match="action_expert.safetensors: not a readable safetensors"):
+        load_denoiser(broken)
