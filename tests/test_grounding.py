@@ -108,6 +108,22 @@ def test_grounding_keeps_the_manner_the_prompt_names_or_does_not_name():
     assert [c for c, _ in ground("A person walks on.", e, plain, Grounding(weight=1.0)).captions] == [caps[0]]
 
 
+def test_a_manner_no_caption_of_the_action_has_gives_way_to_the_action():
+    """Issue 38: "A man kicks hard ..." names the masculine style's phrase and no kick caption names a manner;
+    it is grounded on the kicks (it was left alone, and the model made no kick), never on a mannered walk.
+    A manner that the action's captions do have still keeps to them."""
+    caps = ["A person kicks with their left leg.", "A man walks forward.", "A person walks ahead."]
+    emb = torch.tensor([[1.0, 0, 0, 0], [0.6, 0.8, 0, 0], [0, 1.0, 0, 0]])
+    known = KnownPrompts(caps, emb, "x", ("A man",))
+    e = torch.nn.functional.normalize(torch.tensor([[0.9, 0.4, 0.1, 0]]), dim=-1)
+    out = ground("A man kicks hard using his left leg.", e, known, Grounding(weight=1.0, top_k=3))
+    assert out.status == "grounded" and [c for c, _ in out.captions] == [caps[0]]
+    out = ground("A man walks on.", e, known, Grounding(weight=1.0, top_k=3))
+    assert [c for c, _ in out.captions] == [caps[1]]  # the walks do have the manner: kept
+    out = ground("A man kicks and walks.", e, known, Grounding(weight=1.0, top_k=3))
+    assert out.status == "unmatched"  # no caption names both actions: left alone as before
+
+
 def test_known_prompts_keep_the_manner_phrases_their_captions_use(tmp_path):
     from kinema.data.captions import captions_for, style_phrases
 

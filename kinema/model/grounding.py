@@ -26,7 +26,10 @@ elderly person" and speed words such as "slowly" or "at full speed"; kinema.data
 written by ``kinema export --known-prompts``), a prompt that names none of them is grounded only on
 captions that name none ("A person walks ahead.", the neutral style's "A person walks forward in a
 neutral way."), and one that names one only on captions that name one ("Someone strolls slowly ahead."
--> "Someone walks slowly ahead.").
+-> "Someone walks slowly ahead."). When no caption of a prompt's actions names a manner at all ("A man
+kicks hard using his left leg.": "A man" is the masculine style's phrase, and no kick caption has a
+style), the action wins: the prompt is grounded on its actions' captions whatever their manner, where
+it was left alone ('unmatched', conditioned on its own words, and the model made no kick).
 
 Same actions, likewise (kinema.model.actions): MiniLM put "A person walks forward and reaches out with
 the right hand." nearest to "A person walks forward and turns to the right." (0.80), so grounding swapped
@@ -170,16 +173,26 @@ class Grounded:
         }
 
 
-def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts) -> torch.Tensor:
+def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts, manner: bool = True) -> torch.Tensor:
     """Which captions ``(N,)`` bool a prompt may be grounded on: same sides, same manner (when the known
-    prompts list manner phrases) and, when the prompt names actions, all of them."""
+    prompts list manner phrases and ``manner``) and, when the prompt names actions, all of them."""
     want = sides(prompt)
     same = torch.tensor([sides(c) == want for c in known.captions])
-    if known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none, and so on
+    if manner and known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none
         same &= known.mannered == known.names_manner(prompt)
     if actions:
         same &= torch.tensor([actions <= a for a in known.caption_actions])
     return same
+
+
+def _nearest(same: torch.Tensor, ref_unit: torch.Tensor, known: KnownPrompts, settings: Grounding):
+    """The top-k (values, indices) of the candidate captions ``same (N,)`` by cosine to ``ref_unit (1, E)``;
+    None when there is none or the nearest is below ``UNKNOWN_BELOW``."""
+    sims = torch.where(same, known.embeddings @ ref_unit[0], -math.inf)
+    top = sims.topk(min(settings.top_k, int(same.sum())))
+    if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
+        return None
+    return top
 
 
 def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, settings: Grounding,
@@ -201,11 +214,13 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     if float(best[0]) < UNKNOWN_BELOW or known.untrained(actions):
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
-    same = _candidates(prompt, actions, known)
     ref_unit = torch.nn.functional.normalize(ref.float().reshape(1, -1), dim=-1)
-    sims = torch.where(same, known.embeddings @ ref_unit[0], -math.inf)
-    top = sims.topk(min(settings.top_k, int(same.sum())))
-    if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
+    top = _nearest(_candidates(prompt, actions, known), ref_unit, known, settings)
+    if top is None and actions and known.manner_phrases and known.names_manner(prompt):
+        # no caption of these actions says it in this manner ("A man kicks hard using his left leg.": the
+        # kicks have no style words): the action matters more than the manner, so ground on the action's own
+        top = _nearest(_candidates(prompt, actions, known, manner=False), ref_unit, known, settings)
+    if top is None:
         return Grounded(e, "unmatched")
     w = torch.softmax(top.values.double() / settings.temperature, dim=0).float()
     target = (w[:, None] * known.embeddings[top.indices]).sum(dim=0, keepdim=True)  # (1, E)
