@@ -14,7 +14,7 @@ from kinema.cli import main
 from kinema.data.phrasings import PROBES
 from kinema.errors import KinemaError
 from kinema.model.actions import actions_in, reworded
-from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, sides
+from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, off_forward, sides
 from kinema.model.vocabulary import KnownPrompts
 from kinema.text import get_text_encoder
 
@@ -122,6 +122,22 @@ def test_a_manner_no_caption_of_the_action_has_gives_way_to_the_action():
     assert [c for c, _ in out.captions] == [caps[1]]  # the walks do have the manner: kept
     out = ground("A man kicks and walks.", e, known, Grounding(weight=1.0, top_k=3))
     assert out.status == "unmatched"  # no caption names both actions: left alone as before
+
+
+def test_grounding_never_turns_a_forward_walk_backward():
+    """Stop 53: the shipped model grounded "A man walks forward." on "A man walks backward while facing
+    forward." (the masculine style's backward walk). Captions must name the same directions away from
+    forward as the prompt."""
+    caps = ["A man walks backward while facing forward.", "A man walks straight ahead.", "A person steps back."]
+    emb = torch.tensor([[1.0, 0, 0, 0], [0.6, 0.8, 0, 0], [0.6, 0, 0.8, 0]])
+    known = KnownPrompts(caps, emb, "x")
+    e = torch.nn.functional.normalize(torch.tensor([[0.95, 0.3, 0.1, 0]]), dim=-1)
+    assert known.match("p", e).nearest[0][0] == caps[0]  # nearest overall: the backward walk
+    assert [c for c, _ in ground("A man walks forward.", e, known, Grounding(weight=1.0)).captions] == [caps[1]]
+    for prompt in ("A man walks backwards.", "Someone moves back."):
+        assert [c for c, _ in ground(prompt, e, known, Grounding(weight=1.0, top_k=3)).captions] == [caps[0], caps[2]]
+    assert off_forward("Someone steps sideways to the left.") == {"sideways"}
+    assert off_forward("A person lies on their back.") == frozenset()
 
 
 def test_known_prompts_keep_the_manner_phrases_their_captions_use(tmp_path):

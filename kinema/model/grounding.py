@@ -18,6 +18,11 @@ left hand.", 0.89), so blending the nearest captions as they come would swap sid
 candidate only when the set of side words it uses ({left, right}, also as leftward(s) / rightward(s))
 equals the prompt's; a prompt that names no side is grounded on captions that name none.
 
+Same directions, likewise: "A man walks forward." was nearest to "A man walks backward while facing
+forward." (the masculine style's backward walk), so grounding turned a forward walk into a backward one.
+A caption is a candidate only when it names the same directions away from forward ({backward, sideways})
+as the prompt: none for "walks forward" or "walks", 'backward' for "walks backwards".
+
 Same manner, likewise: the nearest caption of "A person walks forward." is "A person walks forward
 wearily." (an exhausted style), of "A person bows." "A person bows wearily.", so a blend of the nearest
 captions as they come would give a user who named no manner a tired walk. When the known prompts list
@@ -80,6 +85,17 @@ _SIDE = re.compile(r"\b(left|right)(?:wards?)?\b", re.IGNORECASE)
 def sides(text: str) -> frozenset[str]:
     """The sides a text names: a subset of {'left', 'right'} ("walks leftward" names 'left')."""
     return frozenset(m.lower() for m in _SIDE.findall(text))
+
+
+_AWAY_FROM_FORWARD = re.compile(
+    r"\b(backward|sideways|sideward|(?:walk|step|mov)(?:s|ed|ing|e|es)? back)s?\b", re.IGNORECASE)
+
+
+def off_forward(text: str) -> frozenset[str]:
+    """The directions other than forward a text moves in: a subset of {'backward', 'sideways'}
+    ("walks backwards" and "steps back" name 'backward'; "sideward" is 'sideways')."""
+    return frozenset("sideways" if m.lower().startswith("side") else "backward"
+                     for m in _AWAY_FROM_FORWARD.findall(text))
 
 
 @dataclass(frozen=True)
@@ -174,10 +190,11 @@ class Grounded:
 
 
 def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts, manner: bool = True) -> torch.Tensor:
-    """Which captions ``(N,)`` bool a prompt may be grounded on: same sides, same manner (when the known
-    prompts list manner phrases and ``manner``) and, when the prompt names actions, all of them."""
-    want = sides(prompt)
-    same = torch.tensor([sides(c) == want for c in known.captions])
+    """Which captions ``(N,)`` bool a prompt may be grounded on: same sides, same directions away from
+    forward, same manner (when the known prompts list manner phrases and ``manner``) and, when the prompt
+    names actions, all of them."""
+    want, away = sides(prompt), off_forward(prompt)
+    same = torch.tensor([sides(c) == want and off_forward(c) == away for c in known.captions])
     if manner and known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none
         same &= known.mannered == known.names_manner(prompt)
     if actions:
