@@ -16,6 +16,13 @@ measure on the output (metres, Y up):
   (both feet off the ground);
 - roll: the lowest the head comes relative to the pelvis (negative = head below the pelvis: upside
   down); *passes* below 0 (a tuck that goes over);
+- fall: the pelvis' lowest height as a share of its first frame's and its highest rise above the first
+  frame (m); *passes* below 0.6 without a rise over 0.25 m (the training falls get down to 0.15-0.59 and
+  rise 0.15 m at most; a fall that first leaps is not a fall);
+- nod (yes / no): the range over the motion of the head's pitch (its forward axis above or below the
+  horizontal) and of its yaw (that axis turned from the body's forward, from the shoulders), degrees;
+  *passes* when the named one ranges over 15 degrees or more and more than the other (the training nods:
+  pitch 24-25, yaw 0; head shakes: yaw 25-31, pitch 11-15);
 - dance: pelvis travel and hand sway; reported, with the warning if any.
 
 Every prompt also reports the generation's warnings (an unknown prompt is warned). The summary line per
@@ -36,6 +43,7 @@ import json
 import torch
 
 from kinema.data.humanoid_actions import HELD_OUT_PROMPTS
+from kinema.geometry.rotations import quat_rotate
 
 DANCE = "A person dances."
 
@@ -44,8 +52,29 @@ def _ix(names) -> dict[str, int]:
     return {n: i for i, n in enumerate(names)}
 
 
-def measure(content: str, P: torch.Tensor, names) -> dict:
-    """The measures of the module docstring for one generated motion ``P (T, J, 3)``."""
+def head_ranges(P: torch.Tensor, Q: torch.Tensor, ix: dict[str, int]) -> tuple[float, float]:
+    """Ranges (degrees) of the head's pitch and yaw over a motion: positions ``P (T, J, 3)``, global
+    rotations ``Q (T, J, 4)``. The head's forward axis is the one of its local axes that points most along
+    the body's forward (from the shoulders) at the first frame."""
+    across = P[:, ix["Shoulder_L"]] - P[:, ix["Shoulder_R"]]
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across)
+    fwd = torch.cross(across, up, dim=-1)
+    fwd[:, 1] = 0
+    fwd = fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+    head = Q[:, ix["Head"]].to(P.dtype)
+    axes = torch.cat([torch.eye(3, dtype=P.dtype), -torch.eye(3, dtype=P.dtype)])
+    first = quat_rotate(head[:1].expand(6, 4), axes)
+    h = quat_rotate(head, axes[int((first * fwd[0]).sum(-1).argmax())].expand(len(head), 3))
+    pitch = torch.rad2deg(torch.asin(h[:, 1].clamp(-1, 1)))
+    flat = torch.nn.functional.normalize(h * torch.tensor([1.0, 0.0, 1.0], dtype=P.dtype), dim=-1)
+    side = torch.cross(fwd, up, dim=-1)
+    yaw = torch.rad2deg(torch.atan2((flat * side).sum(-1), (flat * fwd).sum(-1)))
+    return float(pitch.max() - pitch.min()), float(yaw.max() - yaw.min())
+
+
+def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None) -> dict:
+    """The measures of the module docstring for one generated motion: positions ``P (T, J, 3)``, global
+    rotations ``Q (T, J, 4)`` (needed for nods only)."""
     ix = _ix(names)
     hips = P[:, ix["Hips"]]
     toes = P[:, [ix["Toes_L"], ix["Toes_R"]], 1]
@@ -78,6 +107,15 @@ def measure(content: str, P: torch.Tensor, names) -> dict:
     elif action == "roll":
         out["head_over_pelvis_min_m"] = float((P[:, ix["Head"], 1] - hips[:, 1]).min())
         out["pass"] = out["head_over_pelvis_min_m"] < 0
+    elif action == "fall":
+        out["pelvis_low_share"] = float(hips[:, 1].min() / hips[0, 1])
+        out["pelvis_rise_m"] = float(hips[:, 1].max() - hips[0, 1])
+        out["pass"] = out["pelvis_low_share"] < 0.6 and out["pelvis_rise_m"] <= 0.25
+    elif action == "nod":
+        pitch, yaw = head_ranges(P, Q, ix)
+        out["head_pitch_range_deg"], out["head_yaw_range_deg"] = pitch, yaw
+        named, other = (pitch, yaw) if content == "nod-yes" else (yaw, pitch)
+        out["pass"] = named >= 15 and named > other
     else:
         out["travel_m"] = float((hips[-1, [0, 2]] - hips[0, [0, 2]]).norm())
         out["hand_sway_m"] = float((P[:, ix["Hand_R"]] - P[:, ix["Chest"]]).std(dim=0).norm())
@@ -100,7 +138,7 @@ def run(model_name: str, seeds: list[int], seconds: float = 4.0, as_learned: boo
             row = {"content": content, "prompt": prompt, "seed": seed, "warnings": list(res.report.warnings)}
             g = res.report.prompts[0].get("grounding", {})
             row["grounded_on"] = [c["caption"] for c in g.get("captions", [])] if isinstance(g, dict) else []
-            row.update(measure(content, P, list(res[0].skeleton.names)))
+            row.update(measure(content, P, list(res[0].skeleton.names), res[0].global_rotations.double()))
             rows.append(row)
             print(json.dumps(row))
     return rows

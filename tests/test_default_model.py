@@ -22,7 +22,8 @@ def model():
 
 def test_shipped_files_size_and_licence() -> None:
     names = sorted(p.name for p in SHIPPED.iterdir())
-    assert names == ["MODEL_CARD.md", "checkpoint.json", "ema.safetensors", "known_prompts.safetensors", "walk.png"]
+    assert names == ["MODEL_CARD.md", "action_expert.safetensors", "checkpoint.json", "ema.safetensors",
+                     "known_prompts.safetensors", "walk.png"]
     assert sum(p.stat().st_size for p in SHIPPED.iterdir()) <= 25e6
     card = (SHIPPED / "MODEL_CARD.md").read_text()
     for needed in (
@@ -34,6 +35,9 @@ def test_shipped_files_size_and_licence() -> None:
         "kinema evaluate",
         "Ground truth",
         "kinema bench",
+        "CC0",
+        "Quaternius",
+        "--action-expert",
     ):
         assert needed in card, needed
 
@@ -91,3 +95,17 @@ def test_default_model_follows_text(model) -> None:
     assert 3.0 < walk[1] < 8.0 and walk[0].abs() < 0.5 * walk[1], walk
     assert run[1] > walk[1] and run[0].abs() < 0.5 * run[1], (run, walk)
     assert wave.norm() < 0.6, wave
+
+
+def test_new_actions_run_on_the_action_expert_and_old_ones_on_the_main_weights(model) -> None:
+    """Issue 38: a kick asked in words no caption uses is made by the action expert (the named foot above
+    the pelvis, the other below half the pelvis' height) without a warning; a walk stays on the main
+    weights, which are the shipped model's before the expert came."""
+    assert model.loaded.expert is not None and "kick" in model.loaded.expert.actions
+    res = model.generate("Someone delivers a kick with the left foot.", seconds=3, seed=0)
+    P, names = res[0].positions, list(res[0].skeleton.names)
+    hips, foot, other = (P[:, names.index(n)] for n in ("Hips", "Foot_L", "Foot_R"))
+    assert float((foot[:, 1] - hips[:, 1]).max()) > 0 and float(other[:, 1].max()) < 0.5 * float(hips[0, 1])
+    assert res.report.prompts[0]["weights"] == "action expert" and not res.report.warnings
+    walk = model.generate("A person walks forward.", seconds=2, seed=0, steps=5)
+    assert walk.report.prompts[0]["weights"] == "main"

@@ -53,9 +53,10 @@ def model():
     return kinema.load_model()
 
 
-@pytest.mark.parametrize("prompt", ["A person sits down on a chair.", "A person jumps up in place."])
+@pytest.mark.parametrize("prompt", ["A person sits down on a chair.", "A person climbs a ladder."])
 def test_unknown_prompts_warn_with_their_nearest_captions(model, prompt):
-    """Issue 18: no sitting or jumping in the training data; the model used to raise a hand silently."""
+    """Issue 18: no sitting or climbing in the training data; the model used to raise a hand silently.
+    (Jumping was the second case until stop 53's action expert learned it.)"""
     rep = model.generate(prompt, seconds=1.0, steps=1, postprocess=False).report
     assert len(rep.warnings) == 1 and rep.warnings[0].startswith(f"prompt {prompt!r} is far from every caption")
     (entry,) = rep.prompts
@@ -188,22 +189,28 @@ def test_measured_actions_decide_over_clip_counts(tmp_path):
 
 
 def test_the_default_model_knows_which_actions_its_clips_show():
+    """Stop 53: the known prompts are the Bandai + Quaternius humanoid build's; the actions its action expert
+    was measured to make (kick, jump, roll, fall: scripts/humanoid_action_probes.py) are learned whatever
+    their clip count, those it was measured not to make (punch, nod) are not, and the unmeasured rare ones
+    keep the count rule."""
     known = kinema.load_model().known_prompts
     clips = known.action_clips
-    assert clips["kick"] == clips["dance"] == 2 and clips["call"] == clips["slash"] == 4  # 1-2 takes, mirrored
+    assert clips["kick"] == 6 and clips["dance"] == 8 and clips["call"] == clips["slash"] == 4  # mirrored
+    assert clips["punch"] == 10 and clips["nod"] == 12 and clips["roll"] == 4
     assert min(clips[a] for a in ("walk", "run", "turn", "bow", "wave", "raise", "guide")) >= 2 * MIN_ACTION_CLIPS
-    assert known.named_actions - known.learned == {"kick", "dance", "call", "slash", "spin"}
-    assert "punch" not in known.named_actions and "jump" not in known.named_actions
+    assert {"kick", "jump", "roll", "fall"} <= known.learned
+    unlearned = {"punch", "nod", "dance", "crouch", "pick up", "call", "slash", "spin"}
+    assert known.named_actions - known.learned == unlearned
 
 
 @pytest.mark.parametrize(
     "prompt, says",
     [
         ("A person walks forward and reaches out with the right hand.", "the model was not trained on 'reach'"),
-        ("A person kicks with their right leg.", "the model was not trained on 'kick' enough to learn it"),
-        ("A person kicks.", "only 2 training clips show it"),
         ("A person dances.", "the model was not trained on 'dance' enough to learn it"),
-        ("A person punches.", "the model was not trained on 'punch'"),
+        ("A person punches.", "the model does not make 'punch': 0 of 8 measured samples show it"),
+        ("Someone nods yes.", "the model does not make 'nod'"),
+        ("A person picks up a box.", "only 2 training clips show it"),
     ],
 )
 def test_a_prompt_whose_action_the_model_does_not_know_is_warned(model, prompt, says):

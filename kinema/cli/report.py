@@ -44,16 +44,18 @@ def residual_table(residuals: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def grounding_lines(prompts: list[dict]) -> list[str]:
-    """One line per grounded prompt of ``report.prompts``: the training captions it was blended with
-    and their weights (kinema.model.grounding)."""
+def prompt_lines(prompts: list[dict]) -> list[str]:
+    """How the prompts of ``report.prompts`` were conditioned: per grounded prompt, the training captions
+    it was blended with and their weights (kinema.model.grounding); per prompt that the model's action
+    expert made, a line saying so (kinema.model.action_expert)."""
     lines = []
     for p in prompts:
         g = p.get("grounding") or {}
-        if g.get("status") != "grounded":
-            continue
-        caps = ", ".join(f"{c['caption']!r} ({c['weight']:.2f})" for c in g["captions"])
-        lines.append(f"grounded {p['prompt']!r} (own weight {g['prompt_weight']:.2f}) on {caps}")
+        if g.get("status") == "grounded":
+            caps = ", ".join(f"{c['caption']!r} ({c['weight']:.2f})" for c in g["captions"])
+            lines.append(f"grounded {p['prompt']!r} (own weight {g['prompt_weight']:.2f}) on {caps}")
+        if p.get("weights") == "action expert":
+            lines.append(f"made {p['prompt']!r} with the model's action expert")
     return lines
 
 
@@ -116,7 +118,7 @@ def print_report(result) -> None:
     windows = f", {rep.windows} window(s)" if rep.windows > 1 else ""
     print(f"generated {len(result)} motion(s){where}, {rep.segments} segment(s){windows}, {rep.steps} DDIM steps "
           f"in {rep.seconds:.2f} s")
-    for line in grounding_lines(rep.prompts):
+    for line in prompt_lines(rep.prompts):
         print(line)
     for table in (residual_table(rep.residuals), objective_table(rep.objectives)):
         if table:

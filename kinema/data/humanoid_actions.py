@@ -133,6 +133,9 @@ HELD_OUT_PROMPTS: dict[str, tuple[str, ...]] = {
     "punch-right": ("A man punches straight ahead with his right fist.", "Someone jabs with the right hand."),
     "jump": ("A man jumps straight up into the air.", "Someone hops up off the ground."),
     "roll": ("A man rolls forward across the floor.", "Someone performs a roll."),
+    "fall": ("A man falls down onto the floor.", "Someone trips and falls over."),
+    "nod-yes": ("A man nods his head in agreement.", "Someone nods to say yes."),
+    "nod-no": ("A man shakes his head in refusal.", "Someone shakes their head to say no."),
 }
 
 

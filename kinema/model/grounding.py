@@ -47,8 +47,8 @@ heads forward.") is grounded as before, on captions of any action.
 
 Four cases are left alone:
 
-- a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`): the model knows
-  it, so its embedding is returned unchanged (grounding is the identity there; tested);
+- a prompt that *is* a training caption (same text, or cosine >= :data:`EXACT_ABOVE`) of learned actions:
+  the model knows it, so its embedding is returned unchanged (grounding is the identity there; tested);
 - an unknown prompt (nearest caption below ``UNKNOWN_BELOW``, or an action the model has not learned):
   rewriting it into the nearest known action would silently produce something else; it keeps its own
   embedding and the unknown-prompt warning;
@@ -224,11 +224,13 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
     if settings.off or known is None:
         return Grounded(e, "off")
     best, _, ref = known.nearest_judged(e, reworded, 1)
+    actions = actions_in(prompt)
+    if known.untrained(actions):  # even a training caption ("A person dances.": 8 clips, not learned)
+        return Grounded(e, "unknown")
     # a reworded prompt was below the unknown threshold in its own words, so never a caption's twin
     if prompt.strip() in known.caption_set or (ref is e and float(best[0]) >= EXACT_ABOVE):
         return Grounded(e, "exact")
-    actions = actions_in(prompt)
-    if float(best[0]) < UNKNOWN_BELOW or known.untrained(actions):
+    if float(best[0]) < UNKNOWN_BELOW:
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
     ref_unit = torch.nn.functional.normalize(ref.float().reshape(1, -1), dim=-1)
