@@ -63,9 +63,7 @@ class LoadedModel:
     def for_prompt(self, prompt: str) -> LoadedModel:
         """The model that denoises a pass of ``prompt``: this one with the action expert's weights when the
         prompt names one of its actions, else this one."""
-        if self.expert is None or not self.expert.serves(prompt):
-            return self
-        return replace(self, denoiser=self.expert.denoiser)
+        return replace(self, denoiser=self.expert.denoiser) if self.serves_with_expert(prompt) else self
 
     def serves_with_expert(self, prompt: str) -> bool:
         """Whether :meth:`for_prompt` runs ``prompt`` on the action expert's weights."""
