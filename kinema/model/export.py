@@ -127,18 +127,27 @@ def mix_weights(
     else is a one-line `KinemaError`. Returns the weights and what was mixed (for checkpoint.json)."""
     if not 0.0 <= share <= 1.0:
         raise KinemaError(f"--mix: the share of the other model must lie in [0, 1], got {share:g}")
-    other_ckpt = find_checkpoint(other)
-    other_info = read_checkpoint_info(other_ckpt)
-    for key in _MIX_MUST_MATCH:
-        if other_info.get(key) != info.get(key):
-            raise KinemaError(f"--mix: {other_ckpt} has another {key} than {ckpt}; only a model and its own "
-                              "fine-tune (same network, features and statistics) can be mixed")
+    other_ckpt, other_info = _same_network(other, info, ckpt, _MIX_MUST_MATCH, "--mix", "only a model and its "
+                                           "own fine-tune (same network, features and statistics) can be mixed")
     theirs = read_weights(weights_file(other_ckpt, True))
     if set(theirs) != set(state) or any(theirs[k].shape != v.shape for k, v in state.items()):
         raise KinemaError(f"--mix: {other_ckpt}'s weights do not match {ckpt}'s tensor for tensor")
     mixed = {k: torch.lerp(v.float(), theirs[k].float(), share) if v.is_floating_point() else v
              for k, v in state.items()}
     return mixed, {"source": str(other_ckpt), "step": other_info.get("step"), "share": share}
+
+
+def _same_network(other: str | Path, info: dict, ckpt: Path, keys: tuple[str, ...], flag: str,
+                  why: str) -> tuple[Path, dict]:
+    """The checkpoint folder and checkpoint.json of ``other``, a network packed with the model of
+    ``info`` (at ``ckpt``): a one-line `KinemaError` (``flag``: ..., ``why``) names the first of the
+    checkpoint.json ``keys`` in which they differ."""
+    other_ckpt = find_checkpoint(other)
+    other_info = read_checkpoint_info(other_ckpt)
+    for key in keys:
+        if other_info.get(key) != info.get(key):
+            raise KinemaError(f"{flag}: {other_ckpt} has another {key} than {ckpt}; {why}")
+    return other_ckpt, other_info
 
 
 def _replace_defaults(
@@ -187,12 +196,9 @@ def _action_expert(src: str | Path, actions: list[str], info: dict, ckpt: Path) 
     if info.get("kind") == "anyrig":
         raise KinemaError(f"{where}: {ckpt} is an any-rig model; action experts are for the human model")
     actions = expert_actions(actions, "--expert-actions")
-    expert_ckpt = find_checkpoint(src)
-    expert_info = read_checkpoint_info(expert_ckpt)
-    for key in EXPERT_MUST_MATCH:
-        if expert_info.get(key) != info.get(key):
-            raise KinemaError(f"{where}: {expert_ckpt} has another {key} than {ckpt}; an action expert must be a "
-                              "fine-tune of the model (same network, features and statistics: --init-from)")
+    expert_ckpt, expert_info = _same_network(src, info, ckpt, EXPERT_MUST_MATCH, where, "an action expert must "
+                                             "be a fine-tune of the model (same network, features and statistics: "
+                                             "--init-from)")
     weights = weights_file(expert_ckpt, True)
     packed = expert_info.get("export", {})
     entry = {
