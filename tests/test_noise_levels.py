@@ -21,6 +21,16 @@ def test_the_noise_hides_a_larger_value_only_at_a_later_step():
     assert 975 <= int(first[2]) <= 990  # a kick's foot (36 std) stands above the noise until ~t = 980
 
 
+def test_a_smaller_visibility_hides_the_value_deeper():
+    """``visible`` (stop 53): the first step where sqrt(alpha_bar) * peak <= visible; 0.25 starts later than 1."""
+    peaks = torch.tensor([6.0, 15.0, 36.0])
+    at_noise, deeper = drowned_from(SCHEDULE, peaks), drowned_from(SCHEDULE, peaks, visible=0.25)
+    assert (deeper > at_noise).all()
+    root_ab = SCHEDULE.alphas_cumprod.sqrt()
+    for p, t in zip(peaks.tolist(), deeper.tolist(), strict=True):
+        assert root_ab[t] * p <= 0.25 < root_ab[t - 1] * p
+
+
 def test_only_rows_beyond_the_threshold_are_redrawn_and_only_where_the_noise_hides_them():
     x0 = torch.zeros(64, 20, 6)
     x0[:32, 5, 2] = 36.0  # far out
@@ -50,9 +60,9 @@ def test_cli_trains_with_the_option_saves_it_and_rejects_bad_values(tiny_data, t
     out = tmp_path / "run"
     args = ["train", "--config", "tiny", "--data", str(tiny_data), "--out", str(out), "--batch-size", "2",
             "--steps", "2", "--text-encoder", "hash-test-32", "--no-progress"]
-    assert main([*args, "--high-noise-share", "0.5", "--high-noise-min-std", "2"]) == 0
+    assert main([*args, "--high-noise-share", "0.5", "--high-noise-min-std", "2", "--high-noise-visible", "0.25"]) == 0
     saved = json.loads((out / "train_config.json").read_text())
-    assert (saved["high_noise_share"], saved["high_noise_min_std"]) == (0.5, 2.0)
+    assert (saved["high_noise_share"], saved["high_noise_min_std"], saved["high_noise_visible"]) == (0.5, 2.0, 0.25)
     capsys.readouterr()
     with pytest.raises(SystemExit):  # argparse: one line naming the option and the range
         main([*args, "--high-noise-share", "1.5"])

@@ -43,6 +43,9 @@ def register(sub) -> None:
     p.add_argument("--high-noise-min-std", type=positive_float,
                    help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
                         "(default 8)")
+    p.add_argument("--high-noise-visible", type=positive_float,
+                   help="--high-noise-share rows are drawn from the steps where their clip's largest value is at "
+                        "most this many noise standard deviations (default 1; smaller hides it deeper)")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -109,7 +112,7 @@ def _config_from_args(args: argparse.Namespace):
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
         "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
         "crop_min_fraction": args.crop_min_fraction, "high_noise_share": args.high_noise_share,
-        "high_noise_min_std": args.high_noise_min_std,
+        "high_noise_min_std": args.high_noise_min_std, "high_noise_visible": args.high_noise_visible,
         "anchor": None if args.anchor is None else _init_path(args.anchor), "anchor_weight": args.anchor_weight,
         "anchor_datasets": args.anchor_datasets,
     }

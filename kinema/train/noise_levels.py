@@ -26,11 +26,11 @@ import torch
 from kinema.diffusion.schedule import NoiseSchedule
 
 
-def drowned_from(schedule: NoiseSchedule, peak: torch.Tensor) -> torch.Tensor:
+def drowned_from(schedule: NoiseSchedule, peak: torch.Tensor, visible: float = 1.0) -> torch.Tensor:
     """Per row, the first 0-based step at which the noise hides a value of ``peak (B,)`` normalised units:
-    the smallest ``t`` with ``sqrt(alpha_bar_t) * peak <= 1`` (the last step when none does)."""
+    the smallest ``t`` with ``sqrt(alpha_bar_t) * peak <= visible`` (the last step when none does)."""
     root_ab = schedule.alphas_cumprod.sqrt().to(peak.dtype)  # (T,), decreasing
-    hidden = root_ab[None, :] * peak[:, None] <= 1.0  # (B, T), False then True along T
+    hidden = root_ab[None, :] * peak[:, None] <= visible  # (B, T), False then True along T
     last = torch.full(peak.shape, schedule.num_train_steps - 1, dtype=torch.int64)
     return torch.where(hidden.any(dim=1), hidden.to(torch.int64).argmax(dim=1), last)
 
@@ -42,14 +42,16 @@ def high_noise_timesteps(
     share: float,
     min_std: float,
     generator: torch.Generator,
+    visible: float = 1.0,
 ) -> torch.Tensor:
     """``t (B,)`` with the rows of ``x0 (B, T, D)`` (normalised; padded frames zero) that reach beyond
     ``min_std`` redrawn with probability ``share``, uniformly from :func:`drowned_from` their largest
-    ``|x0|`` to the last step. ``share == 0`` returns ``t`` and draws nothing (runs stay as before)."""
+    ``|x0|`` (at most ``visible`` noise standard deviations) to the last step. ``share == 0`` returns ``t``
+    and draws nothing (runs stay as before)."""
     if share <= 0:
         return t
     peak = x0.detach().abs().flatten(1).amax(dim=1).float()
-    lo = drowned_from(schedule, peak)
+    lo = drowned_from(schedule, peak, visible)
     u = torch.rand(t.shape, generator=generator)
     pick = torch.rand(t.shape, generator=generator)
     span = schedule.num_train_steps - lo

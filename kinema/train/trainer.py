@@ -89,6 +89,8 @@ class TrainConfig:
     # outside the normalisation are otherwise read from the noisy input, never made from the text
     high_noise_share: float = 0.0
     high_noise_min_std: float = 8.0
+    # those rows' steps: where sqrt(alpha_bar_t) * the clip's largest value <= this (1: at the noise's level)
+    high_noise_visible: float = 1.0
     # fine-tuning: pull the predictions on the rows of these datasets' clips (all when empty) towards those
     # of this frozen model (kinema.train.anchor: learning without forgetting), with this weight
     anchor: str = ""
@@ -316,7 +318,8 @@ class Trainer:
         else:
             mask = torch.zeros_like(x0)
         t = self.schedule.sample_timesteps(B, g)
-        t = high_noise_timesteps(t, x0, self.schedule, cfg.high_noise_share, cfg.high_noise_min_std, g)
+        t = high_noise_timesteps(t, x0, self.schedule, cfg.high_noise_share, cfg.high_noise_min_std, g,
+                                 visible=cfg.high_noise_visible)
         noise = torch.randn(x0.shape, generator=g)
         x_t = self.schedule.q_sample(x0, t, noise)
         text = self.text_table[batch.caption_index]
