@@ -52,15 +52,21 @@ def _ix(names) -> dict[str, int]:
     return {n: i for i, n in enumerate(names)}
 
 
+def body_forward(P: torch.Tensor, ix: dict[str, int]) -> torch.Tensor:
+    """Per frame, the body's horizontal forward unit vector ``(T, 3)`` of positions ``P (T, J, 3)``: square to
+    the line from the right shoulder to the left, Y up."""
+    across = P[:, ix["Shoulder_L"]] - P[:, ix["Shoulder_R"]]
+    fwd = torch.cross(across, torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across), dim=-1)
+    fwd[:, 1] = 0
+    return fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+
+
 def head_ranges(P: torch.Tensor, Q: torch.Tensor, ix: dict[str, int]) -> tuple[float, float]:
     """Ranges (degrees) of the head's pitch and yaw over a motion: positions ``P (T, J, 3)``, global
     rotations ``Q (T, J, 4)``. The head's forward axis is the one of its local axes that points most along
     the body's forward (from the shoulders) at the first frame."""
-    across = P[:, ix["Shoulder_L"]] - P[:, ix["Shoulder_R"]]
-    up = torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across)
-    fwd = torch.cross(across, up, dim=-1)
-    fwd[:, 1] = 0
-    fwd = fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+    fwd = body_forward(P, ix)
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(fwd)
     head = Q[:, ix["Head"]].to(P.dtype)
     axes = torch.cat([torch.eye(3, dtype=P.dtype), -torch.eye(3, dtype=P.dtype)])
     first = quat_rotate(head[:1].expand(6, 4), axes)
@@ -88,10 +94,7 @@ def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None)
         out["other_foot_max_m"] = float(free[:, 1].max())
         out["pass"] = out["named_foot_over_pelvis_m"] > 0 and out["other_foot_max_m"] < 0.5 * float(hips[0, 1])
     elif action == "punch":
-        across = P[:, ix["Shoulder_L"]] - P[:, ix["Shoulder_R"]]
-        fwd = torch.cross(across, torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across), dim=-1)
-        fwd[:, 1] = 0
-        fwd = fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+        fwd = body_forward(P, ix)
         gain = {}
         for s in ("L", "R"):
             reach = ((P[:, ix[f"Hand_{s}"]] - hips) * fwd).sum(-1)
