@@ -89,6 +89,7 @@ def test_a_kick_lifts_the_foot_its_caption_names_also_mirrored(humanoid_build):
 
 def test_clips_stand_on_the_floor_before_and_after_the_action(humanoid_build):
     from kinema.data.humanoid_build import SINK_M
+    from kinema.data.humanoid_clips import PAD_SECONDS
     from kinema.retarget.align import rest_frames
 
     skel = Skeleton.from_dict(json.loads((humanoid_build / "skeleton.json").read_text()))
@@ -104,7 +105,7 @@ def test_clips_stand_on_the_floor_before_and_after_the_action(humanoid_build):
         for frame in ends:  # standing in the idle: toes where the standing rest pose has them
             assert float(toes[frame].min()) == pytest.approx(standing, abs=0.01), rec["clip_id"]
         assert rec["min_toe_height"] > standing - SINK_M
-        assert rec["duration_s"] > 2.0  # one second of idle on either side
+        assert rec["duration_s"] > 2 * PAD_SECONDS  # idle on either side
 
 
 # what each content's captions name (kinema.model.actions): one action each, so grounding never blends two

@@ -80,6 +80,9 @@ def _add_fine_tune_arguments(p: argparse.ArgumentParser) -> None:
                         "model's ('default' or a folder in the run's statistics: learning without forgetting, "
                         "meant to keep the contents it knows; docs/training.md)")
     p.add_argument("--anchor-weight", type=positive_float, help="weight of the --anchor term (default 1)")
+    p.add_argument("--datasets", nargs="+", metavar="NAME",
+                   help="train only on the clips of these datasets of the build (clips.json 'dataset'; default: "
+                        "all), e.g. an action expert's fine-tune on the new actions alone (docs/training.md)")
     p.add_argument("--anchor-datasets", nargs="+", metavar="NAME",
                    help="datasets (the build's clips.json 'dataset') whose clips are anchored (default: all)")
 
@@ -114,7 +117,7 @@ def _config_from_args(args: argparse.Namespace):
         "crop_min_fraction": args.crop_min_fraction, "high_noise_share": args.high_noise_share,
         "high_noise_min_std": args.high_noise_min_std, "high_noise_visible": args.high_noise_visible,
         "anchor": None if args.anchor is None else _init_path(args.anchor), "anchor_weight": args.anchor_weight,
-        "anchor_datasets": args.anchor_datasets,
+        "anchor_datasets": args.anchor_datasets, "datasets": args.datasets,
     }
     saved = args.out / "train_config.json"
     if args.resume and saved.exists():

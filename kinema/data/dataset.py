@@ -10,6 +10,7 @@ a training step.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
@@ -133,6 +134,16 @@ class MotionDataset(torch.utils.data.Dataset):
             shape = None if x is None else (tuple(x.shape), str(x.dtype))
             raise DataError(f"{path}: expected a float32 tensor 'features' of shape (N, {D}), got {shape}")
         return x
+
+    def keep_datasets(self, names: Sequence[str]) -> None:
+        """Keep only the clips whose ``dataset`` (clips.json) is one of ``names``; a name no clip of this
+        split has is a one-line error (a typo would otherwise train or evaluate on nothing)."""
+        have = {rec.get("dataset", "") for rec in self.clips}
+        unknown = sorted(set(names) - have)
+        if unknown:
+            raise DataError(f"{self.dir / 'clips.json'}: no {self.split} clip comes from dataset "
+                            f"{', '.join(map(repr, unknown))} (it has {', '.join(sorted(have))})")
+        self.clips = [rec for rec in self.clips if rec.get("dataset", "") in names]
 
     def __len__(self) -> int:
         return len(self.clips)

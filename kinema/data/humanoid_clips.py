@@ -29,7 +29,10 @@ from kinema.geometry.rotations import quat_between, quat_inverse, quat_mul, quat
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
-PAD_SECONDS = 1.0
+#: idle on each side of an action. 2 s makes a punch clip 4.9 s long, so the requests users make (4-5 s:
+#: kinema generate's default is 5) are lengths the model saw the action at; with 1 s (2.9-s punch clips)
+#: an expert punched at 2.85 s and not at all at 4 s (issue 38, stop 54: docs/training.md)
+PAD_SECONDS = 2.0
 BLEND_SECONDS = 0.2
 LOOP_SECONDS = 3.0
 

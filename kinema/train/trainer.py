@@ -71,6 +71,10 @@ class TrainConfig:
     # clip sampling weight = (train clips sharing its content label) ** -content_balance: 0 draws clips
     # uniformly (common contents dominate), 0.5 square-root balances, 1 gives every content equal time
     content_balance: float = 0.0
+    # train only on the clips of these datasets of the build (clips.json 'dataset'; all when empty): an
+    # action expert (kinema.model.action_expert) serves only its actions' prompts, so its fine-tune need not
+    # rehearse the rest
+    datasets: list[str] = field(default_factory=list)
     # fine-tuning: start from the weights of this model or checkpoint folder (its EMA copy when present)
     # instead of random ones; the optimiser, step counter and schedule start fresh
     init_from: str = ""
@@ -142,6 +146,8 @@ class Trainer:
         self.bf16, self.compile = bool(bf16), bool(compile)
         self.stopped_by_budget = False  # set by run(): whether its time budget ended it
         ds = MotionDataset(data_dir, "train")
+        if cfg.datasets:
+            ds.keep_datasets(cfg.datasets)
         if len(ds) == 0:
             raise KinemaError(f"{data_dir}: the train split is empty")
         self.dataset = ds
