@@ -1,10 +1,13 @@
 """Does a human model make the Quaternius humanoid actions (issue 38)? Held-out phrasings, measured.
 
-    python scripts/humanoid_action_probes.py --model default --seeds 0 1 2 [--json out.json]
+    python scripts/humanoid_action_probes.py --model default --seeds 0 1 2 [--json out.json] [--after-walk]
 
 For every phrasing of kinema.data.humanoid_actions.HELD_OUT_PROMPTS (no training caption uses them) and
-"A person dances.", generate 4 s (``--seconds``; defaults: 50 DDIM steps, post-processing, grounding) at each seed and
-measure on the output (metres, Y up):
+"A person dances.", generate 5 s (``--seconds``: 5 is what ``kinema generate`` makes when not told; defaults:
+50 DDIM steps, post-processing, grounding) at each seed and measure on the output (metres, Y up).
+``--after-walk`` asks for each prompt as the second segment of a timeline, after 3 s of "A person walks
+forward." (how users put actions into a scene), and measures that segment's frames alone.
+The measures:
 
 - kick (named side): the named foot's highest point above the pelvis at that frame (> 0 = above hip
   height) and the other foot's highest point above the floor; *passes* when the named foot goes above
@@ -46,6 +49,8 @@ from kinema.data.humanoid_actions import HELD_OUT_PROMPTS
 from kinema.geometry.rotations import quat_rotate
 
 DANCE = "A person dances."
+WALK = "A person walks forward."
+WALK_SECONDS = 3.0
 
 
 def _ix(names) -> dict[str, int]:
@@ -125,7 +130,8 @@ def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None)
     return out
 
 
-def run(model_name: str, seeds: list[int], seconds: float = 4.0, as_learned: bool = False) -> list[dict]:
+def run(model_name: str, seeds: list[int], seconds: float = 5.0, as_learned: bool = False,
+        after_walk: bool = False) -> list[dict]:
     import kinema
 
     model = kinema.load_model(model_name)
@@ -136,12 +142,17 @@ def run(model_name: str, seeds: list[int], seconds: float = 4.0, as_learned: boo
     cases = [(c, p) for c, ps in HELD_OUT_PROMPTS.items() for p in ps] + [("dance", DANCE)]
     for content, prompt in cases:
         for seed in seeds:
-            res = model.generate(prompt, seconds=seconds, seed=seed)
-            P = res[0].positions.double()
+            if after_walk:
+                res = model.generate(timeline=[{"prompt": WALK, "seconds": WALK_SECONDS},
+                                               {"prompt": prompt, "seconds": seconds}], seed=seed)
+            else:
+                res = model.generate(prompt, seconds=seconds, seed=seed)
+            start = round(WALK_SECONDS * res[0].fps) if after_walk else 0  # the prompt's own frames
+            P, Q = res[0].positions.double()[start:], res[0].global_rotations.double()[start:]
             row = {"content": content, "prompt": prompt, "seed": seed, "warnings": list(res.report.warnings)}
-            g = res.report.prompts[0].get("grounding", {})
+            g = res.report.prompts[-1].get("grounding", {})
             row["grounded_on"] = [c["caption"] for c in g.get("captions", [])] if isinstance(g, dict) else []
-            row.update(measure(content, P, list(res[0].skeleton.names), res[0].global_rotations.double()))
+            row.update(measure(content, P, list(res[0].skeleton.names), Q))
             rows.append(row)
             print(json.dumps(row))
     return rows
@@ -163,22 +174,27 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default="default")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    ap.add_argument("--seconds", type=float, default=4.0,
-                    help="length of each generated motion (default 4; the humanoid clips are 2.5-7.5 s, kicks 3)")
+    ap.add_argument("--seconds", type=float, default=5.0,
+                    help="length of each generated motion (default 5, as kinema generate; the humanoid clips are "
+                         "2.8-7 s, an action within 1 or 2 s of idle on either side)")
+    ap.add_argument("--after-walk", action="store_true",
+                    help=f"each prompt after {WALK_SECONDS:g} s of {WALK!r} in one timeline, measured on its own "
+                         "frames")
     ap.add_argument("--json", help="write every row and the summary here")
     ap.add_argument("--as-learned", action="store_true",
                     help="measure as if every action the captions name were learned (evidence for kinema export "
                          "--action-probes)")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    rows = run(args.model, args.seeds, seconds=args.seconds, as_learned=args.as_learned)
+    rows = run(args.model, args.seeds, seconds=args.seconds, as_learned=args.as_learned, after_walk=args.after_walk)
     s = summary(rows)
     for k, v in s.items():
         print(f"{k}: {v}")
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"model": args.model, "seeds": args.seeds, "seconds": args.seconds,
-                       "as_learned": args.as_learned, "rows": rows, "summary": s}, f, indent=1)
+                       "as_learned": args.as_learned, "after_walk": args.after_walk, "rows": rows, "summary": s},
+                      f, indent=1)
     return 0
 
 

@@ -70,6 +70,24 @@ def test_base_clips_kept_and_humanoid_actions_added(humanoid_build, tiny_data):
     assert "CC0" in meta["licence"] and "CC BY-NC" in meta["licence"]
 
 
+def test_every_action_comes_at_each_idle_length_as_one_source(humanoid_build):
+    """Stop 54: each animation is built once per PAD_SECONDS (its mirror with it), the longer ones 2 x the
+    extra idle longer, all sharing the animation's source_clip_id, which the build counts once."""
+    from kinema.data.humanoid_clips import PAD_SECONDS
+
+    new = [r for r in _clips(humanoid_build) if r["dataset"] == "quaternius-humanoids"]
+    by_source: dict[str, list[dict]] = {}
+    for r in new:
+        by_source.setdefault(r["source_clip_id"], []).append(r)
+    for source, recs in by_source.items():
+        assert len(recs) == 2 * len(PAD_SECONDS), source  # each length, mirrored
+        short, long = sorted({r["duration_s"] for r in recs})
+        assert long - short == pytest.approx(2 * (PAD_SECONDS[1] - PAD_SECONDS[0]), abs=0.11), source
+        assert len({r["clip_id"] for r in recs}) == len(recs)
+    meta = json.loads((humanoid_build / "meta.json").read_text())
+    assert meta["humanoids"]["source_clips"] == len(by_source) and meta["humanoids"]["clips"] == len(new)
+
+
 def test_a_kick_lifts_the_foot_its_caption_names_also_mirrored(humanoid_build):
     names = None
     for rec in _clips(humanoid_build):
@@ -105,7 +123,7 @@ def test_clips_stand_on_the_floor_before_and_after_the_action(humanoid_build):
         for frame in ends:  # standing in the idle: toes where the standing rest pose has them
             assert float(toes[frame].min()) == pytest.approx(standing, abs=0.01), rec["clip_id"]
         assert rec["min_toe_height"] > standing - SINK_M
-        assert rec["duration_s"] > 2 * PAD_SECONDS  # idle on either side
+        assert rec["duration_s"] > 2 * min(PAD_SECONDS)  # idle on either side
 
 
 # what each content's captions name (kinema.model.actions): one action each, so grounding never blends two

@@ -106,13 +106,16 @@ def _mix(mix: list[str] | None) -> tuple[Path, float] | None:
 
 def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | None) -> None:
     """Embed the train captions of ``data`` with the model's text encoder into ``out``, with the
-    per-action ``probes`` (kinema.model.vocabulary.read_action_probes) when given."""
+    per-action ``probes`` (kinema.model.vocabulary.read_action_probes) when given. Clips per action count
+    each source clip once per side: the humanoid actions, built at two idle lengths, are one clip each."""
     from kinema.data.dataset import MotionDataset
     from kinema.data.phrasings import manner_phrases
     from kinema.model.vocabulary import KnownPrompts
     from kinema.text import get_text_encoder
 
-    clips = [rec["captions"] for rec in MotionDataset(data, "train").clips]
+    records = MotionDataset(data, "train").clips
+    once = {(rec.get("source_clip_id", rec["clip_id"]), rec.get("mirrored")): rec for rec in records}
+    clips = [rec["captions"] for rec in once.values()]
     encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
     known = KnownPrompts.from_clips(clips, encoder, manner_phrases())
     if probes:

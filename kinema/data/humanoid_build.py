@@ -47,7 +47,7 @@ from kinema.data.build import MIRROR_SUFFIX, RECORD_KEYS, _prepare_out, _split_c
 from kinema.data.build_folder import write_build_folder
 from kinema.data.captions import mirror_content
 from kinema.data.humanoid_actions import STYLE, content_label, humanoid_captions
-from kinema.data.humanoid_clips import HumanoidClip, action_clips
+from kinema.data.humanoid_clips import PAD_SECONDS, HumanoidClip, action_clips
 from kinema.data.quaternius import LICENCE, list_glbs
 from kinema.data.sources import load_source
 from kinema.errors import DataError, KinemaError
@@ -154,12 +154,13 @@ def _records(clip: HumanoidClip, content: str, fps: float) -> list[tuple[np.ndar
     """Features and clips.json records of a clip and its mirror."""
     from kinema.data.bandai import min_toe_height
 
-    cid = f"{DATASET}/{clip.file}#{clip.clip}"
+    source = f"{DATASET}/{clip.file}#{clip.clip}"  # the animation: shared by its idle lengths and mirror
+    cid = source if clip.pad_seconds == PAD_SECONDS[0] else f"{source}@idle{clip.pad_seconds:g}s"
     out = []
     for motion, mirrored in ((clip.motion, False), (clip.motion.mirror(), True)):
         rec = {
             "clip_id": cid + (MIRROR_SUFFIX if mirrored else ""),
-            "source_clip_id": cid,
+            "source_clip_id": source,
             "dataset": DATASET,
             "content": mirror_content(content) if mirrored else content,
             "style": STYLE,
@@ -252,7 +253,7 @@ def _build_meta(meta: dict, base: Path, root: Path, report: HumanoidReport, reco
             "licence": LICENCE,
             "style": STYLE,
             "clips": len(new),
-            "source_clips": sum(not r["mirrored"] for r in new),
+            "source_clips": len({r["source_clip_id"] for r in new}),  # animations (each at two idle lengths)
             "seconds": round(sum(r["duration_s"] for r in new), 1),
             "files": report.used,
             "not_humanoid": report.not_humanoid,
@@ -267,7 +268,7 @@ def _build_meta(meta: dict, base: Path, root: Path, report: HumanoidReport, reco
         licence="Bandai Namco clips CC BY-NC 4.0; Quaternius clips CC0 1.0",
     )
     meta["counts"] = {
-        "source_clips": sum(not r["mirrored"] for r in records),
+        "source_clips": len({r["source_clip_id"] for r in records}),
         "clips": len(records),
         "frames": frames,
         "hours": sum(r["duration_s"] for r in records) / 3600.0,

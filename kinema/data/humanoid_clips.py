@@ -3,7 +3,8 @@ measure the side.
 
 Game clips are short (a kick is 0.6-1 s, a punch 0.6 s) and start and end in the character's own
 stance; the captures the human model learned from start and end standing for seconds. So each action
-is *padded* on the character, before retargeting: `PAD_SECONDS` of the character's idle, the action
+is *padded* on the character, before retargeting: `PAD_SECONDS` of the character's idle (once with
+each length), the action
 (its clips chained: a platformer jump is take-off, airborne loop, landing), then idle again (or the
 last pose held, for a fall), each join cross-faded over `BLEND_SECONDS` (local rotations slerped, root
 and bone translations lerped). Looping clips (dance) are repeated to `LOOP_SECONDS` first.
@@ -29,10 +30,10 @@ from kinema.geometry.rotations import quat_between, quat_inverse, quat_mul, quat
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
 
-#: idle on each side of an action. 2 s makes a punch clip 4.9 s long, so the requests users make (4-5 s:
-#: kinema generate's default is 5) are lengths the model saw the action at; with 1 s (2.9-s punch clips)
-#: an expert punched at 2.85 s and not at all at 4 s (issue 38, stop 54: docs/training.md)
-PAD_SECONDS = 2.0
+#: idle on each side of an action; every action is built once per length. With 1 s alone (a 2.9-s punch
+#: clip) an expert punched at 2.85 s and not at 4; with 2 s alone it kicked in 5-s requests and timeline
+#: segments but no longer in 3-s ones (issue 38, stop 54: docs/training.md). Both: clips 2.5-7 s
+PAD_SECONDS = (1.0, 2.0)
 BLEND_SECONDS = 0.2
 LOOP_SECONDS = 3.0
 
@@ -48,6 +49,7 @@ class HumanoidClip:
     side: str | None  # measured: left/right (kicks, punches), forward/backward (falls), None
     motion: Motion  # on the human skeleton
     action_frames: tuple[int, int]  # [start, end) of the action inside the padded clip
+    pad_seconds: float = PAD_SECONDS[0]  # the idle on either side
 
 
 def _blend(a: Motion, b: Motion, overlap: int) -> Motion:
@@ -89,16 +91,17 @@ def _hold(motion: Motion, frames: int) -> Motion:
     return _repeat_to(last, frames)
 
 
-def pad_action(clips: list[Motion], idle: Motion | None, *, loop: bool, after: str) -> tuple[Motion, tuple[int, int]]:
-    """The chained action clips padded with idle (or a held last pose) on both sides; returns the padded
-    motion (on the character) and the action's [start, end) frames in it."""
+def pad_action(clips: list[Motion], idle: Motion | None, *, loop: bool, after: str,
+               pad_seconds: float) -> tuple[Motion, tuple[int, int]]:
+    """The chained action clips padded with ``pad_seconds`` of idle (or a held last pose) on both sides;
+    returns the padded motion (on the character) and the action's [start, end) frames in it."""
     fps = clips[0].fps
     action = clips[0]
     for c in clips[1:]:
         action = _concat(action, c)
     if loop:
         action = _repeat_to(action, round(LOOP_SECONDS * fps))
-    pad, blend = round(PAD_SECONDS * fps), round(BLEND_SECONDS * fps)
+    pad, blend = round(pad_seconds * fps), round(BLEND_SECONDS * fps)
     before = _repeat_to(idle, pad + blend) if idle is not None else _hold(action.crop(0, 1), pad + blend)
     out = _blend(before, action, blend)
     start = before.num_frames - min(blend, before.num_frames - 1, action.num_frames - 1)
@@ -200,9 +203,9 @@ def find_idle(clips: dict[str, Motion]) -> Motion | None:
 
 
 def action_clips(rel: str, clips: dict[str, Motion], human: Skeleton) -> list[HumanoidClip]:
-    """Every `HUMANOID_ACTIONS` clip of one character file, padded, retargeted onto ``human``, its side
-    measured. A chained part the file lacks (a jump with no airborne loop) is skipped; a clip that is
-    only a part of another action (``jump_land``) is not an action of its own."""
+    """Every `HUMANOID_ACTIONS` clip of one character file, padded (once per `PAD_SECONDS`), retargeted
+    onto ``human``, its side measured. A chained part the file lacks (a jump with no airborne loop) is
+    skipped; a clip that is only a part of another action (``jump_land``) is not an action of its own."""
     from kinema.retarget import retarget
 
     by_name = {clean_clip_name(n): n for n in clips}
@@ -213,8 +216,10 @@ def action_clips(rel: str, clips: dict[str, Motion], human: Skeleton) -> list[Hu
         if key not in by_name:
             continue
         names = [by_name[c] for c in chain if c in by_name]
-        padded, frames = pad_action([clips[n] for n in names], idle, loop=action.loop, after=action.after)
-        motion = on_the_floor(upright_pelvis(retarget(padded, human, mapping)), frames[0])
-        out.append(HumanoidClip(rel, names[0], tuple(names), action, measured_side(action, motion, frames), motion,
-                                frames))
+        for pad in PAD_SECONDS:
+            padded, frames = pad_action([clips[n] for n in names], idle, loop=action.loop, after=action.after,
+                                        pad_seconds=pad)
+            motion = on_the_floor(upright_pelvis(retarget(padded, human, mapping)), frames[0])
+            out.append(HumanoidClip(rel, names[0], tuple(names), action, measured_side(action, motion, frames),
+                                    motion, frames, pad))
     return out
