@@ -189,11 +189,10 @@ def test_measured_actions_decide_over_clip_counts(tmp_path):
 
 
 def test_the_default_model_knows_which_actions_its_clips_show():
-    """Stops 53-54: the known prompts are the Bandai + Quaternius humanoid build's (an animation counted once at
-    its two idle lengths); the actions its action expert
-    was measured to make (kick, jump, roll, fall: scripts/humanoid_action_probes.py) are learned whatever
-    their clip count, those it was measured not to make (punch, nod) are not, and the unmeasured rare ones
-    keep the count rule."""
+    """Stops 53-54: the known prompts are the Bandai + Quaternius humanoid build's (an animation counted once
+    at its two idle lengths); the actions its action expert was measured to make (kick, jump, roll, fall:
+    scripts/humanoid_action_probes.py) are learned whatever their clip count, those it was measured not to
+    make (punch, nod) are not, and the unmeasured rare ones keep the count rule."""
     known = kinema.load_model().known_prompts
     clips = known.action_clips
     assert clips["kick"] == 6 and clips["dance"] == 8 and clips["call"] == clips["slash"] == 4  # mirrored

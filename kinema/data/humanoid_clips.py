@@ -4,10 +4,10 @@ measure the side.
 Game clips are short (a kick is 0.6-1 s, a punch 0.6 s) and start and end in the character's own
 stance; the captures the human model learned from start and end standing for seconds. So each action
 is *padded* on the character, before retargeting: `PAD_SECONDS` of the character's idle (once with
-each length), the action
-(its clips chained: a platformer jump is take-off, airborne loop, landing), then idle again (or the
-last pose held, for a fall), each join cross-faded over `BLEND_SECONDS` (local rotations slerped, root
-and bone translations lerped). Looping clips (dance) are repeated to `LOOP_SECONDS` first.
+each length), the action (its clips chained: a platformer jump is take-off, airborne loop, landing),
+then idle again (or the last pose held, for a fall), each join cross-faded over `BLEND_SECONDS` (local
+rotations slerped, root and bone translations lerped). Looping clips (dance) are repeated to
+`LOOP_SECONDS` first.
 
 The padded clip is then retargeted onto the human skeleton (kinema.retarget: humanoid slots, rest-pose
 alignment, leg-length scale, planted feet held) as one motion, so a jump that ends in the air in its
@@ -32,7 +32,7 @@ from kinema.skeleton import Skeleton
 
 #: idle on each side of an action; every action is built once per length. With 1 s alone (a 2.9-s punch
 #: clip) an expert punched at 2.85 s and not at 4; with 2 s alone it kicked in 5-s requests and timeline
-#: segments but no longer in 3-s ones (issue 38, stop 54: docs/training.md). Both: clips 2.5-7 s
+#: segments but no longer in 3-s ones (issue 38, stop 54: docs/training.md). Both: clips 2.8-7 s
 PAD_SECONDS = (1.0, 2.0)
 BLEND_SECONDS = 0.2
 LOOP_SECONDS = 3.0
@@ -49,7 +49,7 @@ class HumanoidClip:
     side: str | None  # measured: left/right (kicks, punches), forward/backward (falls), None
     motion: Motion  # on the human skeleton
     action_frames: tuple[int, int]  # [start, end) of the action inside the padded clip
-    pad_seconds: float = PAD_SECONDS[0]  # the idle on either side
+    pad_seconds: float  # the idle on either side (one of PAD_SECONDS)
 
 
 def _blend(a: Motion, b: Motion, overlap: int) -> Motion:
