@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -95,7 +96,17 @@ def test_overfit_one_clip_reproduces_it_through_ddim(tiny_data, tmp_path):
     assert err < 0.05, f"mean joint error {err * 100:.1f} cm"
 
 
-def test_checkpoint_resume_is_exact(tiny_data, tmp_path):
+@pytest.fixture
+def one_thread():
+    """One torch thread: with two, a reduction's order follows how busy the cores are, and the last bits of
+    a result with it (a resumed run then differed from the straight one on a loaded machine)."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def test_checkpoint_resume_is_exact(tiny_data, tmp_path, one_thread):
     straight = Trainer(_cfg(steps=10, ckpt_every=5, phase1_fraction=0.5), tiny_data, tmp_path / "a")
     straight.run(progress=False)
     first = Trainer(_cfg(steps=10, ckpt_every=5, phase1_fraction=0.5), tiny_data, tmp_path / "b")
@@ -170,6 +181,32 @@ def test_content_balance_weights_rare_contents_up():
     assert sum(w1[:9]) == pytest.approx(w1[9])  # power 1: every content gets the same total weight
     with pytest.raises(Exception, match="content_balance"):
         content_weights(recs, -1.0)
+
+
+def test_content_weight_scales_named_contents_after_balancing():
+    from kinema.train.trainer import content_weights
+
+    recs = [{"content": "walk"}] * 9 + [{"content": "punch-left"}] * 2 + [{"content": "punch-right"}] * 2
+    w = content_weights(recs, 1.0, {"punch-left": 5.0, "punch-right": 5.0})
+    assert sum(w[:9]) == pytest.approx(1.0) and sum(w[9:11]) == pytest.approx(5.0) and sum(w[11:]) == pytest.approx(5.0)
+    # one content per source clip (the relabelling it replaces) gives the same weights
+    relabelled = [{"content": "walk"}] * 9 + [{"content": f"punch-{i}"} for i in range(4)]
+    assert content_weights(relabelled, 1.0) == content_weights(recs, 1.0, {"punch-left": 2.0, "punch-right": 2.0})
+    assert content_weights(recs, 0.0, {"walk": 2.0})[:10] == [2.0] * 9 + [1.0]
+    with pytest.raises(Exception, match="no training clip has the content 'kick'"):
+        content_weights(recs, 1.0, {"kick": 2.0})
+    with pytest.raises(Exception, match="must be a finite number > 0"):
+        content_weights(recs, 1.0, {"walk": 0.0})
+
+
+def test_cli_content_weight_reads_content_equals_factor():
+    from kinema.cli.train import _content_factor
+
+    assert _content_factor("punch-left=5") == ("punch-left", 5.0)
+    assert _content_factor("pick-up=0.5") == ("pick-up", 0.5)
+    for bad in ("punch-left", "=5", "punch-left=lots"):
+        with pytest.raises(argparse.ArgumentTypeError, match="CONTENT=X"):
+            _content_factor(bad)
 
 
 def test_batch_sampler_draws_clips_in_proportion_to_their_weights():

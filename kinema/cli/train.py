@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--content-balance", type=float,
                    help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
                         "square-root balancing of rare contents")
+    p.add_argument("--content-weight", nargs="+", type=_content_factor, metavar="CONTENT=X",
+                   help="multiply the sampling weight of the clips of these contents (clips.json 'content') by X, "
+                        "after --content-balance, e.g. punch-left=5 punch-right=5")
     p.add_argument("--foot-contact", type=float,
                    help="weight of the foot-contact consistency loss (velocity of joints the data says are "
                         "planted -> 0; default 0 = off); docs/training.md")
@@ -89,7 +92,19 @@ def _add_fine_tune_arguments(p: argparse.ArgumentParser) -> None:
 
 # Settings a resumed run may change: the schedule (length, phase boundary, how clips are weighted) and
 # how often it reports. Everything else (model, data, optimiser) must match the checkpoint it continues.
-_RESUME_SCHEDULE = ("steps", "phase1_fraction", "content_balance", "ckpt_every", "log_every")
+_RESUME_SCHEDULE = ("steps", "phase1_fraction", "content_balance", "content_weight", "ckpt_every", "log_every")
+
+
+def _content_factor(text: str) -> tuple[str, float]:
+    """``--content-weight``'s CONTENT=X (argparse type)."""
+    content, sep, factor = text.rpartition("=")
+    try:
+        value = float(factor)
+    except ValueError:
+        value = None
+    if not sep or not content or value is None:
+        raise argparse.ArgumentTypeError(f"expected CONTENT=X with a number X (e.g. punch-left=5), got {text!r}")
+    return content, value
 
 
 def _init_path(name: str | None) -> str | None:
@@ -111,7 +126,9 @@ def _config_from_args(args: argparse.Namespace):
         "model": args.config, "steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
         "warmup": args.warmup,
         "optimizer": args.optimizer, "phase1_fraction": args.phase1_fraction, "ckpt_every": args.ckpt_every,
-        "content_balance": args.content_balance, "log_every": args.log_every, "seed": args.seed,
+        "content_balance": args.content_balance,
+        "content_weight": None if args.content_weight is None else dict(args.content_weight),
+        "log_every": args.log_every, "seed": args.seed,
         "text_encoder": args.text_encoder, "init_from": _init_path(args.init_from),
         "foot_contact": args.foot_contact, "text_whiten": args.text_whiten,
         "crop_min_fraction": args.crop_min_fraction, "high_noise_share": args.high_noise_share,

@@ -71,6 +71,9 @@ class TrainConfig:
     # clip sampling weight = (train clips sharing its content label) ** -content_balance: 0 draws clips
     # uniformly (common contents dominate), 0.5 square-root balances, 1 gives every content equal time
     content_balance: float = 0.0
+    # multiply the sampling weight of the clips of these contents (clips.json 'content') by these factors,
+    # after content_balance: a fine-tune can spend more of its steps on a few rare actions (issue 38: punches)
+    content_weight: dict[str, float] = field(default_factory=dict)
     # train only on the clips of these datasets of the build (clips.json 'dataset'; all when empty): an
     # action expert (kinema.model.action_expert) serves only its actions' prompts, so its fine-tune need not
     # rehearse the rest
@@ -107,16 +110,24 @@ class TrainConfig:
         return cls(**d)
 
 
-def content_weights(records: list[dict], power: float) -> list[float] | None:
-    """Per-clip sampling weights ``count(content) ** -power`` (None for ``power == 0``); a clip without a
-    ``content`` label counts as its own content."""
-    if power == 0:
-        return None
+def content_weights(records: list[dict], power: float, scale: dict[str, float] | None = None) -> list[float] | None:
+    """Per-clip sampling weights ``count(content) ** -power``, times ``scale[content]`` for the contents
+    it names (None for ``power == 0`` without a scale); a clip without a ``content`` label counts as its
+    own content. Every content ``scale`` names must have a clip in ``records``."""
     if not math.isfinite(power) or power < 0:
         raise KinemaError(f"content_balance must be a finite number >= 0, got {power}")
+    scale = scale or {}
     keys = [str(r.get("content") or r.get("clip_id", i)) for i, r in enumerate(records)]
     counts = Counter(keys)
-    return [counts[k] ** -power for k in keys]
+    for content, factor in scale.items():
+        if content not in counts:
+            raise KinemaError(f"content_weight: no training clip has the content {content!r} "
+                              f"(contents: {', '.join(sorted(counts))})")
+        if not (math.isfinite(factor) and factor > 0):
+            raise KinemaError(f"content_weight: the factor of {content!r} must be a finite number > 0, got {factor}")
+    if power == 0 and not scale:
+        return None
+    return [counts[k] ** -power * scale.get(k, 1.0) for k in keys]
 
 
 def _dist_info() -> tuple[int, int]:
@@ -167,7 +178,8 @@ class Trainer:
         self.batches = BatchSampler(
             clips, ranges, self.layout, self.stats, cfg.batch_size, max_frames,
             text_dropout=cfg.text_dropout, random_heading=cfg.random_heading, rank=self.rank, world_size=self.world,
-            clip_weights=content_weights(ds.clips, cfg.content_balance), crop_min_fraction=cfg.crop_min_fraction,
+            clip_weights=content_weights(ds.clips, cfg.content_balance, cfg.content_weight),
+            crop_min_fraction=cfg.crop_min_fraction,
         )
         self.model_config = get_config(
             cfg.model, num_joints=self.skeleton.num_joints, text_dim=encoder.dim, fps=self.fps,
