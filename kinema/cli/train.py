@@ -24,31 +24,13 @@ def register(sub) -> None:
     p.add_argument("--warmup", type=int, help="learning-rate warm-up steps (default 500; fewer for a short fine-tune)")
     p.add_argument("--optimizer", choices=["adamw", "adam-atan2"])
     p.add_argument("--phase1-fraction", type=float, help="share of steps in text-only phase 1 (default 0.5)")
-    p.add_argument("--content-balance", type=float,
-                   help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
-                        "square-root balancing of rare contents")
-    p.add_argument("--content-weight", nargs="+", type=_content_factor, metavar="CONTENT=X",
-                   help="multiply the sampling weight of the clips of these contents (clips.json 'content') by X, "
-                        "after --content-balance, e.g. punch-left=5 punch-right=5")
+    _add_draw_arguments(p)
     p.add_argument("--foot-contact", type=float,
                    help="weight of the foot-contact consistency loss (velocity of joints the data says are "
                         "planted -> 0; default 0 = off); docs/training.md")
     p.add_argument("--text-whiten", type=float,
                    help="train the text projection in whitened caption-embedding coordinates, eigenvalues shrunk "
                         "by X * the largest (0 < X <= 1; default 0 = off); docs/training.md")
-    p.add_argument("--crop-min-fraction", type=float,
-                   help="shortest training window as a fraction of the longest clip in its length bucket "
-                        "(0 < X <= 1; default 0.5); docs/training.md")
-    p.add_argument("--high-noise-share", type=unit_float,
-                   help="chance that a row whose clip reaches beyond --high-noise-min-std normalised units is "
-                        "trained at a step where the noise hides it, so it is learned from the text (0-1; "
-                        "default 0 = off; for fine-tunes on clips far outside the statistics; docs/training.md)")
-    p.add_argument("--high-noise-min-std", type=positive_float,
-                   help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
-                        "(default 8)")
-    p.add_argument("--high-noise-visible", type=positive_float,
-                   help="--high-noise-share rows are drawn from the steps where their clip's largest value is at "
-                        "most this many noise standard deviations (default 1; smaller hides it deeper)")
     p.add_argument("--ckpt-every", type=int)
     p.add_argument("--log-every", type=int)
     p.add_argument("--seed", type=int)
@@ -71,6 +53,30 @@ def register(sub) -> None:
                    help="torch CPU threads (default: KINEMA_THREADS, else chosen by kinema.runtime; see docs/speed.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=run)
+
+
+def _add_draw_arguments(p: argparse.ArgumentParser) -> None:
+    """What a batch draws: clips by content (--content-*), window lengths (--crop-min-fraction) and noise
+    levels (--high-noise-*)."""
+    p.add_argument("--content-balance", type=float,
+                   help="draw clips with weight (clips of the same content) ** -X: 0 uniform (default), 0.5 "
+                        "square-root balancing of rare contents")
+    p.add_argument("--content-weight", nargs="+", type=_content_factor, metavar="CONTENT=X",
+                   help="multiply the sampling weight of the clips of these contents (clips.json 'content') by X, "
+                        "after --content-balance, e.g. punch-left=5 punch-right=5")
+    p.add_argument("--crop-min-fraction", type=float,
+                   help="shortest training window as a fraction of the longest clip in its length bucket "
+                        "(0 < X <= 1; default 0.5); docs/training.md")
+    p.add_argument("--high-noise-share", type=unit_float,
+                   help="chance that a row whose clip reaches beyond --high-noise-min-std normalised units is "
+                        "trained at a step where the noise hides it, so it is learned from the text (0-1; "
+                        "default 0 = off; for fine-tunes on clips far outside the statistics; docs/training.md)")
+    p.add_argument("--high-noise-min-std", type=positive_float,
+                   help="rows whose clip reaches beyond this many normalised units get --high-noise-share "
+                        "(default 8)")
+    p.add_argument("--high-noise-visible", type=positive_float,
+                   help="--high-noise-share rows are drawn from the steps where their clip's largest value is at "
+                        "most this many noise standard deviations (default 1; smaller hides it deeper)")
 
 
 def _add_fine_tune_arguments(p: argparse.ArgumentParser) -> None:
