@@ -193,10 +193,18 @@ def test_content_weight_scales_named_contents_after_balancing():
     relabelled = [{"content": "walk"}] * 9 + [{"content": f"punch-{i}"} for i in range(4)]
     assert content_weights(relabelled, 1.0) == content_weights(recs, 1.0, {"punch-left": 2.0, "punch-right": 2.0})
     assert content_weights(recs, 0.0, {"walk": 2.0})[:10] == [2.0] * 9 + [1.0]
-    with pytest.raises(Exception, match="no training clip has the content 'kick'"):
+    with pytest.raises(Exception, match="no clip of the training clips has the content 'kick'"):
         content_weights(recs, 1.0, {"kick": 2.0})
     with pytest.raises(Exception, match="must be a finite number > 0"):
         content_weights(recs, 1.0, {"walk": 0.0})
+
+
+def test_trainer_names_the_build_of_an_unknown_content_weight(tiny_data, tmp_path):
+    from kinema.errors import KinemaError
+
+    with pytest.raises(KinemaError, match=r"clips\.json \(train split\) has the content 'punch-left'"):
+        Trainer(_cfg(steps=2, content_weight={"punch-left": 5.0}), tiny_data, tmp_path / "run")
+    assert not (tmp_path / "run").exists()
 
 
 def test_cli_content_weight_reads_content_equals_factor():

@@ -110,10 +110,12 @@ class TrainConfig:
         return cls(**d)
 
 
-def content_weights(records: list[dict], power: float, scale: dict[str, float] | None = None) -> list[float] | None:
+def content_weights(records: list[dict], power: float, scale: dict[str, float] | None = None,
+                    source: str = "the training clips") -> list[float] | None:
     """Per-clip sampling weights ``count(content) ** -power``, times ``scale[content]`` for the contents
     it names (None for ``power == 0`` without a scale); a clip without a ``content`` label counts as its
-    own content. Every content ``scale`` names must have a clip in ``records``."""
+    own content. Every content ``scale`` names must have a clip in ``records`` (``source`` names them in
+    the error)."""
     if not math.isfinite(power) or power < 0:
         raise KinemaError(f"content_balance must be a finite number >= 0, got {power}")
     scale = scale or {}
@@ -121,7 +123,7 @@ def content_weights(records: list[dict], power: float, scale: dict[str, float] |
     counts = Counter(keys)
     for content, factor in scale.items():
         if content not in counts:
-            raise KinemaError(f"content_weight: no training clip has the content {content!r} "
+            raise KinemaError(f"content_weight: no clip of {source} has the content {content!r} "
                               f"(contents: {', '.join(sorted(counts))})")
         if not (math.isfinite(factor) and factor > 0):
             raise KinemaError(f"content_weight: the factor of {content!r} must be a finite number > 0, got {factor}")
@@ -178,7 +180,8 @@ class Trainer:
         self.batches = BatchSampler(
             clips, ranges, self.layout, self.stats, cfg.batch_size, max_frames,
             text_dropout=cfg.text_dropout, random_heading=cfg.random_heading, rank=self.rank, world_size=self.world,
-            clip_weights=content_weights(ds.clips, cfg.content_balance, cfg.content_weight),
+            clip_weights=content_weights(ds.clips, cfg.content_balance, cfg.content_weight,
+                                         f"{Path(data_dir) / 'clips.json'} (train split)"),
             crop_min_fraction=cfg.crop_min_fraction,
         )
         self.model_config = get_config(
