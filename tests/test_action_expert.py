@@ -12,6 +12,7 @@ from kinema.cli import main
 from kinema.errors import KinemaError
 from kinema.generate import load_model
 from kinema.model.loading import load_denoiser
+from kinema.model.sides import mirror_caption
 
 KICK, WALK = "A person kicks with the left leg.", "A person walks forward."
 
@@ -34,6 +35,17 @@ def routed(tiny_checkpoint, tiny_data, tmp_path_factory):
     assert main(["export", str(main_dir), "--out", str(routed_dir), "--dtype", "float32", "--known-prompts",
                  str(tiny_data), "--action-expert", str(expert_dir), "--expert-actions", "kick", "jump"]) == 0
     return routed_dir, main_dir, expert_dir
+
+
+@pytest.fixture(scope="module")
+def mirroring(routed, tiny_data, tmp_path_factory):
+    """The routed folder with its expert making right-side prompts as mirror images (--expert-mirror-side)."""
+    routed_dir, main_dir, expert_dir = routed
+    out = tmp_path_factory.mktemp("mirroring") / "model"
+    assert main(["export", str(main_dir), "--out", str(out), "--dtype", "float32", "--known-prompts",
+                 str(tiny_data), "--action-expert", str(expert_dir), "--expert-actions", "kick", "jump",
+                 "--expert-mirror-side", "right"]) == 0
+    return out
 
 
 def test_prompts_naming_an_expert_action_run_on_the_expert_weights(routed) -> None:
@@ -80,4 +92,45 @@ def test_bad_experts_are_refused_with_one_line(routed, tmp_path, capsys) -> None
     (broken / "checkpoint.json").write_text(json.dumps(info))
     (broken / "action_expert.safetensors").write_bytes(b"garbage")
     with pytest.raises(KinemaError, match="action_expert.safetensors: not a readable safetensors"):
+        load_denoiser(broken)
+
+
+def test_an_expert_prompt_naming_the_mirror_side_is_made_as_the_mirror_image(mirroring) -> None:
+    """Issue 38: with ``mirror_side`` "right", a right kick is the left kick made at the mirrored heading and
+    mirrored back (raw output: exactly); a timeline with an unsided walk is mirrored whole; the report says
+    what each prompt was made as. Requests that would not map onto themselves are made as they are: the
+    left kick, a prompt naming both sides, a right-hand prompt the expert does not serve, and any
+    constrained request."""
+    model = load_model(mirroring)
+    assert json.loads((mirroring / "checkpoint.json").read_text())["action_expert"]["mirror_side"] == "right"
+    right = model.generate(mirror_caption(KICK), seconds=1.0, seed=5, steps=4, postprocess=False, heading=0.4)
+    left = model.generate(KICK, seconds=1.0, seed=5, steps=4, postprocess=False, heading=-0.4)
+    assert torch.allclose(right[0].positions, left[0].mirror().positions, atol=1e-5)
+    assert right.report.prompts[0]["made_as_mirror_of"] == KICK and right.report.prompts[0]["prompt"] != KICK
+    assert right.report.prompts[0]["grounding"] == left.report.prompts[0]["grounding"]
+    timeline = model.generate([(WALK, 1.0), (mirror_caption(KICK), 1.0)], seed=5, steps=4, postprocess=False)
+    assert [p["made_as_mirror_of"] for p in timeline.report.prompts] == [WALK, KICK]
+    for prompt in (KICK, "A person kicks with the left leg, then the right leg.", "A person raises the right hand."):
+        assert "made_as_mirror_of" not in _positions(model, prompt)[1].prompts[0], prompt
+    keyframe = [{"type": "root2d", "frame_indices": [10], "smooth_root_2d": [[0.0, 0.5]]}]
+    constrained = model.generate(mirror_caption(KICK), seconds=1.0, seed=5, steps=4, constraints=keyframe)
+    assert "made_as_mirror_of" not in constrained.report.prompts[0]
+
+
+def test_a_bad_mirror_side_is_refused_with_one_line(routed, tmp_path, capsys) -> None:
+    """--expert-mirror-side takes left or right and needs --action-expert; a folder whose entry names another
+    side does not load."""
+    routed_dir, main_dir, expert_dir = routed
+    out = tmp_path / "x"
+    assert main(["export", str(main_dir), "--out", str(out), "--expert-mirror-side", "right"]) == 2
+    assert "give --action-expert RUN too" in capsys.readouterr().err
+    assert not out.exists()
+    info = json.loads((routed_dir / "checkpoint.json").read_text())
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    for f in routed_dir.iterdir():
+        (broken / f.name).write_bytes(f.read_bytes())
+    entry = info["action_expert"] | {"mirror_side": "up"}
+    (broken / "checkpoint.json").write_text(json.dumps(info | {"action_expert": entry}))
+    with pytest.raises(KinemaError, match="mirror_side must be one of left, right, got 'up'"):
         load_denoiser(broken)

@@ -167,7 +167,8 @@ def test_grounding_never_swaps_a_new_action_for_another():
     side, never on a walk, wave or another new action (MiniLM embeddings, kinema.model.grounding)."""
     from kinema.data.captions import captions_for
     from kinema.data.phrasings import manner_phrases
-    from kinema.model.grounding import Grounding, ground, sides
+    from kinema.model.grounding import Grounding, ground
+    from kinema.model.sides import sides
     from kinema.model.vocabulary import KnownPrompts
     from kinema.runtime import text_cache_dir
     from kinema.text import get_text_encoder

@@ -14,7 +14,8 @@ from kinema.cli import main
 from kinema.data.phrasings import PROBES
 from kinema.errors import KinemaError
 from kinema.model.actions import actions_in, reworded
-from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, off_forward, sides
+from kinema.model.grounding import DEFAULT_GROUNDING, Grounding, as_grounding, ground, off_forward
+from kinema.model.sides import sides
 from kinema.model.vocabulary import KnownPrompts
 from kinema.text import get_text_encoder
 

@@ -49,6 +49,10 @@ def register(sub) -> None:
     p.add_argument("--expert-actions", nargs="+", metavar="ACTION",
                    help="with --action-expert: the actions it serves (names of kinema.model.actions, e.g. kick punch "
                         "jump roll crouch nod fall 'pick up')")
+    p.add_argument("--expert-mirror-side", choices=("left", "right"), metavar="SIDE",
+                   help="with --action-expert: the side (left or right) the expert does worse, measured with the "
+                        "action probes; its prompts that name that side alone are generated as the mirror image of "
+                        "the other side's (kinema.human.mirrored_request)")
     p.set_defaults(func=run)
 
 
@@ -73,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
     out = export_model(resolve_model_path(args.model), args.out, dtype=args.dtype, guidance=guidance,
                        sampling_steps=args.steps, ema=args.weights == "ema", grounding=grounding_overrides(args),
-                       root_stage=args.root_stage, mix=_mix(args.mix), action_expert=expert)
+                       root_stage=args.root_stage, mix=_mix(args.mix), action_expert=expert,
+                       expert_mirror_side=args.expert_mirror_side)
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
         _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)

@@ -47,15 +47,20 @@ def residual_table(residuals: list[dict]) -> str:
 def prompt_lines(prompts: list[dict]) -> list[str]:
     """How the prompts of ``report.prompts`` were conditioned: per grounded prompt, the training captions
     it was blended with and their weights (kinema.model.grounding); per prompt that the model's action
-    expert made, a line saying so (kinema.model.action_expert)."""
+    expert made, a line saying so (kinema.model.action_expert), and one per prompt made as the mirror image
+    of its other side's (kinema.human.mirrored_request)."""
     lines = []
     for p in prompts:
+        made = p.get("made_as_mirror_of", p["prompt"])
+        if made != p["prompt"]:
+            lines.append(f"made {p['prompt']!r} as the mirror image of {made!r} (the model makes that side better; "
+                         "kinema.human.mirrored_request)")
         g = p.get("grounding") or {}
         if g.get("status") == "grounded":
             caps = ", ".join(f"{c['caption']!r} ({c['weight']:.2f})" for c in g["captions"])
-            lines.append(f"grounded {p['prompt']!r} (own weight {g['prompt_weight']:.2f}) on {caps}")
+            lines.append(f"grounded {made!r} (own weight {g['prompt_weight']:.2f}) on {caps}")
         if p.get("weights") == "action expert":
-            lines.append(f"made {p['prompt']!r} with the model's action expert")
+            lines.append(f"made {made!r} with the model's action expert")
     return lines
 
 

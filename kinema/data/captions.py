@@ -47,6 +47,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from kinema.errors import DataError
+from kinema.model.sides import mirror_caption
 
 # --------------------------------------------------------------------------------------------
 # Content -> verb phrases (present tense, third person). "{their}" becomes his/her/their to
@@ -242,27 +243,7 @@ TEMPLATES: tuple[str, ...] = (
 # Possessive that agrees with a subject; anything not listed is singular "their".
 _POSSESSIVE = {"A man": "his", "A woman": "her", "A graceful woman": "her"}
 
-_SIDE_WORD = re.compile(r"\b(left|right)(?=(?:wards?)?\b)", re.IGNORECASE)
 _LABEL_PREFIX = re.compile(r"^dataset-\d+_")
-
-
-def mirror_caption(text: str) -> str:
-    """Swap the words "left" and "right" (also in "leftward(s)", "left-hand"), keeping case.
-
-    Used on free user text and to build mirrored captions. It is purely lexical: "right" in the
-    sense of "correct" or "left" as the past of "leave" would be swapped too.
-    """
-
-    def swap(m: re.Match[str]) -> str:
-        word = m.group(1)
-        new = "right" if word.lower() == "left" else "left"
-        if word.isupper():
-            return new.upper()
-        if word[0].isupper():
-            return new.capitalize()
-        return new
-
-    return _SIDE_WORD.sub(swap, text)
 
 
 def mirror_content(content: str) -> str:

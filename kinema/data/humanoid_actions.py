@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinema.data.captions import mirror_caption
+from kinema.model.sides import mirror_caption
 
 #: The style label of every humanoid clip (clips.json ``style``).
 STYLE = "game-animation"

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinema.data.captions import CONTENT_PHRASES, mirror_caption, mirror_content, style_phrases
+from kinema.data.captions import CONTENT_PHRASES, mirror_content, style_phrases
+from kinema.model.sides import mirror_caption
 
 # (slow below, fast above) m/s of mean pelvis ground speed, per locomotion content.
 SPEED_BANDS: dict[str, tuple[float, float]] = {"walk": (0.95, 1.40), "run": (2.10, 3.00), "dash": (0.0, 0.0)}

@@ -21,6 +21,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
 from kinema.human.keyjoint_planning import KeyjointPlanner, plans_by_default, sample_with_keyjoint_plan, shipped_planner
+from kinema.human.mirrored_request import mirrored_prompts
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
 from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
@@ -154,9 +155,12 @@ class HumanPipeline(MotionPipeline):
         steps_given = r.steps
         segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
+        made_as = mirrored_prompts([s.prompt for s in segments], self.loaded.expert,
+                                   r.constraints is not None or r.objectives is not None)
+        segments = [replace(s, prompt=made_as.get(s.prompt, s.prompt)) for s in segments]
         texts = self.ground_prompts([s.prompt for s in segments], r.grounding_settings())
         guide = self._guidance(r.guidance)
-        heading, constraints = r.heading, r.constraints
+        heading, constraints = -r.heading if made_as else r.heading, r.constraints
         plan = plan_segments(self.representation, segments, constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
         bound = collect_objectives(constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
@@ -173,6 +177,7 @@ class HumanPipeline(MotionPipeline):
         else:
             raw = self._sample_batch(plan, call, progress)
             plans = [plan] * samples
+        raw = [m.mirror() for m in raw] if made_as else raw
         t_sampled = time.perf_counter()
         require_finite(raw, "sampling")
         motions, residuals = [], []
@@ -189,11 +194,17 @@ class HumanPipeline(MotionPipeline):
         report = GenerationReport(
             seconds=t1 - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
-            prompts=[m.to_dict() | {"grounding": texts[m.prompt].to_dict()} | self._weights_used(m.prompt)
-                     for m in matches], objectives=obj_report,
+            prompts=[self._prompt_report(m, made_as, texts) for m in matches], objectives=obj_report,
             timings={"sampling": t_sampled - t0, "postprocess": t1 - t_sampled}, joints=self.skeleton.num_joints,
         )
         return GenerationResult(motions, report)
+
+    def _prompt_report(self, match: PromptMatch, made_as: dict[str, str], texts: dict[str, Grounded]) -> dict:
+        """What the report says of one prompt: how well it is known, how it was grounded, which weights made it
+        and, for a request made as its mirror image (kinema.human.mirrored_request), the prompt it was made as."""
+        made = made_as.get(match.prompt, match.prompt)
+        mirrored = {"made_as_mirror_of": made} if made_as else {}
+        return match.to_dict() | {"grounding": texts[made].to_dict()} | self._weights_used(made) | mirrored
 
     # ------------------------------------------------------------------ internals
     def _weights_used(self, prompt: str) -> dict:

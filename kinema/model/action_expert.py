@@ -15,9 +15,14 @@ the expert, every other prompt on the main weights. A timeline routes each segme
 window, by its prompt) on its own, so "walks, then kicks" walks on the main weights and kicks on the
 expert's. Generation reports which weights served each prompt.
 
+``mirror_side`` (optional, "left" or "right"): the side the expert does worse, as measured by the action
+probes; a request whose expert prompt names that side alone is generated as its mirror image
+(kinema.human.mirrored_request).
+
 ``checkpoint.json`` holds the entry under ``"action_expert"``: its ``actions``, the ``weights`` file name
-(``action_expert.safetensors``) and where the weights came from (``source``, ``step``,
-``train_config``), written by ``kinema export MODEL --action-expert RUN --expert-actions ...``.
+(``action_expert.safetensors``), its ``mirror_side`` if any and where the weights came from (``source``,
+``step``, ``train_config``), written by ``kinema export MODEL --action-expert RUN --expert-actions ...
+[--expert-mirror-side SIDE]``.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import torch
 from kinema.errors import KinemaError
 from kinema.model.actions import ACTION_WORDS, actions_in
 from kinema.model.denoiser import Denoiser
+from kinema.model.sides import SIDES, sides
 
 #: the expert's weights file in a model folder
 WEIGHTS_FILE = "action_expert.safetensors"
@@ -49,17 +55,30 @@ def expert_actions(actions: Iterable[str], where: str = "action expert") -> tupl
     return out
 
 
+def mirror_side(side, where: str = "action expert") -> str | None:
+    """``side`` checked: None, "left" or "right"; anything else is a one-line `KinemaError`."""
+    if side is not None and side not in SIDES:
+        raise KinemaError(f"{where}: mirror_side must be one of {', '.join(SIDES)}, got {side!r}")
+    return side
+
+
 @dataclass(frozen=True)
 class ActionExpert:
-    """The expert weights of a model folder (a loaded, frozen `Denoiser`) and the actions they serve."""
+    """The expert weights of a model folder (a loaded, frozen `Denoiser`), the actions they serve and the
+    side whose prompts it generates as mirror images (None: none)."""
 
     actions: tuple[str, ...]
     denoiser: Denoiser
     entry: Mapping
+    mirror_side: str | None = None
 
     def serves(self, prompt: str) -> bool:
         """Whether a prompt names one of the expert's actions."""
         return bool(actions_in(prompt) & frozenset(self.actions))
+
+    def mirrors(self, prompt: str) -> bool:
+        """Whether the expert serves ``prompt`` and it names the expert's ``mirror_side`` alone."""
+        return self.mirror_side is not None and self.serves(prompt) and sides(prompt) == {self.mirror_side}
 
     @classmethod
     def from_entry(cls, entry: Mapping, state: dict[str, torch.Tensor], main: Denoiser, where: str) -> ActionExpert:
@@ -80,4 +99,4 @@ class ActionExpert:
                                   "than the model")
         for p in model.parameters():
             p.requires_grad_(False)
-        return cls(actions, model.eval(), dict(entry))
+        return cls(actions, model.eval(), dict(entry), mirror_side(entry.get("mirror_side"), where))

@@ -21,7 +21,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.errors import KinemaError
 from kinema.model.action_expert import MUST_MATCH as EXPERT_MUST_MATCH
 from kinema.model.action_expert import WEIGHTS_FILE as EXPERT_WEIGHTS_FILE
-from kinema.model.action_expert import expert_actions
+from kinema.model.action_expert import expert_actions, mirror_side
 from kinema.model.anyrig.loading import LoadedAnyRig, load_anyrig
 from kinema.model.grounding import Grounding
 from kinema.model.loading import (
@@ -51,6 +51,7 @@ def export_model(
     root_stage: str | Path | None = None,
     mix: tuple[str | Path, float] | None = None,
     action_expert: tuple[str | Path, list[str]] | None = None,
+    expert_mirror_side: str | None = None,
 ) -> Path:
     """Write the EMA weights of the run/checkpoint ``src`` as an inference model folder ``out``.
 
@@ -67,7 +68,8 @@ def export_model(
     EMA weights are packed as ``root_stage.safetensors`` with its config under ``"root_stage"``.
     ``mix=(MODEL, SHARE)``: pack ``(1 - SHARE) * src + SHARE * MODEL``'s weights (`mix_weights`).
     ``action_expert=(RUN, ACTIONS)``: pack RUN's (EMA) weights as the model's action expert for prompts that
-    name one of ACTIONS (kinema.model.action_expert; `_action_expert`).
+    name one of ACTIONS (kinema.model.action_expert; `_action_expert`); ``expert_mirror_side`` ("left" or
+    "right"): the side whose expert prompts are generated as mirror images (kinema.human.mirrored_request).
     Returns ``out``. An existing ``out`` is replaced only once the new folder is complete.
     """
     if dtype not in DTYPES:
@@ -90,13 +92,16 @@ def export_model(
         state, info["export"]["mixed_with"] = mix_weights(state, info, ckpt, *mix)
     if info.get("kind") == "anyrig":
         info["rig_files"] = rig_files(info)
-    stage, expert = _companions(info, ckpt, root_stage, action_expert)
+    if expert_mirror_side is not None and action_expert is None:
+        raise KinemaError("--expert-mirror-side: give --action-expert RUN too (the side is the expert's)")
+    stage, expert = _companions(info, ckpt, root_stage, action_expert, expert_mirror_side)
     state = {k: v.to(DTYPES[dtype]).contiguous() for k, v in state.items()}
     expert = None if expert is None else {k: v.to(DTYPES[dtype]).contiguous() for k, v in expert.items()}
     return _write_folder(Path(out), info, state, stage, expert)
 
 
-def _companions(info: dict, ckpt: Path, root_stage, action_expert) -> tuple[dict | None, dict | None]:
+def _companions(info: dict, ckpt: Path, root_stage, action_expert,
+                mirror: str | None = None) -> tuple[dict | None, dict | None]:
     """The networks packed beside the model's own weights, entered in ``info``: an any-rig model's root stage
     and a human model's action expert (float32 weights, or None when not given). A re-packed folder keeps
     its own only when they are given again."""
@@ -109,6 +114,8 @@ def _companions(info: dict, ckpt: Path, root_stage, action_expert) -> tuple[dict
     info.pop("action_expert", None)
     if action_expert is not None:
         info["action_expert"], expert = _action_expert(*action_expert, info, ckpt)
+        if mirror_side(mirror, "--expert-mirror-side") is not None:
+            info["action_expert"]["mirror_side"] = mirror
     return stage, expert
 
 

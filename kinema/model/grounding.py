@@ -73,18 +73,13 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.model.actions import actions_in
+from kinema.model.sides import sides
 from kinema.model.vocabulary import UNKNOWN_BELOW, KnownPrompts
 
 #: cosine at or above which a prompt counts as the training caption itself (float16-stored caption
 #: embeddings agree with a fresh encoding to ~1e-6)
 EXACT_ABOVE = 0.9999
 _KEYS = ("weight", "temperature", "top_k")
-_SIDE = re.compile(r"\b(left|right)(?:wards?)?\b", re.IGNORECASE)
-
-
-def sides(text: str) -> frozenset[str]:
-    """The sides a text names: a subset of {'left', 'right'} ("walks leftward" names 'left')."""
-    return frozenset(m.lower() for m in _SIDE.findall(text))
 
 
 _AWAY_FROM_FORWARD = re.compile(
