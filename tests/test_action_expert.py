@@ -9,8 +9,11 @@ import pytest
 import torch
 
 from kinema.cli import main
+from kinema.constraints.types import EndEffectorConstraint, FullBodyConstraint, Root2DConstraint
 from kinema.errors import KinemaError
 from kinema.generate import load_model
+from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
+from kinema.human.mirrored_request import mirror_constraints
 from kinema.model.loading import load_denoiser
 from kinema.model.sides import mirror_caption
 
@@ -99,8 +102,8 @@ def test_an_expert_prompt_naming_the_mirror_side_is_made_as_the_mirror_image(mir
     """Issue 38: with ``mirror_side`` "right", a right kick is the left kick made at the mirrored heading and
     mirrored back (raw output: exactly); a timeline with an unsided walk is mirrored whole; the report says
     what each prompt was made as. Requests that would not map onto themselves are made as they are: the
-    left kick, a prompt naming both sides, a right-hand prompt the expert does not serve, and any
-    constrained request."""
+    left kick, a prompt naming both sides, a right-hand prompt the expert does not serve, and a request with
+    a joint rotation target."""
     model = load_model(mirroring)
     assert json.loads((mirroring / "checkpoint.json").read_text())["action_expert"]["mirror_side"] == "right"
     right = model.generate(mirror_caption(KICK), seconds=1.0, seed=5, steps=4, postprocess=False, heading=0.4)
@@ -112,9 +115,61 @@ def test_an_expert_prompt_naming_the_mirror_side_is_made_as_the_mirror_image(mir
     assert [p["made_as_mirror_of"] for p in timeline.report.prompts] == [WALK, KICK]
     for prompt in (KICK, "A person kicks with the left leg, then the right leg.", "A person raises the right hand."):
         assert "made_as_mirror_of" not in _positions(model, prompt)[1].prompts[0], prompt
-    keyframe = [{"type": "root2d", "frame_indices": [10], "smooth_root_2d": [[0.0, 0.5]]}]
-    constrained = model.generate(mirror_caption(KICK), seconds=1.0, seed=5, steps=4, constraints=keyframe)
-    assert "made_as_mirror_of" not in constrained.report.prompts[0]
+    turn = [{"type": "end-effector", "joint": "right_hand", "frame_indices": [10], "rotations": [[0.0, 0.3, 0.0]]}]
+    rotated = model.generate(mirror_caption(KICK), seconds=1.0, seed=5, steps=4, constraints=turn)
+    assert "made_as_mirror_of" not in rotated.report.prompts[0]  # a joint rotation has no exact mirror here
+
+
+def test_constraints_are_sampled_mirrored_and_hit_in_the_users_frame(mirroring) -> None:
+    """A constrained right kick samples the mirror images of its constraints (the left kick with mirrored
+    constraints, at the negated heading, mirrored back: the same raw motion), and post-processing puts the
+    user's own targets on the output: the right hand and the root waypoint where the user put them."""
+    model = load_model(mirroring)
+    user = [{"type": "root2d", "frame_indices": [19], "smooth_root_2d": [[0.3, 0.6]],
+             "global_root_heading": [[0.8, 0.6]]},
+            {"type": "end-effector", "joint": "right_hand", "frame_indices": [10], "positions": [[-0.3, 1.1, 0.3]]},
+            {"type": "foot-contact", "frame_indices": [0], "contacts": [[1, 1, 0, 0]]}]
+    mirrored = [{"type": "root2d", "frame_indices": [19], "smooth_root_2d": [[-0.3, 0.6]],
+                 "global_root_heading": [[0.8, -0.6]]},
+                {"type": "end-effector", "joint": "Hand_L", "frame_indices": [10], "positions": [[0.3, 1.1, 0.3]]},
+                {"type": "foot-contact", "frame_indices": [0], "contacts": [[0, 0, 1, 1]]}]
+    kw = {"seconds": 1.0, "seed": 5, "steps": 4, "keyjoint_model": "none"}
+    right = model.generate(mirror_caption(KICK), constraints=user, postprocess=False, heading=0.4, **kw)
+    left = model.generate(KICK, constraints=mirrored, postprocess=False, heading=-0.4, **kw)
+    assert right.report.prompts[0]["made_as_mirror_of"] == KICK
+    assert torch.allclose(right[0].positions, left[0].mirror().positions, atol=1e-5)
+    post = model.generate(mirror_caption(KICK), constraints=user, **kw)
+    names = list(post[0].skeleton.names)
+    hand = post[0].positions[10, names.index("Hand_R")]
+    assert torch.allclose(hand, torch.tensor([-0.3, 1.1, 0.3]), atol=0.02), hand
+    after = post.report.residuals[0]["exact"]["after"]  # measured on the output, against the user's targets
+    assert after["position_cm"]["max"] < 0.1 and after["root_xz_cm"]["max"] < 0.1, after
+    assert post.report.prompts[0]["made_as_mirror_of"] == KICK
+
+
+def test_mirrored_constraints_are_the_constraints_of_the_mirrored_motion(routed) -> None:
+    """mirror_constraints on keyframe poses, a hand target and a path taken from a motion gives what the same
+    read-out of the motion's mirror image gives."""
+    motion = load_model(routed[1]).generate(WALK, seconds=1.0, seed=1, steps=4, postprocess=False)[0]
+    frames = [0, 12]
+
+    def read_out(m):
+        names = list(m.skeleton.names)
+        return [FullBodyConstraint(frame_indices=frames, local_rotations=quat_to_axis_angle(m.local_rotations[frames]),
+                                   root_positions=m.root_translation[frames]),
+                EndEffectorConstraint(frame_indices=frames, joint="Hand_L",
+                                      positions=m.positions[frames, names.index("Hand_L")]),
+                Root2DConstraint(frame_indices=frames, positions=m.root_translation[frames][:, [0, 2]])]
+
+    ours, theirs = mirror_constraints(read_out(motion), motion.skeleton), read_out(motion.mirror())
+    assert ours[1].joint == "Hand_R"
+    right_hand = motion.mirror().positions[frames, list(motion.skeleton.names).index("Hand_R")]
+    theirs[1] = EndEffectorConstraint(frame_indices=frames, joint="Hand_R", positions=right_hand)
+    dots = (axis_angle_to_quat(ours[0].local_rotations) * axis_angle_to_quat(theirs[0].local_rotations)).sum(-1)
+    assert float(dots.abs().min()) > 1 - 1e-5  # the same rotations (q and -q are one)
+    assert torch.allclose(ours[0].root_positions, theirs[0].root_positions, atol=1e-5)
+    assert torch.allclose(ours[1].positions, theirs[1].positions, atol=1e-5)
+    assert torch.allclose(ours[2].positions, theirs[2].positions, atol=1e-5)
 
 
 def test_a_bad_mirror_side_is_refused_with_one_line(routed, tmp_path, capsys) -> None:

@@ -10,24 +10,83 @@ other side: every prompt's side words swapped (kinema.model.sides.mirror_caption
 and the raw motions mirrored back (kinema.motion.mirror) before post-processing. Prompts that name no side
 ("A person walks forward.") stay as they are: the mirror of their training data is their training data.
 
-A request is mirrored only when that maps it onto itself exactly: no constraints or objectives (they are
-placed in the user's frame, on named joints), at least one prompt the expert mirrors and no prompt naming
-the other side. The report says which prompts were made as a mirror image, and of what.
+A request is mirrored only when that maps it onto itself exactly: at least one prompt the expert mirrors,
+no prompt naming the other side, no objectives (they are optimised in the user's frame) and constraints
+that have an exact mirror image (:func:`mirror_constraints`: every kind but an end-effector rotation).
+Constraints are sampled mirrored (x -> -x, left and right joints and foot contacts swapped, headings
+turned the other way) and post-processing then hits the user's own constraints on the mirrored-back
+motion, so residuals are measured in the frame the user gave. The report says which prompts were made
+as a mirror image, and of what.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import torch
+
+from kinema.constraints.types import (
+    Constraint,
+    EndEffectorConstraint,
+    FootContactConstraint,
+    FullBodyConstraint,
+    Root2DConstraint,
+    resolve_joint,
+)
+from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
 from kinema.model.action_expert import ActionExpert
 from kinema.model.sides import mirror_caption, sides
+from kinema.motion.core import Motion
+from kinema.motion.mirror import CONTACT_MIRROR
+from kinema.skeleton import Skeleton
+
+#: x -> -x on (x, y, z) points and (x, z) ground points
+_X3, _X2 = torch.tensor([-1.0, 1.0, 1.0]), torch.tensor([-1.0, 1.0])
 
 
-def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, constrained: bool) -> dict[str, str]:
+def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, objectives: bool) -> dict[str, str]:
     """``{prompt: the prompt it is made as}`` for a request of ``prompts`` (a timeline's, in order) to be
     generated as its mirror image, or ``{}`` when it is made as it is: no expert or no ``mirror_side``,
-    ``constrained`` (constraints or objectives given), no prompt the expert mirrors, or a prompt naming
-    the other side."""
-    if expert is None or expert.mirror_side is None or constrained:
+    ``objectives`` given, no prompt the expert mirrors, or a prompt naming the other side."""
+    if expert is None or expert.mirror_side is None or objectives:
         return {}
     if not any(expert.mirrors(p) for p in prompts) or any(sides(p) - {expert.mirror_side} for p in prompts):
         return {}
     return {p: mirror_caption(p) for p in prompts}
+
+
+def mirror_constraints(constraints: list[Constraint], skeleton: Skeleton) -> list[Constraint] | None:
+    """The mirror images of loaded ``constraints`` (kinema.constraints.types) on ``skeleton``: what a mirrored
+    request samples towards. None when one has no exact mirror here (an end-effector rotation: its rest
+    orientation need not mirror onto the other side's)."""
+    out = []
+    for c in constraints:
+        if isinstance(c, Root2DConstraint):
+            heading = None if c.heading is None else c.heading * torch.tensor([1.0, -1.0])
+            out.append(replace(c, positions=c.positions * _X2, heading=heading))
+        elif isinstance(c, FootContactConstraint):
+            out.append(replace(c, contacts=c.contacts[:, CONTACT_MIRROR]))
+        elif isinstance(c, EndEffectorConstraint):
+            if c.rotations is not None:
+                return None
+            joint = skeleton.names[skeleton.mirror_map[resolve_joint(skeleton, c.joint)]]
+            out.append(replace(c, joint=joint, positions=c.positions * _X3,
+                               smooth_root_2d=_mirror_2d(c.smooth_root_2d)))
+        elif isinstance(c, FullBodyConstraint):
+            out.append(_mirror_poses(c, skeleton))
+        else:
+            return None
+    return out
+
+
+def _mirror_2d(points: torch.Tensor | None) -> torch.Tensor | None:
+    return None if points is None else points * _X2
+
+
+def _mirror_poses(c: FullBodyConstraint, skeleton: Skeleton) -> FullBodyConstraint:
+    """A full-body constraint's keyframe poses mirrored as a motion is (kinema.motion.mirror)."""
+    poses = Motion(skeleton, 1.0, c.root_positions.float(), axis_angle_to_quat(c.local_rotations.float()))
+    mirrored = poses.mirror()
+    return replace(c, local_rotations=quat_to_axis_angle(mirrored.local_rotations).to(c.local_rotations.dtype),
+                   root_positions=mirrored.root_translation.to(c.root_positions.dtype),
+                   smooth_root_2d=_mirror_2d(c.smooth_root_2d))

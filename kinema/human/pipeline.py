@@ -21,7 +21,7 @@ from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
 from kinema.human.keyjoint_planning import KeyjointPlanner, plans_by_default, sample_with_keyjoint_plan, shipped_planner
-from kinema.human.mirrored_request import mirrored_prompts
+from kinema.human.mirrored_request import mirror_constraints, mirrored_prompts
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
 from kinema.human.objective_sampling import add_final, collect_objectives, objective_settings, sample_with_objectives
 from kinema.human.sampling import JOINT_SIGMA_SECONDS, ROOT_SMOOTHING_SECONDS, SampleSettings, sample_features
@@ -155,18 +155,16 @@ class HumanPipeline(MotionPipeline):
         steps_given = r.steps
         segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
-        made_as = mirrored_prompts([s.prompt for s in segments], self.loaded.expert,
-                                   r.constraints is not None or r.objectives is not None)
-        segments = [replace(s, prompt=made_as.get(s.prompt, s.prompt)) for s in segments]
-        texts = self.ground_prompts([s.prompt for s in segments], r.grounding_settings())
         guide = self._guidance(r.guidance)
-        heading, constraints = -r.heading if made_as else r.heading, r.constraints
+        constraints = r.constraints
         plan = plan_segments(self.representation, segments, constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
         bound = collect_objectives(constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
-        planner = self._planner(r.keyjoint_model, plan, bound)
+        made_as, sampled = self._mirrored(segments, plan, bool(bound))
+        texts = self.ground_prompts([s.prompt for s in sampled.segments], r.grounding_settings())
+        planner = self._planner(r.keyjoint_model, sampled, bound)
         obj_report: dict = {}
-        call = SamplingCall(guide, steps, g, heading, samples, texts, planner)
+        call = SamplingCall(guide, steps, g, -r.heading if made_as else r.heading, samples, texts, planner)
         if bound:
             settings = objective_settings(self._settings(plan.segments[0].num_frames, guide, steps), steps_given,
                                           DEFAULT_DDIM_STEPS)
@@ -175,8 +173,8 @@ class HumanPipeline(MotionPipeline):
             raw, plans, obj_report = sample_with_objectives(self, plan, call, settings, bound, opt,
                                                             progress=split_progress(progress)[0])
         else:
-            raw = self._sample_batch(plan, call, progress)
-            plans = [plan] * samples
+            raw = self._sample_batch(sampled, call, progress)
+            plans = [plan] * samples  # post-processing hits the user's constraints, in the user's frame
         raw = [m.mirror() for m in raw] if made_as else raw
         t_sampled = time.perf_counter()
         require_finite(raw, "sampling")
@@ -207,6 +205,17 @@ class HumanPipeline(MotionPipeline):
         return match.to_dict() | {"grounding": texts[made].to_dict()} | self._weights_used(made) | mirrored
 
     # ------------------------------------------------------------------ internals
+    def _mirrored(self, segments: list[Segment], plan: SegmentPlan,
+                  objectives: bool) -> tuple[dict[str, str], SegmentPlan]:
+        """For a request made as its mirror image (kinema.human.mirrored_request): ``{prompt: the prompt it is
+        made as}`` and the plan the sampler runs (mirrored prompts and constraints); else ``({}, plan)``."""
+        made_as = mirrored_prompts([s.prompt for s in segments], self.loaded.expert, objectives)
+        cons = mirror_constraints(plan.constraints, self.skeleton) if made_as else None
+        if cons is None:
+            return {}, plan
+        mirrored = [replace(s, prompt=made_as[s.prompt]) for s in segments]
+        return made_as, plan_segments(self.representation, mirrored, cons)
+
     def _weights_used(self, prompt: str) -> dict:
         """For a model with an action expert (kinema.model.action_expert): which weights denoised
         ``prompt``, as ``{"weights": "action expert" | "main"}``; {} for a model without one."""
