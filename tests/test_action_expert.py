@@ -51,6 +51,16 @@ def mirroring(routed, tiny_data, tmp_path_factory):
     return out
 
 
+def _copy_with_expert_entry(folder, out, entry):
+    """A copy of the model ``folder`` at ``out`` whose checkpoint.json has ``entry`` as its action expert."""
+    out.mkdir()
+    for f in folder.iterdir():
+        (out / f.name).write_bytes(f.read_bytes())
+    info = json.loads((folder / "checkpoint.json").read_text())
+    (out / "checkpoint.json").write_text(json.dumps(info | {"action_expert": entry}))
+    return out
+
+
 def test_prompts_naming_an_expert_action_run_on_the_expert_weights(routed) -> None:
     """A kick prompt gives exactly what the expert's own folder gives, a walk prompt what the main folder
     gives, and the two networks do differ; the report says which weights served each prompt."""
@@ -85,11 +95,7 @@ def test_bad_experts_are_refused_with_one_line(routed, tmp_path, capsys) -> None
     assert "go together" in capsys.readouterr().err
     assert not out.exists()
     info = json.loads((routed_dir / "checkpoint.json").read_text())
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for f in routed_dir.iterdir():
-        (broken / f.name).write_bytes(f.read_bytes())
-    (broken / "checkpoint.json").write_text(json.dumps(info | {"action_expert": {"actions": "kick"}}))
+    broken = _copy_with_expert_entry(routed_dir, tmp_path / "broken", {"actions": "kick"})
     with pytest.raises(KinemaError, match="field 'action_expert': expected an object with a list 'actions'"):
         load_denoiser(broken)
     (broken / "checkpoint.json").write_text(json.dumps(info))
@@ -180,12 +186,7 @@ def test_a_bad_mirror_side_is_refused_with_one_line(routed, tmp_path, capsys) ->
     assert main(["export", str(main_dir), "--out", str(out), "--expert-mirror-side", "right"]) == 2
     assert "give --action-expert RUN too" in capsys.readouterr().err
     assert not out.exists()
-    info = json.loads((routed_dir / "checkpoint.json").read_text())
-    broken = tmp_path / "broken"
-    broken.mkdir()
-    for f in routed_dir.iterdir():
-        (broken / f.name).write_bytes(f.read_bytes())
-    entry = info["action_expert"] | {"mirror_side": "up"}
-    (broken / "checkpoint.json").write_text(json.dumps(info | {"action_expert": entry}))
+    entry = json.loads((routed_dir / "checkpoint.json").read_text())["action_expert"] | {"mirror_side": "up"}
+    broken = _copy_with_expert_entry(routed_dir, tmp_path / "broken", entry)
     with pytest.raises(KinemaError, match="mirror_side must be one of left, right, got 'up'"):
         load_denoiser(broken)
