@@ -2,8 +2,8 @@
 
 Why (issue 38, docs/training.md "Stop 56"): every training clip of the human model is there twice, as
 made and mirrored left to right with its caption's sides swapped, so in the data a right kick is exactly
-the mirror image of a left kick. The action expert learned one side better all the same (the shipped
-one, probed on held-out phrasings at 4 s: left kicks 12 of 12, right 5 of 12; at 5 s left punches 6 of
+the mirror image of a left kick. The action expert learned one side better all the same (stop 54's
+expert O, probed on held-out phrasings at 4 s: left kicks 12 of 12, right 5 of 12; at 5 s left punches 6 of
 12, right none). A model whose expert names a ``mirror_side`` (kinema.model.action_expert) therefore
 makes a request whose expert prompt names that side alone as the mirror image of the request for the
 other side: every prompt's side words swapped (kinema.model.sides.mirror_caption), the heading negated,
@@ -11,12 +11,12 @@ and the raw motions mirrored back (kinema.motion.mirror) before post-processing.
 ("A person walks forward.") stay as they are: the mirror of their training data is their training data.
 
 A request is mirrored only when that maps it onto itself exactly: at least one prompt the expert mirrors,
-no prompt naming the other side, no objectives (they are optimised in the user's frame) and constraints
-that have an exact mirror image (:func:`mirror_constraints`: every kind but an end-effector rotation).
-Constraints are sampled mirrored (x -> -x, left and right joints and foot contacts swapped, headings
-turned the other way) and post-processing then hits the user's own constraints on the mirrored-back
-motion, so residuals are measured in the frame the user gave. The report says which prompts were made
-as a mirror image, and of what.
+no prompt naming the other side and no objectives (they are optimised in the user's frame). Its
+constraints are sampled mirrored (:func:`mirror_constraints`: x -> -x, left and right joints and foot
+contacts swapped, headings turned the other way, joint rotations mirrored as kinema.motion.mirror
+does), and post-processing then hits the user's own constraints on the mirrored-back motion, so
+residuals are measured in the frame the user gave. The report says which prompts were made as a mirror
+image, and of what.
 """
 
 from __future__ import annotations
@@ -33,11 +33,11 @@ from kinema.constraints.types import (
     Root2DConstraint,
     resolve_joint,
 )
-from kinema.geometry.rotations import axis_angle_to_quat, quat_to_axis_angle
+from kinema.geometry.rotations import axis_angle_to_quat, mirror_quat_x, quat_mul, quat_to_axis_angle
 from kinema.model.action_expert import ActionExpert
 from kinema.model.sides import mirror_caption, sides
 from kinema.motion.core import Motion
-from kinema.motion.mirror import CONTACT_MIRROR
+from kinema.motion.mirror import CONTACT_MIRROR, mirror_corrections
 from kinema.skeleton import Skeleton
 
 #: x -> -x on (x, y, z) points and (x, z) ground points
@@ -56,9 +56,9 @@ def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, objectives
 
 
 def mirror_constraints(constraints: list[Constraint], skeleton: Skeleton) -> list[Constraint] | None:
-    """The mirror images of loaded ``constraints`` (kinema.constraints.types) on ``skeleton``: what a mirrored
-    request samples towards. None when one has no exact mirror here (an end-effector rotation: its rest
-    orientation need not mirror onto the other side's)."""
+    """The mirror images of loaded ``constraints`` (kinema.constraints.types) on ``skeleton``, exactly as
+    kinema.motion.mirror mirrors a motion: what a mirrored request samples towards. None when one is of a
+    kind this does not know."""
     out = []
     for c in constraints:
         if isinstance(c, Root2DConstraint):
@@ -67,11 +67,7 @@ def mirror_constraints(constraints: list[Constraint], skeleton: Skeleton) -> lis
         elif isinstance(c, FootContactConstraint):
             out.append(replace(c, contacts=c.contacts[:, CONTACT_MIRROR]))
         elif isinstance(c, EndEffectorConstraint):
-            if c.rotations is not None:
-                return None
-            joint = skeleton.names[skeleton.mirror_map[resolve_joint(skeleton, c.joint)]]
-            out.append(replace(c, joint=joint, positions=c.positions * _X3,
-                               smooth_root_2d=_mirror_2d(c.smooth_root_2d)))
+            out.append(_mirror_effector(c, skeleton))
         elif isinstance(c, FullBodyConstraint):
             out.append(_mirror_poses(c, skeleton))
         else:
@@ -81,6 +77,20 @@ def mirror_constraints(constraints: list[Constraint], skeleton: Skeleton) -> lis
 
 def _mirror_2d(points: torch.Tensor | None) -> torch.Tensor | None:
     return None if points is None else points * _X2
+
+
+def _mirror_effector(c: EndEffectorConstraint, skeleton: Skeleton) -> EndEffectorConstraint:
+    """A joint target moved to the partner joint: positions reflected, a global rotation ``R`` of joint j
+    becomes ``mirror(R) B_j`` (the partner's rest frame need not be the reflection of j's;
+    kinema.motion.mirror.mirror_corrections)."""
+    j = resolve_joint(skeleton, c.joint)
+    rotations = c.rotations
+    if rotations is not None:
+        fix = mirror_corrections(skeleton)[j].to(rotations.dtype)
+        rotations = quat_to_axis_angle(quat_mul(mirror_quat_x(axis_angle_to_quat(rotations)), fix))
+    return replace(c, joint=skeleton.names[skeleton.mirror_map[j]], rotations=rotations,
+                   positions=None if c.positions is None else c.positions * _X3,
+                   smooth_root_2d=_mirror_2d(c.smooth_root_2d))
 
 
 def _mirror_poses(c: FullBodyConstraint, skeleton: Skeleton) -> FullBodyConstraint:
