@@ -156,10 +156,9 @@ class HumanPipeline(MotionPipeline):
         segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
         guide = self._guidance(r.guidance)
-        constraints = r.constraints
-        plan = plan_segments(self.representation, segments, constraints, r.constraints_fps)
+        plan = plan_segments(self.representation, segments, r.constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
-        bound = collect_objectives(constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
+        bound = collect_objectives(r.constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
         made_as, sampled = self._mirrored(segments, plan, bool(bound))
         texts = self.ground_prompts([s.prompt for s in sampled.segments], r.grounding_settings())
         planner = self._planner(r.keyjoint_model, sampled, bound)
