@@ -40,8 +40,8 @@ from kinema.motion.core import Motion
 from kinema.motion.mirror import CONTACT_MIRROR, mirror_corrections
 from kinema.skeleton import Skeleton
 
-#: x -> -x on (x, y, z) points and (x, z) ground points
-_X3, _X2 = torch.tensor([-1.0, 1.0, 1.0]), torch.tensor([-1.0, 1.0])
+#: x -> -x on (x, y, z) points and (x, z) ground points; a (cos psi, sin psi) heading turned to -psi
+_X3, _X2, _HEADING = torch.tensor([-1.0, 1.0, 1.0]), torch.tensor([-1.0, 1.0]), torch.tensor([1.0, -1.0])
 
 
 def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, objectives: bool) -> dict[str, str]:
@@ -62,7 +62,7 @@ def mirror_constraints(constraints: list[Constraint], skeleton: Skeleton) -> lis
     out = []
     for c in constraints:
         if isinstance(c, Root2DConstraint):
-            heading = None if c.heading is None else c.heading * torch.tensor([1.0, -1.0])
+            heading = None if c.heading is None else c.heading * _HEADING
             out.append(replace(c, positions=c.positions * _X2, heading=heading))
         elif isinstance(c, FootContactConstraint):
             out.append(replace(c, contacts=c.contacts[:, CONTACT_MIRROR]))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 
-_SIDE = re.compile(r"\b(left|right)(?:wards?)?\b", re.IGNORECASE)
+#: a side word ("left", "right", also in "leftward(s)" and "left-hand"); group 1 is the side itself
 _SIDE_WORD = re.compile(r"\b(left|right)(?=(?:wards?)?\b)", re.IGNORECASE)
 #: the side words
 SIDES = ("left", "right")
@@ -19,7 +19,7 @@ SIDES = ("left", "right")
 
 def sides(text: str) -> frozenset[str]:
     """The sides a text names: a subset of {'left', 'right'} ("walks leftward" names 'left')."""
-    return frozenset(m.lower() for m in _SIDE.findall(text))
+    return frozenset(m.lower() for m in _SIDE_WORD.findall(text))
 
 
 def mirror_caption(text: str) -> str:
