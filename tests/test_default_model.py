@@ -134,3 +134,22 @@ def test_right_side_actions_are_made_as_the_left_ones_mirror_and_move_the_right_
     for res, twin in ((kick, "A man kicks hard using his left leg."), (punch, "Someone jabs with the left hand.")):
         assert res.report.prompts[0]["made_as_mirror_of"] == twin and res.report.prompts[0]["known"]
         assert not [w for w in res.report.warnings if w.startswith("prompt ")]
+
+
+def test_default_guidance_is_regular_two_branches_and_weights_ask_for_separated(model, monkeypatch) -> None:
+    """The shipped model's own guidance is regular CFG (w 2 on text and constraints together): a constrained
+    call runs two denoiser rows per step, not separated guidance's three (docs/speed.md, issue 37). Two
+    weights in the request ask for separated guidance, three rows, and a different motion; the report
+    names the mode that ran."""
+    from tests.denoiser_spy import record_forward_rows
+
+    assert model.loaded.guidance.to_dict() == {"mode": "regular", "w_text": 2.0, "w_constr": 2.0}
+    cons = [{"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}]
+    rows = record_forward_rows(model, monkeypatch)
+    kw = {"seconds": 1.0, "constraints": cons, "steps": 3, "seed": 0, "postprocess": False}
+    joint = model.generate("A person walks forward.", **kw)
+    assert rows == [2] * 3 and joint.report.guidance_mode == "regular"
+    rows.clear()
+    separated = model.generate("A person walks forward.", guidance=(2.0, 2.0), **kw)
+    assert rows == [3] * 3 and separated.report.guidance_mode == "separated"
+    assert (joint[0].positions - separated[0].positions).norm(dim=-1).mean() > 1e-3

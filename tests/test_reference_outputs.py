@@ -7,7 +7,10 @@ and a two-prompt timeline, each with and without post-processing, 5 DDIM steps, 
 timeline cases were re-recorded on purpose (``--only timeline``) by issue 18's new joins and again
 when timelines became segments sampled on their own prompts; all cases with the grounded default
 model. Issue 36 re-recorded the post-processed cases whose foot locking moves the pelvis (text,
-keyframes, waypoints, timeline): the reach shift is smoothed so it makes no pelvis pop.
+keyframes, waypoints, timeline): the reach shift is smoothed so it makes no pelvis pop. Issue 37
+re-recorded the constrained cases (keyframes, hands, waypoints, raw and post-processed) when the shipped
+model's own guidance became regular CFG (two branches instead of separated guidance's three); the text
+and timeline cases run two branches either way and kept their recording, bit for bit.
 
 What is compared, and why these bounds (issue 36). float32 rounding differs between CPUs (vector
 width, FMA, MKL / oneDNN kernels, thread count), and the sampler amplifies it: an Intel Xeon gave

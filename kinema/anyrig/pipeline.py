@@ -204,7 +204,7 @@ class AnyRigPipeline(MotionPipeline):
         motions = [finish_motion(f, rep_n, rig_m, scale, constraints, postprocess, report, ties) for f in feats]
         report.seconds = time.perf_counter() - t0
         report.timings = {"sampling": t_sampled - t0, "postprocess": report.seconds - (t_sampled - t0)}
-        report.guidance = (guide.w_text, guide.w_constr)
+        report.guidance, report.guidance_mode = (guide.w_text, guide.w_constr), guide.mode.value
         return GenerationResult(motions, report)
 
     def _orient(self, feats: torch.Tensor, root: int, heading: float, constraints, *, one_prompt: bool) -> torch.Tensor:

@@ -65,7 +65,8 @@ class Worker:
                            "traceback": traceback.format_exc(limit=8)}
         rep = result.report
         report = {"seconds": result[0].duration, "frames": rep.frames, "steps": rep.steps,
-                  "guidance": list(rep.guidance), "seed": rep.seed, "residuals": json_safe(rep.residuals),
+                  "guidance": list(rep.guidance), "guidance_mode": rep.guidance_mode, "seed": rep.seed,
+                  "residuals": json_safe(rep.residuals),
                   "warnings": [str(w) for w in rep.warnings]}
         return base | {"files": files, "report": report, "elapsed_s": time.perf_counter() - t0}
 

@@ -5,8 +5,10 @@ of this process by ``time.process_time``, so other processes on a busy machine c
 
 - ``prompt_raw``: a prompt-only raw generate of ``seconds`` (no constraints, no post-processing);
 - ``constrained_raw`` / ``constrained_post``: the same clip with the bench's waypoints + hand target
-  (kinema.bench.generate.example_constraints), raw and post-processed; the post-processing share is
-  ``(post - raw) / post`` and ``ratio`` is ``constrained_post / prompt_raw`` (issue 37: <= 1.25);
+  (kinema.bench.generate.example_constraints), raw and post-processed, with the model's own guidance; the
+  post-processing share is ``(post - raw) / post`` and ``ratio`` is ``constrained_post / prompt_raw``
+  (issue 37: <= 1.25); ``separated_post`` / ``separated_ratio``: the same with the model's weights given,
+  i.e. separated guidance (three denoiser branches where the shipped model's own regular CFG runs two);
 - ``samples_N``: seconds per motion of a prompt-only, post-processed call of ``N`` samples;
 - ``sparse_*``: sparse joint targets alone (kinema.bench.keyjoint_planning.sparse_example), raw, with the
   default (keyjoint-planned) and with ``keyjoint_model="none"``, and the worst raw target error (cm);
@@ -97,6 +99,9 @@ def bench_speed(model_name: str = "default", seconds: float = 5.0, rounds: int =
             add(p, "prompt_raw", _cpu(lambda m=m: m.generate(PROMPT, postprocess=False, **kw)))
             add(p, "constrained_raw", _cpu(lambda m=m: m.generate(PROMPT, constraints=cons, postprocess=False, **kw)))
             add(p, "constrained_post", _cpu(lambda m=m: m.generate(PROMPT, constraints=cons, **kw)))
+            weights = (m.loaded.guidance.w_text, m.loaded.guidance.w_constr)
+            add(p, "separated_post", _cpu(lambda m=m, w=weights: m.generate(PROMPT, constraints=cons, guidance=w,
+                                                                             **kw)))
             for n in samples:
                 add(p, f"samples_{n}", _cpu(lambda m=m, n=n: m.generate(PROMPT, samples=n, **kw)) / n)
             for mode in ("default", "none"):
@@ -111,6 +116,7 @@ def bench_speed(model_name: str = "default", seconds: float = 5.0, rounds: int =
         med = {k: statistics.median(v) for k, v in times[p].items()}
         med["post_share"] = (med["constrained_post"] - med["constrained_raw"]) / med["constrained_post"]
         med["ratio"] = med["constrained_post"] / med["prompt_raw"]
+        med["separated_ratio"] = med["separated_post"] / med["prompt_raw"]
         med["samples_gain"] = med[f"samples_{samples[0]}"] / med[f"samples_{samples[-1]}"]
         dtype = torch.bfloat16 if p == "bf16" else torch.float32
         peak = matmul_peak(dtype)
@@ -129,6 +135,8 @@ ROWS = [
     ("constrained_post", "waypoints + hand, post-processed (s)", ".3f"),
     ("post_share", "post-processing share of that", ".1%"),
     ("ratio", "constrained + post / prompt raw", ".2f"),
+    ("separated_post", "waypoints + hand, separated guidance (weights given), post-processed (s)", ".3f"),
+    ("separated_ratio", "separated guidance: constrained + post / prompt raw", ".2f"),
     ("sparse_none_cm", "sparse targets, direct: worst raw error (cm)", ".1f"),
     ("sparse_default_cm", "sparse targets, default (planned): worst raw error (cm)", ".1f"),
     ("sparse_none", "sparse targets, direct (s)", ".3f"),

@@ -22,7 +22,11 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="model folder to write, e.g. kinema/assets/models/default")
     p.add_argument("--dtype", default="float16", choices=("float16", "bfloat16", "float32"), help="weight precision")
     p.add_argument("--guidance", type=non_negative_float, nargs=2, metavar=("W_TEXT", "W_CONSTR"),
-                   help="default separated guidance weights saved with the model (finite, >= 0)")
+                   help="default guidance weights saved with the model (finite, >= 0)")
+    p.add_argument("--guidance-mode", choices=("separated", "regular"), default="separated",
+                   help="the guidance mode a call without weights runs (kinema.diffusion.guidance): separated (text "
+                        "and constraints weighted on their own: three denoiser branches on a constrained call) or "
+                        "regular (one weight, W_TEXT, on text and constraints together: two branches; docs/speed.md)")
     p.add_argument("--steps", type=positive_int, help="default DDIM steps saved with the model")
     p.add_argument("--weights", default="ema", choices=("ema", "raw"),
                    help="EMA weights (default) or the raw optimiser weights (short fine-tunes, whose EMA still "
@@ -74,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
     if (args.action_expert is None) != (args.expert_actions is None):
         raise KinemaError("--action-expert RUN and --expert-actions ACTION ... go together")
     expert = None if args.action_expert is None else (resolve_model_path(args.action_expert), args.expert_actions)
-    guidance = None if args.guidance is None else Guidance("separated", *args.guidance)
+    if args.guidance is None and args.guidance_mode != "separated":
+        raise KinemaError("--guidance-mode: give --guidance W_TEXT W_CONSTR too (the weights it is saved with)")
+    guidance = None if args.guidance is None else Guidance(args.guidance_mode, *args.guidance)
     out = export_model(resolve_model_path(args.model), args.out, dtype=args.dtype, guidance=guidance,
                        sampling_steps=args.steps, ema=args.weights == "ema", grounding=grounding_overrides(args),
                        root_stage=args.root_stage, mix=_mix(args.mix), action_expert=expert,
@@ -90,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     if getattr(loaded, "expert", None) is not None:
         stage += f", with an action expert for {', '.join(loaded.expert.actions)}"
     print(f"wrote {out} ({size / 1e6:.2f} MB, step {loaded.info.get('step')}, {args.dtype}{stage}, "
-          f"guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
+          f"{loaded.guidance.mode.value} guidance {loaded.guidance.w_text:g}/{loaded.guidance.w_constr:g}, "
           f"{loaded.sampler.num_inference_steps} DDIM steps{_grounding_note(loaded)})")
     return 0
 

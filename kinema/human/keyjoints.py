@@ -84,12 +84,15 @@ def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepr
     """Metres to add to the ``joint_pos`` channels of unnormalised ``feats (B, T, D)``: ``(B, T, J, 3)``.
 
     Keyjoint residuals (target - FK joint, posed by ``rep.pose``) spread over time (see module); frames
-    whose every joint coordinate is constrained (full-body keyframes) contribute nothing.
+    whose every joint coordinate is constrained (full-body keyframes) contribute nothing. Only the frames
+    with a residual are posed (posing is per frame): a hand target at one frame of 100 poses one frame.
     """
-    P = rep.pose(feats)
     full = keys.mask.flatten(-2).amin(-1) > 0  # (B, T)
     m = keys.mask * (~full)[..., None, None].to(keys.mask)
-    residual = (keys.pos - P) * m
+    frames = m.flatten(2).amax(-1).amax(0).nonzero().flatten()  # frames some row has a residual on
+    P = rep.pose(feats[:, frames])
+    posed = (keys.pos[:, frames] - P) * m[:, frames]
+    residual = posed.new_zeros(posed.shape[:1] + keys.pos.shape[1:]).index_copy(1, frames, posed)
     return gaussian_spread(residual, m.amax(-1) > 0, sigma_frames)
 
 

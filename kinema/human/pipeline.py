@@ -190,7 +190,8 @@ class HumanPipeline(MotionPipeline):
         t1 = time.perf_counter()
         report = GenerationReport(
             seconds=t1 - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
-            guidance=(guide.w_text, guide.w_constr), seed=seed, residuals=residuals, warnings=warnings,
+            guidance=(guide.w_text, guide.w_constr), guidance_mode=guide.mode.value, seed=seed, residuals=residuals,
+            warnings=warnings,
             prompts=[self._prompt_report(m, made_as, texts) for m in matches], objectives=obj_report,
             timings={"sampling": t_sampled - t0, "postprocess": t1 - t_sampled}, joints=self.skeleton.num_joints,
         )
@@ -286,7 +287,8 @@ class HumanPipeline(MotionPipeline):
         return out
 
     def _guidance(self, guidance) -> Guidance:
-        """The call's guidance (two weights are separated guidance; the request checked them)."""
+        """The call's guidance: the model's own (its saved mode and weights) when the request gives none, else
+        separated guidance with the request's two weights (the request checked them)."""
         return Guidance.given(guidance, self.loaded.guidance, mode="separated")
 
     def encode_text(self, prompt: str) -> torch.Tensor | None:

@@ -110,7 +110,8 @@ class GenerationRequest:
                                help="DDIM steps (default: the model's setting)")
     guidance: tuple[float, float] | None = option(None, kind="pair", low=0, high="max_guidance",
                                                   metavar=("W_TEXT", "W_CONSTR"), objects=True,
-                                                  help="separated guidance weights (default: the model's)")
+                                                  help="separated guidance weights, text and constraints on their own "
+                                                       "(default: the model's own guidance; docs/constraints.md)")
     constraints: Any = option(None, kind="json", file=True, metavar="FILE",
                               help="keyframes, end effectors, waypoints, paths, foot contacts (docs/constraints.md)")
     constraints_fps: float | None = option(None, kind="float", low=0, open_low=True, high="max_fps", metavar="FPS",

@@ -24,7 +24,9 @@ from kinema.pipeline.stages import load_stage
 class GenerationReport:
     """What one ``generate`` call did.
 
-    Common to every pipeline: ``seconds`` (wall time), ``steps``, ``seed``, ``guidance``, ``segments``,
+    Common to every pipeline: ``seconds`` (wall time), ``steps``, ``seed``, ``guidance`` (the weights) and
+    ``guidance_mode`` (kinema.diffusion.guidance: "separated" or "regular"; a call without constraints runs
+    the two-branch regular form either way), ``segments``,
     ``frames``, ``warnings`` (what a user must hear: unmet targets, unknown prompts, stages undone by the
     guard), ``left_out`` (parts of the request the model cannot take and left out, e.g. foot contacts for
     the any-rig model), ``timings`` (wall seconds per stage).
@@ -55,6 +57,7 @@ class GenerationReport:
     frames: int = 0
     steps: int = 0
     guidance: tuple[float, float] = (0.0, 0.0)
+    guidance_mode: str = ""
     seed: int = 0
     warnings: list[str] = field(default_factory=list)
     left_out: list[str] = field(default_factory=list)

@@ -213,6 +213,8 @@ class ReportOut(BaseModel):
     frames: int
     steps: int
     guidance: tuple[float, float]
+    #: "separated" (the two weights apply on their own) or "regular" (w_text on text and constraints together)
+    guidance_mode: str = ""
     seed: int
     residuals: list[dict[str, Any]]
     warnings: list[str]
