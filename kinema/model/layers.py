@@ -13,6 +13,7 @@ import math
 import torch
 from torch import nn
 
+from kinema.model import bf16_encoder
 from kinema.model.config import ModelConfig
 
 
@@ -105,5 +106,8 @@ class StageTransformer(nn.Module):
         if pad_mask is not None:
             cond_valid = torch.ones(B, self.num_cond, dtype=torch.bool, device=pad_mask.device)
             key_padding = ~torch.cat([cond_valid, pad_mask.to(torch.bool)], dim=1)  # True = ignore
-        hidden = self.encoder(tokens, src_key_padding_mask=key_padding)
+        if tokens.dtype == torch.bfloat16 and not self.training:  # the softmax in fp32 (kinema.model.bf16_encoder)
+            hidden = bf16_encoder.encode(self.encoder, tokens, key_padding)
+        else:
+            hidden = self.encoder(tokens, src_key_padding_mask=key_padding)
         return self.out_proj(hidden[:, self.num_cond:]).to(out_dtype)

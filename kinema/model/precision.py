@@ -3,7 +3,8 @@
 ``bf16`` converts the *weights* of every transformer stage (kinema.model.layers.StageTransformer) to
 bfloat16; a stage casts its inputs to its weights' dtype and its output back, so everything around it
 stays fp32: the feature normalisation, the root stage's un-normalised root and local-root conversion,
-the sampler's arithmetic, constraint imputation and post-processing. Weights, not autocast: autocast
+the sampler's arithmetic, constraint imputation and post-processing; inside a bf16 stage the attention
+softmax runs in fp32 (kinema.model.bf16_encoder: faster on these CPUs). Weights, not autocast: autocast
 casts the weights on every call and (on these CPUs) falls off oneDNN's bf16 fast path.
 
 bf16 only pays on a CPU with bf16 dot-product instructions: AVX512-BF16 (AMD Zen 4, Intel Cooper Lake
