@@ -109,3 +109,11 @@ def test_preview_runs_ten_steps(tiny_checkpoint, tmp_path, capsys):
     assert code == 0 and "10 DDIM steps" in out
     code, _, err = _run([*args[:-2], "--steps", "3", "--out", str(tmp_path / "q.bvh")], capsys)
     assert code == 2 and "either --preview or --steps" in err and not (tmp_path / "q.bvh").exists()
+
+
+def test_summary_line_names_the_guidance_that_ran() -> None:
+    from kinema.cli.report import guidance_words
+
+    assert guidance_words("regular", (2.0, 2.0)) == ", regular guidance 2"
+    assert guidance_words("separated", (2.0, 1.5)) == ", separated guidance 2 / 1.5"
+    assert guidance_words("", (0.0, 0.0)) == ""

@@ -115,14 +115,23 @@ def objective_table(report: dict) -> str:
     return "\n".join(lines)
 
 
+def guidance_words(mode: str, weights) -> str:
+    """``", regular guidance 2"`` / ``", separated guidance 2 / 2"`` for the summary line ("" without a mode)."""
+    if mode == "regular":
+        return f", regular guidance {weights[0]:g}"
+    if mode == "separated":
+        return f", separated guidance {weights[0]:g} / {weights[1]:g}"
+    return ""
+
+
 def print_report(result) -> None:
     """What `kinema generate` prints after writing the files, for any pipeline: the summary line, the
     grounding lines, the residual and objective tables, the constraint errors and the warnings (stderr)."""
     rep = result.report
     where = f" on {rep.joints} joints" if rep.joints else ""
     windows = f", {rep.windows} window(s)" if rep.windows > 1 else ""
-    print(f"generated {len(result)} motion(s){where}, {rep.segments} segment(s){windows}, {rep.steps} DDIM steps "
-          f"in {rep.seconds:.2f} s")
+    print(f"generated {len(result)} motion(s){where}, {rep.segments} segment(s){windows}, {rep.steps} DDIM steps"
+          f"{guidance_words(rep.guidance_mode, rep.guidance)} in {rep.seconds:.2f} s")
     for line in prompt_lines(rep.prompts):
         print(line)
     for table in (residual_table(rep.residuals), objective_table(rep.objectives)):
