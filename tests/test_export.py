@@ -97,3 +97,21 @@ def test_export_mixes_a_fine_tune_with_its_starting_weights(tiny_checkpoint, tmp
     assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "x"), "--mix", str(src), "half"]) == 2
     assert "SHARE must be a number" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_export_guidance_mode(tiny_checkpoint, tmp_path, capsys) -> None:
+    """``--guidance-mode regular`` saves regular CFG as the model's own guidance (a call without weights runs
+    it, two branches; weights ask for separated guidance); without ``--guidance`` it is a one-line error."""
+    out = tmp_path / "regular"
+    assert main(["export", str(tiny_checkpoint), "--out", str(out), "--guidance", "2", "2",
+                 "--guidance-mode", "regular"]) == 0
+    assert "regular guidance 2/2" in capsys.readouterr().out
+    model = load_model(out)
+    assert model.loaded.guidance.to_dict() == {"mode": "regular", "w_text": 2.0, "w_constr": 2.0}
+    cons = [{"type": "root2d", "times": [0.5], "smooth_root_2d": [[0.2, 0.6]]}]
+    kw = {"seconds": 1.0, "constraints": cons, "steps": 2, "postprocess": False}
+    assert model.generate("a person walks", **kw).report.guidance_mode == "regular"
+    assert model.generate("a person walks", guidance=(2.0, 2.0), **kw).report.guidance_mode == "separated"
+    assert main(["export", str(tiny_checkpoint), "--out", str(tmp_path / "x"), "--guidance-mode", "regular"]) == 2
+    assert "--guidance-mode: give --guidance" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
