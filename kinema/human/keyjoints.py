@@ -26,6 +26,8 @@ Shapes: features ``(B, T, D)``; targets ``(B, T, J, 3)`` metres, world frame, Y 
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import torch
 
 from kinema.representation.flat import FlatRepresentation
@@ -63,6 +65,18 @@ class KeyjointTargets:
     def any(self) -> bool:
         return bool(self.mask.any())
 
+    @cached_property
+    def residual_mask(self) -> torch.Tensor:
+        """``mask`` without the frames that pin every joint (full-body keyframes): what
+        :func:`joint_displacement` moves towards, worked out once for all the sampler's steps."""
+        full = self.mask.flatten(-2).amin(-1) > 0  # (B, T)
+        return self.mask * (~full)[..., None, None].to(self.mask)
+
+    @cached_property
+    def residual_frames(self) -> torch.Tensor:
+        """The frames on which some row has a ``residual_mask`` target."""
+        return self.residual_mask.flatten(2).amax(-1).amax(0).nonzero().flatten()
+
 
 def gaussian_spread(residual: torch.Tensor, present: torch.Tensor, sigma_frames: float) -> torch.Tensor:
     """Spread sparse per-frame ``residual (B, T, J, 3)`` (zero where absent) over time.
@@ -87,9 +101,7 @@ def joint_displacement(feats: torch.Tensor, keys: KeyjointTargets, rep: FlatRepr
     whose every joint coordinate is constrained (full-body keyframes) contribute nothing. Only the frames
     with a residual are posed (posing is per frame): a hand target at one frame of 100 poses one frame.
     """
-    full = keys.mask.flatten(-2).amin(-1) > 0  # (B, T)
-    m = keys.mask * (~full)[..., None, None].to(keys.mask)
-    frames = m.flatten(2).amax(-1).amax(0).nonzero().flatten()  # frames some row has a residual on
+    m, frames = keys.residual_mask, keys.residual_frames
     P = rep.pose(feats[:, frames])
     posed = (keys.pos[:, frames] - P) * m[:, frames]
     residual = posed.new_zeros(posed.shape[:1] + keys.pos.shape[1:]).index_copy(1, frames, posed)
