@@ -128,7 +128,7 @@ def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | 
     once = {(rec.get("source_clip_id", rec["clip_id"]), rec.get("mirrored")): rec for rec in records}
     clips = [rec["captions"] for rec in once.values()]
     encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
-    known = KnownPrompts.from_clips(clips, encoder, manner_phrases())
+    known = KnownPrompts.from_clips(clips, encoder, manner_phrases(), [rec["duration_s"] for rec in once.values()])
     if probes:
         known = known.with_probes(probes)
     learned = "" if not probes else "; measured: " + ", ".join(

@@ -20,6 +20,7 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
+from kinema.human.continuation import continuation_window, continued
 from kinema.human.keyjoint_planning import KeyjointPlanner, plans_by_default, sample_with_keyjoint_plan, shipped_planner
 from kinema.human.mirrored_request import mirror_constraints, mirrored_prompts
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
@@ -152,6 +153,11 @@ class HumanPipeline(MotionPipeline):
         r = request
         self.resolve_rig(r.rig)
         samples, steps, seed = self._check_counts(r.samples, r.steps, r.seed)
+        if r.timeline is None:  # a prompt longer than its action was captured at: window by window
+            seconds = self.default_seconds if r.seconds is None else float(r.seconds)
+            window = continuation_window(self, r, seconds)
+            if window is not None:
+                return continued(self, r, seconds, window, steps)
         steps_given = r.steps
         segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
@@ -192,12 +198,12 @@ class HumanPipeline(MotionPipeline):
             seconds=t1 - t0, segments=len(segments), frames=plan.total_frames, steps=steps,
             guidance=(guide.w_text, guide.w_constr), guidance_mode=guide.mode.value, seed=seed, residuals=residuals,
             warnings=warnings,
-            prompts=[self._prompt_report(m, made_as, texts) for m in matches], objectives=obj_report,
+            prompts=[self.prompt_report(m, made_as, texts) for m in matches], objectives=obj_report,
             timings={"sampling": t_sampled - t0, "postprocess": t1 - t_sampled}, joints=self.skeleton.num_joints,
         )
         return GenerationResult(motions, report)
 
-    def _prompt_report(self, match: PromptMatch, made_as: dict[str, str], texts: dict[str, Grounded]) -> dict:
+    def prompt_report(self, match: PromptMatch, made_as: dict[str, str], texts: dict[str, Grounded]) -> dict:
         """What the report says of one prompt: how well it is known, how it was grounded, which weights made it
         and, for a request made as its mirror image (kinema.human.mirrored_request), the prompt it was made as."""
         made = made_as.get(match.prompt, match.prompt)

@@ -73,6 +73,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.model.actions import actions_in
+from kinema.model.pace import pace
 from kinema.model.sides import sides
 from kinema.model.vocabulary import UNKNOWN_BELOW, KnownPrompts
 
@@ -184,25 +185,31 @@ class Grounded:
         }
 
 
-def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts, manner: bool = True) -> torch.Tensor:
+def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts, manner: bool = True,
+                paced: bool = True) -> torch.Tensor:
     """Which captions ``(N,)`` bool a prompt may be grounded on: same sides, same directions away from
-    forward, same manner (when the known prompts list manner phrases and ``manner``) and, when the prompt
-    names actions, all of them."""
-    want, away = sides(prompt), off_forward(prompt)
+    forward, same pace (kinema.model.pace, when ``paced``), same manner (when the known prompts list manner
+    phrases, ``manner`` and the prompt names no pace: a pace word is the manner a caption says it with) and,
+    when the prompt names actions, all of them."""
+    want, away, speed = sides(prompt), off_forward(prompt), pace(prompt)
     same = torch.tensor([sides(c) == want and off_forward(c) == away for c in known.captions])
-    if manner and known.manner_phrases:  # a prompt that names no manner is grounded on captions that name none
+    if paced:
+        same &= torch.tensor([p == speed for p in known.caption_paces])
+    if manner and known.manner_phrases and not (paced and speed):
+        # a prompt that names no manner is grounded on captions that name none
         same &= known.mannered == known.names_manner(prompt)
     if actions:
         same &= torch.tensor([actions <= a for a in known.caption_actions])
     return same
 
 
-def _nearest(same: torch.Tensor, ref_unit: torch.Tensor, known: KnownPrompts, settings: Grounding):
+def _nearest(same: torch.Tensor, ref_unit: torch.Tensor, known: KnownPrompts, settings: Grounding,
+             floor: float = UNKNOWN_BELOW):
     """The top-k (values, indices) of the candidate captions ``same (N,)`` by cosine to ``ref_unit (1, E)``;
-    None when there is none or the nearest is below ``UNKNOWN_BELOW``."""
+    None when there is none or the nearest is below ``floor``."""
     sims = torch.where(same, known.embeddings @ ref_unit[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
-    if top.values.numel() == 0 or float(top.values[0]) < UNKNOWN_BELOW:
+    if top.values.numel() == 0 or float(top.values[0]) < floor:
         return None
     return top
 
@@ -229,7 +236,14 @@ def ground(prompt: str, embedding: torch.Tensor, known: KnownPrompts | None, set
         return Grounded(e, "unknown")
     unit = torch.nn.functional.normalize(e, dim=-1)
     ref_unit = torch.nn.functional.normalize(ref.float().reshape(1, -1), dim=-1)
-    top = _nearest(_candidates(prompt, actions, known), ref_unit, known, settings)
+    # a prompt known as a whole (checked above) that names a pace is grounded on its pace's nearest captions
+    # however near: "A woman strolls along at her leisure." is 0.63 from "Someone walks slowly ahead." and
+    # 0.72 from "A woman walks straight ahead.", a walk at full pace
+    floor = -1.0 if pace(prompt) else UNKNOWN_BELOW
+    top = _nearest(_candidates(prompt, actions, known), ref_unit, known, settings, floor)
+    if top is None and pace(prompt):
+        # no caption of these actions and directions says this pace ("strolls backwards"): ground as before
+        top = _nearest(_candidates(prompt, actions, known, paced=False), ref_unit, known, settings)
     if top is None and actions and known.manner_phrases and known.names_manner(prompt):
         # no caption of these actions says it in this manner ("A man kicks hard using his left leg.": the
         # kicks have no style words): the action matters more than the manner, so ground on the action's own

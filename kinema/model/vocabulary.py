@@ -35,8 +35,10 @@ count (a fine-tune can teach an action from 6 clips drawn often, and 10 clips do
 from __future__ import annotations
 
 import json
+import math
 import re
-from collections.abc import Mapping
+import statistics
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +49,7 @@ from safetensors.torch import save
 from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
 from kinema.model.actions import ACTION_WORDS, actions_in, clips_per_action
+from kinema.model.pace import pace
 
 FILE_NAME = "known_prompts.safetensors"
 #: cosine similarity below which a prompt counts as unknown (see the module docstring for the numbers)
@@ -104,6 +107,7 @@ class KnownPrompts:
         manner_phrases: tuple[str, ...] = (),
         action_clips: Mapping[str, int] | None = None,
         action_probes: Mapping[str, tuple[int, int]] | None = None,
+        caption_seconds: Sequence[float] | None = None,
     ):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
             raise KinemaError(
@@ -120,6 +124,7 @@ class KnownPrompts:
         self.mannered = torch.tensor([self.names_manner(c) for c in self.captions], dtype=torch.bool)
         # the actions each caption names; per action the training clips that show it (empty = not known)
         self.caption_actions = [actions_in(c) for c in self.captions]
+        self.caption_paces = [pace(c) for c in self.captions]  # kinema.model.pace
         self.action_clips = dict(sorted((action_clips or {}).items()))
         self.action_sets = frozenset(self.caption_actions)
         self.named_actions = frozenset().union(*self.caption_actions)
@@ -129,6 +134,13 @@ class KnownPrompts:
             if not 0 <= passed <= total or total < 1:
                 raise KinemaError(f"known prompts: action {a!r} probes {passed}/{total} are not a share of samples")
         self.learned = frozenset(a for a in self.named_actions if self._learned(a))
+        # per caption the median length (s) of the training clips that carry it: how long its action was
+        # captured at, the window a longer prompt is continued in (kinema.human.continuation); None = not known
+        self.caption_seconds = None if caption_seconds is None else [float(x) for x in caption_seconds]
+        if self.caption_seconds is not None and (len(self.caption_seconds) != len(self.captions) or not all(
+                math.isfinite(x) and x > 0 for x in self.caption_seconds)):
+            raise KinemaError(f"known prompts: caption_seconds must hold one positive length per caption "
+                              f"({len(self.captions)})")
 
     def _learned(self, action: str) -> bool:
         """Whether the model learned ``action``: its probes pass (where measured), else enough clips show it."""
@@ -157,7 +169,7 @@ class KnownPrompts:
     def with_probes(self, action_probes: Mapping[str, tuple[int, int]]) -> KnownPrompts:
         """These known prompts with ``action_probes`` (per action: samples passed, samples) measured."""
         return KnownPrompts(self.captions, self.embeddings, self.encoder_id, self.manner_phrases,
-                            self.action_clips, action_probes)
+                            self.action_clips, action_probes, self.caption_seconds)
 
     def untrained(self, actions: frozenset[str]) -> frozenset[str]:
         """The ``actions`` the model has not learned (no caption names them, or too few clips show them)."""
@@ -182,11 +194,26 @@ class KnownPrompts:
         return cls(unique, encoder.encode(unique).float(), encoder.id, phrases, action_clips)
 
     @classmethod
-    def from_clips(cls, clip_captions: list[list[str]], encoder, manner_phrases: tuple[str, ...] = ()) -> KnownPrompts:
-        """:meth:`build` from training clips, each given as its captions: all their captions, and per action
-        the number of clips that show it."""
+    def from_clips(cls, clip_captions: list[list[str]], encoder, manner_phrases: tuple[str, ...] = (),
+                   clip_seconds: Sequence[float] | None = None) -> KnownPrompts:
+        """:meth:`build` from training clips, each given as its captions: all their captions, per action
+        the number of clips that show it and, given each clip's length ``clip_seconds``, per caption the
+        median length of the clips that carry it."""
         captions = [c for caps in clip_captions for c in caps]
-        return cls.build(captions, encoder, manner_phrases, clips_per_action(clip_captions))
+        known = cls.build(captions, encoder, manner_phrases, clips_per_action(clip_captions))
+        if clip_seconds is None:
+            return known
+        return cls(known.captions, known.embeddings, known.encoder_id, known.manner_phrases, known.action_clips,
+                   caption_seconds=median_seconds(known.captions, clip_captions, clip_seconds))
+
+    def seconds_of(self, caption: str) -> float | None:
+        """How long the clips of a known ``caption`` last (median, seconds), or None when not known."""
+        if self.caption_seconds is None:
+            return None
+        try:
+            return self.caption_seconds[self.captions.index(caption)]
+        except ValueError:
+            return None
 
     @staticmethod
     def phrases_in(phrases, captions) -> tuple[str, ...]:
@@ -204,6 +231,8 @@ class KnownPrompts:
         }
         if self.action_clips:
             meta["action_clips"] = json.dumps(self.action_clips)
+        if self.caption_seconds is not None:
+            meta["caption_seconds"] = json.dumps([round(x, 3) for x in self.caption_seconds])
         if self.action_probes:
             meta["action_probes"] = json.dumps({a: list(v) for a, v in self.action_probes.items()})
         path = Path(folder) / FILE_NAME
@@ -224,7 +253,8 @@ class KnownPrompts:
             phrases = tuple(json.loads(meta.get("manner_phrases", "[]")))
             clips = {str(a): int(n) for a, n in json.loads(meta.get("action_clips", "{}")).items()}
             probes = {str(a): (int(v[0]), int(v[1])) for a, v in json.loads(meta.get("action_probes", "{}")).items()}
-            return cls(captions, emb, meta["text_encoder"], phrases, clips, probes)
+            seconds = json.loads(meta["caption_seconds"]) if "caption_seconds" in meta else None
+            return cls(captions, emb, meta["text_encoder"], phrases, clips, probes, seconds)
         except (OSError, KeyError, TypeError, ValueError, AttributeError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
@@ -290,3 +320,18 @@ def read_action_probes(path: str | Path) -> dict[str, tuple[int, int]]:
     if not out:
         raise KinemaError(f"{path}: no row with a 'pass' (an action-probes file measures kicks, punches, ...)")
     return {a: (p, n) for a, (p, n) in sorted(out.items())}
+
+
+def median_seconds(captions: list[str], clip_captions: list[list[str]], clip_seconds: Sequence[float]) -> list[float]:
+    """Per caption of ``captions`` the median of ``clip_seconds`` over the clips (given as their captions)
+    that carry it; a caption no clip carries is an error."""
+    if len(clip_captions) != len(clip_seconds):
+        raise KinemaError(f"known prompts: {len(clip_captions)} clips but {len(clip_seconds)} clip lengths")
+    lengths: dict[str, list[float]] = {}
+    for caps, seconds in zip(clip_captions, clip_seconds, strict=True):
+        for c in {c.strip() for c in caps}:
+            lengths.setdefault(c, []).append(float(seconds))
+    missing = [c for c in captions if c not in lengths]
+    if missing:
+        raise KinemaError(f"known prompts: no clip carries the caption {missing[0]!r}")
+    return [statistics.median(lengths[c]) for c in captions]

@@ -1,0 +1,103 @@
+"""Long prompts as continuation: a prompt longer than its action was captured at is made window by window.
+
+Why (issue 57): the human model learned each action at the length of its captures, and makes it for that
+long, whatever the length asked. Measured on the shipped model, one 10-s window, raw, seeds 0-2, pelvis
+ground speed per second: "A man runs straight ahead." (run captures: median 3.15 s) runs at 2.1-3.8 m/s
+for 3 s, then 0.15-1.4 m/s, in place, to the end; "A person walks ahead." (walk captures: 7.85 s) walks
+at 1.0-1.6 m/s for 7 s, then 0.4-0.9 m/s at 7-9 s. So a prompt is sampled in one window only up to
+`CAPTURE_SHARE` of its captures' length (the median length of the training clips of the caption it is
+grounded on, or its nearest caption: ``KnownPrompts.caption_seconds``) and of the model's window; a
+longer one is a stream (kinema.stream: the same prompt, each window continuing the last frames generated,
+imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then four
+2.4-s windows that each keep running.
+
+Only requests that are a single prompt without constraints, objectives or keyjoint planning are continued;
+the others are made as before (timelines: segments joined by transition windows, kinema.human.segments).
+Sample ``i`` of a continued request is the stream of seed ``seed + i``.
+"""
+
+from __future__ import annotations
+
+import time
+
+from kinema.human.targets import run_postprocess
+from kinema.motion.core import Motion
+from kinema.pipeline.request import GenerationRequest
+from kinema.pipeline.result import GenerationReport, GenerationResult
+from kinema.stream import open_stream
+
+#: share of an action's capture length (and of the model's window) that one window holds
+CAPTURE_SHARE = 0.75
+#: the shortest window (s): a few captions are carried only by a short clip (a 0.65-s dash)
+MIN_WINDOW_SECONDS = 2.0
+
+
+def continuation_window(pipeline, request: GenerationRequest, seconds: float) -> float | None:
+    """The window (s) a request of ``seconds`` is continued in, or None when it is made in one go: it is
+    not a lone unconstrained prompt, the model knows no capture lengths, or the prompt's action lasts."""
+    r = request
+    if (r.timeline is not None or not r.prompt.strip() or r.constraints is not None or r.objectives is not None
+            or r.keyjoint_model not in (None, "none")):
+        return None
+    captured = captured_seconds(pipeline, r)
+    if captured is None:
+        return None
+    fps = float(pipeline.fps)
+    window = round(max(MIN_WINDOW_SECONDS, CAPTURE_SHARE * min(captured, float(pipeline.window_seconds))) * fps) / fps
+    # a window's own request (window frames / fps seconds) is never continued again
+    return window if seconds > window + 0.5 / fps else None
+
+
+def captured_seconds(pipeline, request: GenerationRequest) -> float | None:
+    """How long the captures of the request's prompt last: those of the caption it is grounded on (the first
+    of the blend), else of its nearest caption; None without known capture lengths."""
+    known = pipeline.known_prompts
+    if known is None or known.caption_seconds is None:
+        return None
+    prompt = request.prompt
+    grounded = pipeline.ground_prompts([prompt], request.grounding_settings())[prompt]
+    if grounded.captions:
+        caption = grounded.captions[0][0]
+    elif prompt.strip() in known.caption_set:
+        caption = prompt.strip()
+    else:
+        caption = pipeline.match_prompts([prompt])[0].nearest[0][0]
+    return known.seconds_of(caption)
+
+
+def continued(pipeline, request: GenerationRequest, seconds: float, window: float, steps: int) -> GenerationResult:
+    """``request.samples`` motions of ``seconds`` each, made as streams of ``window``-second windows with
+    ``steps`` DDIM steps, post-processed whole when the request asks; the report of the call."""
+    t0 = time.perf_counter()
+    frames = round(seconds * pipeline.fps)
+    window_request = request.replace(rig=None, robot=None, robot_mapping=None, fps=None, format=None,
+                                     seconds=None, samples=1)
+    motions, residuals, raw_seconds, windows = [], [], 0.0, 0
+    for i in range(request.samples):
+        stream = open_stream(pipeline, window_request.replace(seed=(request.seed + i) % 2**63),
+                             window_seconds=window, lookahead=0.0, steps=steps)
+        out = stream.next_frames(frames)
+        windows += len(stream.windows)
+        motion = Motion(pipeline.skeleton, pipeline.fps, out.root_translation, out.local_rotations)
+        t_raw = time.perf_counter()
+        report: dict = {}
+        if request.postprocess:
+            motion, report = run_postprocess(motion, None, pipeline.representation)
+        raw_seconds += time.perf_counter() - t_raw
+        motions.append(motion)
+        residuals.append(report)
+    matches = pipeline.match_prompts([request.prompt])
+    texts = pipeline.ground_prompts([request.prompt], request.grounding_settings())
+    own = pipeline.loaded.guidance  # the stream's windows run separated guidance (kinema.stream.continuation)
+    guidance = request.guidance if request.guidance is not None else (own.w_text, own.w_constr)
+    t1 = time.perf_counter()
+    result_report = GenerationReport(
+        seconds=t1 - t0, segments=1, frames=frames, steps=steps, guidance=guidance, guidance_mode="separated",
+        seed=request.seed, residuals=residuals,
+        warnings=[m.warning() for m in matches if not m.known] + [w for r in residuals for w in r.get("warnings", [])],
+        prompts=[pipeline.prompt_report(m, {}, texts) | {"continued": {"window_seconds": round(window, 3),
+                                                                        "windows": windows // request.samples}}
+                 for m in matches],
+        timings={"sampling": t1 - t0 - raw_seconds, "postprocess": raw_seconds}, joints=pipeline.skeleton.num_joints,
+    )
+    return GenerationResult(motions, result_report)
