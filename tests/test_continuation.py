@@ -70,3 +70,12 @@ def test_caption_seconds_are_saved_and_checked(tmp_path):
         median_seconds(["A person waves."], clips, [1.0, 2.0, 3.0])
     with pytest.raises(KinemaError, match="one positive length per caption"):
         KnownPrompts(known.captions, known.embeddings, known.encoder_id, caption_seconds=[1.0])
+
+
+def test_bench_lengths_reports_cost_per_second_of_motion(model):
+    from kinema.bench.lengths import bench_lengths, format_lengths
+
+    rows = bench_lengths(model, durations=(2.0, 4.0), prompts=("A person runs forward.",))
+    assert [(r.seconds, r.windows > 1) for r in rows] == [(2.0, False), (4.0, True)]
+    assert all(r.wall_s > 0 and abs(r.per_second_s - r.wall_s / r.seconds) < 1e-9 for r in rows)
+    assert "s per motion s" in format_lengths(rows)

@@ -319,8 +319,9 @@ PROBE_CAPTIONS = {
     "A man saunters forward at a leisurely pace.": "A person walks forward at a slow, leisurely pace.",
     "Somebody heads forward on foot.": "Someone takes a walk forward.",
     "A woman goes for a walk straight ahead.": "A woman walks straight ahead.",
-    "A man jogs quickly forward.": "A man sprints forward.",
-    "Somebody jogs ahead.": "A person runs ahead.",
+    # a jog is grounded on a slow run since issue 57 (kinema.model.pace), never on a sprint or a plain run
+    "A man jogs quickly forward.": "A person runs forward at a gentle pace.",
+    "Somebody jogs ahead.": "Someone runs ahead at an easy pace.",
     "A person sprints as fast as possible.": "Someone sprints straight ahead at full speed in an ordinary way.",
     "Someone races ahead at top speed.": "A person dashes ahead at top speed.",
     "A woman lifts her left arm up high.": "A woman raises her left arm up.",

@@ -7,6 +7,8 @@ to write every table into report.md / report.json. Sections (each optional):
 - ``sweeps``: samples per call (1/4/16) and durations (5/10/20/40 s);
 - ``threads``: 1 vs 2 threads interleaved, quiet and under ``load`` busy-loop processes;
 - ``cold``: the first `kinema generate` of a fresh process (cold and warm) and its phases;
+- ``lengths``: cost per second of motion of a walk and a run at 5, 10 and 60 s (kinema.bench.lengths:
+  long prompts are continued window by window);
 - ``speed``: fp32 vs bf16 interleaved: post-processing share, constrained vs prompt-only cost, samples
   per motion, sparse targets planned by default, the denoiser's share of the matmul peak
   (kinema.bench.precision).
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-SECTIONS = ("steps", "sweeps", "threads", "cold", "speed")
+SECTIONS = ("steps", "sweeps", "lengths", "threads", "cold", "speed")
 
 
 @dataclass
@@ -30,6 +32,7 @@ class GenerateSuiteOptions:
     repeats: int = 2
     samples: tuple[int, ...] = (1, 4, 16)
     durations: tuple[float, ...] = (5.0, 10.0, 20.0, 40.0)
+    lengths: tuple[float, ...] = (5.0, 10.0, 60.0)
     sweep_repeats: int = 1
     threads: tuple[int, ...] = (1, 2)
     loads: tuple[int, ...] = (0, 2)
@@ -51,7 +54,7 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
     from kinema.bench.generate import bench_generate, bench_sweeps
     from kinema.bench.threads import bench_threads
 
-    out: dict = {"seconds": opts.seconds, "generate": [], "sweeps": [], "threads": [], "cli": None,
+    out: dict = {"seconds": opts.seconds, "generate": [], "sweeps": [], "lengths": [], "threads": [], "cli": None,
                  "phases": None, "speed": None, "options": asdict(opts)}
 
     def say(msg: str) -> None:
@@ -59,7 +62,7 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
             print(f"[bench generate] {msg}", flush=True)
 
     model = None
-    if {"sweeps", "threads"} & set(opts.sections):
+    if {"sweeps", "lengths", "threads"} & set(opts.sections):
         from kinema.generate import load_model
 
         model = load_model(opts.model)
@@ -70,6 +73,11 @@ def run_generate_suite(opts: GenerateSuiteOptions, progress: bool = True) -> dic
         say(f"samples {list(opts.samples)}, durations {list(opts.durations)}")
         out["sweeps"] = [asdict(r) for r in bench_sweeps(model, opts.samples, opts.durations,
                                                           repeats=opts.sweep_repeats)]
+    if "lengths" in opts.sections:
+        from kinema.bench.lengths import bench_lengths
+
+        say(f"cost per second of motion at {list(opts.lengths)} s (walk, run)")
+        out["lengths"] = [asdict(r) for r in bench_lengths(model, opts.lengths)]
     if "threads" in opts.sections:
         say(f"threads {list(opts.threads)} at loads {list(opts.loads)} (busy-loop processes)")
 
@@ -104,6 +112,11 @@ def format_generate_suite(result: dict, fence: bool = False) -> str:
     if result.get("sweeps"):
         blocks.append(("Samples per call and motion length (warm, default steps, post-processing on)",
                        format_sweeps([SweepRow(**r) for r in result["sweeps"]])))
+    if result.get("lengths"):
+        from kinema.bench.lengths import LengthRow, format_lengths
+
+        blocks.append(("Cost per second of motion by length (continued window by window past the captures)",
+                       format_lengths([LengthRow(**r) for r in result["lengths"]])))
     if result.get("threads"):
         blocks.append(("Torch threads, quiet and under load (interleaved; load = busy-loop processes)",
                        format_threads([ThreadsRow(**r) for r in result["threads"]], f"{seconds:g}-s motion")))

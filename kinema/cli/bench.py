@@ -282,6 +282,8 @@ def _add_generate_options(p, model_default: str | None) -> None:
     p.add_argument("--repeats", type=_positive_int, default=None, help="repeats per steps setting (default 2)")
     p.add_argument("--samples", type=_positive_int, nargs="+", default=None, help="samples per call (1 4 16)")
     p.add_argument("--durations", type=positive_float, nargs="+", default=None, help="seconds (5 10 20 40)")
+    p.add_argument("--lengths", type=positive_float, nargs="+", default=None,
+                   help="seconds of the lengths section's walk and run (5 10 60)")
     p.add_argument("--thread-counts", type=_positive_int, nargs="+", default=None, help="threads compared (1 2)")
     p.add_argument("--load", type=int, nargs="+", default=None, metavar="N",
                    help="busy-loop processes for the threads section; 0 = quiet (default 0 2)")
@@ -296,6 +298,7 @@ def _suite_options(args: argparse.Namespace, sections: tuple[str, ...]):
     from kinema.errors import KinemaError
 
     given = {"steps": args.steps, "repeats": args.repeats, "samples": args.samples, "durations": args.durations,
+             "lengths": args.lengths,
              "threads": args.thread_counts, "loads": args.load, "thread_repeats": args.thread_repeats}
     if args.load is not None and any(n < 0 for n in args.load):
         raise KinemaError("--load: busy-loop process counts must be >= 0")

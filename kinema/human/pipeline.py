@@ -149,15 +149,20 @@ class HumanPipeline(MotionPipeline):
         (kinema.model.grounding); training captions, unknown prompts and prompts without a near caption
         naming the same sides are never grounded.
         """
+        self.resolve_rig(request.rig)
+        _, steps, _ = self._check_counts(request.samples, request.steps, request.seed)
+        if request.timeline is None:  # a prompt longer than its action was captured at: window by window
+            seconds = self.default_seconds if request.seconds is None else float(request.seconds)
+            window = continuation_window(self, request, seconds)
+            if window is not None:
+                return continued(self, request, seconds, window, steps)
+        return self._sample(request, progress)
+
+    def _sample(self, request: GenerationRequest, progress: bool | ProgressFn) -> GenerationResult:
+        """The request made in one go: every segment sampled, the joins regenerated, post-processed."""
         t0 = time.perf_counter()
         r = request
-        self.resolve_rig(r.rig)
         samples, steps, seed = self._check_counts(r.samples, r.steps, r.seed)
-        if r.timeline is None:  # a prompt longer than its action was captured at: window by window
-            seconds = self.default_seconds if r.seconds is None else float(r.seconds)
-            window = continuation_window(self, r, seconds)
-            if window is not None:
-                return continued(self, r, seconds, window, steps)
         steps_given = r.steps
         segments = self._segments(r)
         matches = self.match_prompts([s.prompt for s in segments])
