@@ -46,7 +46,7 @@ import json
 import torch
 
 from kinema.data.humanoid_actions import HELD_OUT_PROMPTS
-from kinema.geometry.rotations import quat_rotate
+from kinema.evaluate.probe_measures import body_forward, head_ranges
 
 DANCE = "A person dances."
 WALK = "A person walks forward."
@@ -55,32 +55,6 @@ WALK_SECONDS = 3.0
 
 def _ix(names) -> dict[str, int]:
     return {n: i for i, n in enumerate(names)}
-
-
-def body_forward(P: torch.Tensor, ix: dict[str, int]) -> torch.Tensor:
-    """Per frame, the body's horizontal forward unit vector ``(T, 3)`` of positions ``P (T, J, 3)``: square to
-    the line from the right shoulder to the left, Y up."""
-    across = P[:, ix["Shoulder_L"]] - P[:, ix["Shoulder_R"]]
-    fwd = torch.cross(across, torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across), dim=-1)
-    fwd[:, 1] = 0
-    return fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
-
-
-def head_ranges(P: torch.Tensor, Q: torch.Tensor, ix: dict[str, int]) -> tuple[float, float]:
-    """Ranges (degrees) of the head's pitch and yaw over a motion: positions ``P (T, J, 3)``, global
-    rotations ``Q (T, J, 4)``. The head's forward axis is the one of its local axes that points most along
-    the body's forward (from the shoulders) at the first frame."""
-    fwd = body_forward(P, ix)
-    up = torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(fwd)
-    head = Q[:, ix["Head"]].to(P.dtype)
-    axes = torch.cat([torch.eye(3, dtype=P.dtype), -torch.eye(3, dtype=P.dtype)])
-    first = quat_rotate(head[:1].expand(6, 4), axes)
-    h = quat_rotate(head, axes[int((first * fwd[0]).sum(-1).argmax())].expand(len(head), 3))
-    pitch = torch.rad2deg(torch.asin(h[:, 1].clamp(-1, 1)))
-    flat = torch.nn.functional.normalize(h * torch.tensor([1.0, 0.0, 1.0], dtype=P.dtype), dim=-1)
-    side = torch.cross(fwd, up, dim=-1)
-    yaw = torch.rad2deg(torch.atan2((flat * side).sum(-1), (flat * fwd).sum(-1)))
-    return float(pitch.max() - pitch.min()), float(yaw.max() - yaw.min())
 
 
 def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None) -> dict:
@@ -99,7 +73,7 @@ def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None)
         out["other_foot_max_m"] = float(free[:, 1].max())
         out["pass"] = out["named_foot_over_pelvis_m"] > 0 and out["other_foot_max_m"] < 0.5 * float(hips[0, 1])
     elif action == "punch":
-        fwd = body_forward(P, ix)
+        fwd = body_forward(P, ix["Shoulder_L"], ix["Shoulder_R"])
         gain = {}
         for s in ("L", "R"):
             reach = ((P[:, ix[f"Hand_{s}"]] - hips) * fwd).sum(-1)
@@ -120,7 +94,7 @@ def measure(content: str, P: torch.Tensor, names, Q: torch.Tensor | None = None)
         out["pelvis_rise_m"] = float(hips[:, 1].max() - hips[0, 1])
         out["pass"] = out["pelvis_low_share"] < 0.6 and out["pelvis_rise_m"] <= 0.25
     elif action == "nod":
-        pitch, yaw = head_ranges(P, Q, ix)
+        pitch, yaw = head_ranges(P, Q, ix["Head"], ix["Shoulder_L"], ix["Shoulder_R"])
         out["head_pitch_range_deg"], out["head_yaw_range_deg"] = pitch, yaw
         named, other = (pitch, yaw) if content == "nod-yes" else (yaw, pitch)
         out["pass"] = named >= 15 and named > other

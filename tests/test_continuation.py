@@ -79,3 +79,18 @@ def test_bench_lengths_reports_cost_per_second_of_motion(model):
     assert [(r.seconds, r.windows > 1) for r in rows] == [(2.0, False), (4.0, True)]
     assert all(r.wall_s > 0 and abs(r.per_second_s - r.wall_s / r.seconds) < 1e-9 for r in rows)
     assert "s per motion s" in format_lengths(rows)
+
+
+def test_only_travel_is_continued(model):
+    bow = GenerationRequest(prompt="A person bows deeply.", seconds=9)
+    assert continuation_window(model, bow, 9.0) is None  # one bow, not one per window
+    turn = GenerationRequest(prompt="A person walks forward and turns to the left.", seconds=9)
+    assert continuation_window(model, turn, 9.0) is None
+
+
+def test_a_long_run_in_a_timeline_keeps_running(model):
+    timeline = [{"prompt": "A person walks forward.", "seconds": 2}, {"prompt": RUN, "seconds": 6}]
+    result = model.generate(timeline, seed=0, steps=10)
+    motion = result[0]
+    assert result.report.segments == 1 + 3  # the run in pieces of at most 0.75 x its 3.15-s captures
+    assert speed(motion, 5.9, 7.9) > 1.8, speed(motion, 5.9, 7.9)

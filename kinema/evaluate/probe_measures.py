@@ -10,6 +10,7 @@ import math
 
 import torch
 
+from kinema.geometry.rotations import quat_rotate
 from kinema.motion.core import Motion
 
 # Speed probes are generated again at this length: every captured run covers the ~8 m capture room
@@ -73,3 +74,31 @@ def group_step(a: dict, b: dict, separation: float) -> tuple[float, float, bool]
     se = math.sqrt(a["std"] ** 2 / max(a["n"] - 1, 1) + b["std"] ** 2 / max(b["n"] - 1, 1))
     gap = b["mean"] - a["mean"]
     return gap, se, gap > separation * se
+
+
+def body_forward(P: torch.Tensor, left_shoulder: int, right_shoulder: int) -> torch.Tensor:
+    """Per frame, the body's horizontal forward unit vector ``(T, 3)`` of positions ``P (T, J, 3)``: square to
+    the line from the right shoulder to the left, Y up. The shoulders, not the pelvis' travel, say where the
+    body faces: a backward walk or a sidestep faces away from where it goes."""
+    across = P[:, left_shoulder] - P[:, right_shoulder]
+    fwd = torch.cross(across, torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(across), dim=-1)
+    fwd[:, 1] = 0
+    return fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+
+
+def head_ranges(P: torch.Tensor, Q: torch.Tensor, head: int, left_shoulder: int,
+                right_shoulder: int) -> tuple[float, float]:
+    """Ranges (degrees) of the head's pitch and yaw over a motion: positions ``P (T, J, 3)``, global
+    rotations ``Q (T, J, 4)``, joint indices. The head's forward axis is the one of its local axes that points
+    most along the body's forward (from the shoulders) at the first frame, so any rig's head axes work."""
+    fwd = body_forward(P, left_shoulder, right_shoulder)
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=P.dtype).expand_as(fwd)
+    q = Q[:, head].to(P.dtype)
+    axes = torch.cat([torch.eye(3, dtype=P.dtype), -torch.eye(3, dtype=P.dtype)])
+    first = quat_rotate(q[:1].expand(6, 4), axes)
+    h = quat_rotate(q, axes[int((first * fwd[0]).sum(-1).argmax())].expand(len(q), 3))
+    pitch = torch.rad2deg(torch.asin(h[:, 1].clamp(-1, 1)))
+    flat = torch.nn.functional.normalize(h * torch.tensor([1.0, 0.0, 1.0], dtype=P.dtype), dim=-1)
+    side = torch.cross(fwd, up, dim=-1)
+    yaw = torch.rad2deg(torch.atan2((flat * side).sum(-1), (flat * fwd).sum(-1)))
+    return float(pitch.max() - pitch.min()), float(yaw.max() - yaw.min())

@@ -11,8 +11,12 @@ longer one is a stream (kinema.stream: the same prompt, each window continuing t
 imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then four
 2.4-s windows that each keep running.
 
-Only requests that are a single prompt without constraints, objectives or keyjoint planning are continued;
-the others are made as before (timelines: segments joined by transition windows, kinema.human.segments).
+Only prompts whose actions are all travel (`CONTINUED_ACTIONS`: walks and runs, "A person walks forward
+happily.", not "walks and turns left" nor "bows") are continued: another action is made once, in one
+window of up to 10 s, as before. Only requests that are a single prompt without constraints, objectives or keyjoint planning are continued.
+A timeline's segment longer than its `learned_window` is made of equal pieces of the same prompt no longer
+than it, joined like any two segments (transition windows, kinema.human.segments), so a 10-s run after a
+walk runs for 10 s as well.
 Sample ``i`` of a continued request is the stream of seed ``seed + i``.
 """
 
@@ -21,6 +25,7 @@ from __future__ import annotations
 import time
 
 from kinema.human.targets import run_postprocess
+from kinema.model.actions import actions_in
 from kinema.motion.core import Motion
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
@@ -30,6 +35,9 @@ from kinema.stream import open_stream
 CAPTURE_SHARE = 0.75
 #: the shortest window (s): a few captions are carried only by a short clip (a 0.65-s dash)
 MIN_WINDOW_SECONDS = 2.0
+#: the actions (kinema.model.actions) a prompt may name to be continued: travel goes on for as long as asked,
+#: while a bow, a kick or a turn made again in every window would be made several times
+CONTINUED_ACTIONS = frozenset({"walk", "run"})
 
 
 def continuation_window(pipeline, request: GenerationRequest, seconds: float) -> float | None:
@@ -39,23 +47,32 @@ def continuation_window(pipeline, request: GenerationRequest, seconds: float) ->
     if (r.timeline is not None or not r.prompt.strip() or r.constraints is not None or r.objectives is not None
             or r.keyjoint_model not in (None, "none")):
         return None
-    captured = captured_seconds(pipeline, r)
+    window = learned_window(pipeline, r.prompt, r.grounding_settings())
+    # a window's own request (window frames / fps seconds) is never continued again
+    return window if window is not None and seconds > window + 0.5 / float(pipeline.fps) else None
+
+
+def learned_window(pipeline, prompt: str, grounding=None) -> float | None:
+    """The longest stretch (s, whole frames) ``prompt`` is made in at once: `CAPTURE_SHARE` of its captures'
+    length and of the model's window, at least `MIN_WINDOW_SECONDS`; None for a prompt that is not only
+    travel (`CONTINUED_ACTIONS`) or without known capture lengths."""
+    actions = actions_in(prompt)
+    if not actions or not actions <= CONTINUED_ACTIONS:
+        return None
+    captured = captured_seconds(pipeline, prompt, grounding)
     if captured is None:
         return None
     fps = float(pipeline.fps)
-    window = round(max(MIN_WINDOW_SECONDS, CAPTURE_SHARE * min(captured, float(pipeline.window_seconds))) * fps) / fps
-    # a window's own request (window frames / fps seconds) is never continued again
-    return window if seconds > window + 0.5 / fps else None
+    return round(max(MIN_WINDOW_SECONDS, CAPTURE_SHARE * min(captured, float(pipeline.window_seconds))) * fps) / fps
 
 
-def captured_seconds(pipeline, request: GenerationRequest) -> float | None:
-    """How long the captures of the request's prompt last: those of the caption it is grounded on (the first
-    of the blend), else of its nearest caption; None without known capture lengths."""
+def captured_seconds(pipeline, prompt: str, grounding=None) -> float | None:
+    """How long the captures of ``prompt`` last: those of the caption it is grounded on (the first of the
+    blend), else of its nearest caption; None without known capture lengths or for an empty prompt."""
     known = pipeline.known_prompts
-    if known is None or known.caption_seconds is None:
+    if known is None or known.caption_seconds is None or not prompt.strip():
         return None
-    prompt = request.prompt
-    grounded = pipeline.ground_prompts([prompt], request.grounding_settings())[prompt]
+    grounded = pipeline.ground_prompts([prompt], grounding)[prompt]
     if grounded.captions:
         caption = grounded.captions[0][0]
     elif prompt.strip() in known.caption_set:

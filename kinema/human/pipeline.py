@@ -20,7 +20,7 @@ import torch
 from kinema.diffusion.guidance import Guidance
 from kinema.diffusion.sampler import kept_steps
 from kinema.errors import KinemaError
-from kinema.human.continuation import continuation_window, continued
+from kinema.human.continuation import continuation_window, continued, learned_window
 from kinema.human.keyjoint_planning import KeyjointPlanner, plans_by_default, sample_with_keyjoint_plan, shipped_planner
 from kinema.human.mirrored_request import mirror_constraints, mirrored_prompts
 from kinema.human.noise_optimisation import DEFAULT_DDIM_STEPS, DEFAULT_ITERATIONS, NoiseOptSettings
@@ -119,6 +119,9 @@ class HumanPipeline(MotionPipeline):
     @property
     def window_seconds(self) -> float:
         return self.max_seconds
+
+    def window_for(self, prompt: str) -> float | None:
+        return learned_window(self, prompt)
 
     def rigs(self) -> list[RigInfo]:
         skel = self.skeleton
@@ -293,8 +296,9 @@ class HumanPipeline(MotionPipeline):
             seconds = self.default_seconds if request.seconds is None else float(request.seconds)
             return split_long(request.prompt, seconds, self.max_seconds)
         out = []
-        for s in parse_timeline(request.timeline):
-            out += split_long(s.prompt, s.seconds, self.max_seconds)
+        for s in parse_timeline(request.timeline):  # each segment in pieces no longer than its action lasts
+            window = learned_window(self, s.prompt, request.grounding_settings())
+            out += split_long(s.prompt, s.seconds, self.max_seconds if window is None else window)
         return out
 
     def _guidance(self, guidance) -> Guidance:

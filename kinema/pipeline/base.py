@@ -118,6 +118,11 @@ class MotionPipeline(ABC):
     def window_seconds(self) -> float:
         """The longest stretch the denoiser sees at once (longer motions are made of several)."""
 
+    def window_for(self, prompt: str) -> float | None:
+        """The longest stretch (s) this model makes ``prompt`` in at once, where it knows one (the human model:
+        from how long the prompt's action was captured, kinema.human.continuation); None = `window_seconds`."""
+        return None
+
     @abstractmethod
     def rigs(self) -> list[RigInfo]:
         """The rigs this model drives without a rig file (the human model: its own skeleton)."""

@@ -149,9 +149,13 @@ class StreamSettings:
     lookahead: int
     steps: int
     seed: int = 0
+    #: whether each window is as long as the model makes the current prompt at once (``model.window_for``)
+    #: rather than ``window`` frames (which it stays for a prompt the model names no window for)
+    window_from_prompt: bool = False
 
     @classmethod
-    def checked(cls, model, window_seconds: float, lookahead: float, steps: int | None, seed: int) -> StreamSettings:
+    def checked(cls, model, window_seconds: float, lookahead: float, steps: int | None, seed: int,
+                window_from_prompt: bool = False) -> StreamSettings:
         fps = float(model.fps)
         context, blend = max(2, round(CONTEXT_SECONDS * fps)), max(1, round(BLEND_SECONDS * fps))
         skip = round(SKIP_SECONDS * fps)
@@ -166,7 +170,16 @@ class StreamSettings:
         steps = STREAM_STEPS if steps is None else steps
         if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= model.max_steps:
             raise KinemaError(f"steps must be an integer in [1, {model.max_steps}], got {steps!r}")
-        return cls(fps, window, context, skip, blend, round(lookahead * fps), steps, seed)
+        return cls(fps, window, context, skip, blend, round(lookahead * fps), steps, seed, window_from_prompt)
+
+    def window_for(self, model, prompt: str) -> int:
+        """Frames of a window of ``prompt``: ``window``, or with ``window_from_prompt`` the model's window for
+        it (within the shortest window and the model's)."""
+        seconds = model.window_for(prompt) if self.window_from_prompt else None
+        if seconds is None:
+            return self.window
+        shortest = self.context + self.skip + self.blend + max(2, round(0.5 * self.fps))
+        return max(shortest, min(round(seconds * self.fps), round(float(model.window_seconds) * self.fps)))
 
 
 def _number(v) -> bool:
@@ -360,7 +373,8 @@ class MotionStream:
         model's guidance, whose root path is then imposed on the window made with the stronger
         `SWITCH_GUIDANCE` (`ROOT_FROM_FIRST_PASS`)."""
         s = self.settings
-        fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": s.window / s.fps, "steps": s.steps,
+        window = s.window_for(self.model, self.controls.prompt)
+        fields: dict[str, Any] = {"prompt": self.controls.prompt, "seconds": window / s.fps, "steps": s.steps,
                                   "seed": (s.seed + self._window_index) % 2**63, "guidance": self._guidance(),
                                   "postprocess": self.body.postprocess(bool(self.controls.targets)),
                                   "samples": 1}
@@ -368,7 +382,7 @@ class MotionStream:
         self._window_index += 1
         if context is None:
             return *self._run(fields), False
-        controls = self.controls.window_constraints(frame, context.num_frames, s.window)
+        controls = self.controls.window_constraints(frame, context.num_frames, window)
         fields["constraints"] = self.body.window_constraints(context, smooth, controls)
         fields["heading"] = frame.heading
         for c in controls:
@@ -429,7 +443,10 @@ def open_stream(model, request=None, *, window_seconds: float | None = None,
     """A `MotionStream` of ``model`` (a loaded `MotionPipeline`); ``request`` (a `GenerationRequest`,
     optional) gives the first prompt, seed, heading, guidance and grounding, and for a model that
     needs one (the any-rig model) the rig; its ``seconds``, ``constraints`` and ``timeline`` are the
-    stream's own. ``window_seconds``: default `WINDOW_SECONDS` or the model's window if shorter.
+    stream's own. ``window_seconds``: default, each window as long as the model makes the current prompt
+    at once (``model.window_for``: a run 2.35 s, a walk 5.9 s, a slow walk 7.5 s on the shipped human
+    model; issue 57: in 3-s windows at 10 steps "walks at an easy pace" moved at 2.1-2.4 m/s, as fast as
+    a jog, and 1.4-1.8 m/s in 5.9-s ones), else `WINDOW_SECONDS` or the model's window if shorter.
     ``steps``: DDIM steps per window (default `STREAM_STEPS`)."""
     if request is not None and not hasattr(request, "replace"):
         raise KinemaError(f"open_stream: request must be a GenerationRequest, got {type(request).__name__}")
@@ -447,8 +464,9 @@ def open_stream(model, request=None, *, window_seconds: float | None = None,
             raise KinemaError("rig: a stream of this model moves its own skeleton; retarget the written stream "
                               "(kinema retarget) or stream an any-rig model (--model creatures) on the rig")
         body = HumanBody(model.skeleton)
+    from_prompt = window_seconds is None
     if window_seconds is None:
         window_seconds = min(WINDOW_SECONDS, float(model.window_seconds))
     seed = 0 if request is None else int(request.seed)
-    settings = StreamSettings.checked(model, window_seconds, lookahead, steps, seed)
+    settings = StreamSettings.checked(model, window_seconds, lookahead, steps, seed, from_prompt)
     return MotionStream(model, request, settings, body)
