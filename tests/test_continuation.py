@@ -94,3 +94,20 @@ def test_a_long_run_in_a_timeline_keeps_running(model):
     motion = result[0]
     assert result.report.segments == 1 + 3  # the run in pieces of at most 0.75 x its 3.15-s captures
     assert speed(motion, 5.9, 7.9) > 1.8, speed(motion, 5.9, 7.9)
+
+
+def test_a_stream_sizes_its_windows_by_the_prompt_and_a_stroll_is_slower_than_a_jog(model):
+    stream = model.stream(GenerationRequest(prompt="A person walks at an easy pace.", seed=0))
+    walk = stream.next_frames(200)
+    stream.set_prompt("A person jogs forward.")
+    jog = stream.next_frames(200)
+    fps = model.fps
+    assert stream.settings.window_for(model, "A person walks at an easy pace.") == round(
+        model.window_for("A person walks at an easy pace.") * fps)
+    assert model.window_for("A person jogs forward.") < model.window_for("A person walks at an easy pace.")
+
+    def mean_speed(frames):
+        xz = frames.root_translation[80:, [0, 2]].double()
+        return float((xz[1:] - xz[:-1]).norm(dim=-1).sum()) * fps / (xz.shape[0] - 1)
+
+    assert mean_speed(walk) + 0.5 < mean_speed(jog), (mean_speed(walk), mean_speed(jog))

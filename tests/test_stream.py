@@ -54,7 +54,7 @@ def _switch(model, first: str, second: str, before: int = 80, after: int = 100, 
 
 
 def test_frames_continue_seamlessly_and_stay_on_the_floor(model) -> None:
-    s = open_stream(model, GenerationRequest(prompt=WALK))
+    s = open_stream(model, GenerationRequest(prompt=WALK), window_seconds=3.0)  # seams every 3 s
     parts = [s.next_frames(n) for n in (7, 33, 60, 100, 40)]
     assert [p.start for p in parts] == [0, 7, 40, 100, 200]
     p = parts[2]
