@@ -11,7 +11,7 @@ from kinema.model.actions import ACTION_WORDS, actions_in, clips_per_action
 
 # what each Bandai content label's captions name, all captions of all styles and both sides together
 CONTENT_ACTIONS = {
-    "walk": {"walk"}, "run": {"run"}, "dash": {"run"}, "walk-back": {"walk"}, "walk-left": {"walk"},
+    "walk": {"walk"}, "run": {"run"}, "dash": {"run"}, "walk-back": {"walk", "walk back"}, "walk-left": {"walk"},
     "walk-right": {"walk"}, "walk-turn-left": {"walk", "turn"}, "walk-turn-right": {"walk", "turn"},
     "bow": {"bow"}, "bye": {"wave", "raise"}, "byebye": {"wave", "raise"}, "guide": {"guide"},
     "respond": {"raise"}, "call": {"call"}, "punch": {"punch"}, "kick": {"kick", "spin"},

@@ -1,4 +1,7 @@
-"""`kinema evaluate`: score a model on the Kimodo-style test suite (docs/evaluation.md)."""
+"""`kinema evaluate`: score a model on the Kimodo-style test suite (docs/evaluation.md).
+
+``kinema evaluate sfcontrol|fidelity ...`` is ``--protocol sfcontrol|fidelity``: SFControl's protocols
+(kinema.cli.evaluate_sfcontrol) and caption fidelity per action (kinema.cli.evaluate_fidelity)."""
 
 from __future__ import annotations
 
@@ -14,6 +17,8 @@ from kinema.cli._args import (
     positive_int,
     seed,
 )
+from kinema.cli.evaluate_fidelity import add_arguments as add_fidelity_arguments
+from kinema.cli.evaluate_fidelity import run_fidelity_cli
 from kinema.cli.evaluate_sfcontrol import add_arguments as add_sfcontrol_arguments
 from kinema.cli.evaluate_sfcontrol import run_sfcontrol
 from kinema.errors import KinemaError
@@ -22,6 +27,8 @@ from kinema.runtime import text_cache_dir
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="score a model on the evaluation suite (report.md, report.json, plots)")
+    p.add_argument("protocol_name", nargs="?", choices=PROTOCOLS, metavar="PROTOCOL",
+                   help="same as --protocol: 'suite', 'sfcontrol' or 'fidelity' (per-action caption fidelity)")
     p.add_argument("--model", required=True, help="'default' (shipped) or a run/checkpoint folder")
     p.add_argument("--data", type=Path, default=Path("cache/bandai20"), help="dataset build (default cache/bandai20)")
     p.add_argument("--split", default="test", choices=("train", "val", "test"), help="clips to draw cases from")
@@ -40,7 +47,8 @@ def register(sub) -> None:
     add_grounding_arguments(p)
     p.add_argument("--imputation-only", action="store_true",
                    help="ablation: the paper's sampling (no root smoothing, start anchor, root or joint displacement)")
-    p.add_argument("--out", type=Path, help="output folder (default out/eval/<model name>)")
+    p.add_argument("--out", type=Path,
+                   help="output folder (default out/eval/<model name>); fidelity: the JSON file (table as .md)")
     p.add_argument("--suite", type=Path,
                    help="suite JSON: read it if it exists (same cases as an earlier run), else build and save it")
     p.add_argument("--retrieval", default="default",
@@ -51,9 +59,21 @@ def register(sub) -> None:
     p.add_argument("--filmstrips", type=int, default=4, help="rendered cases (default 4)")
     p.add_argument("--no-progress", action="store_true")
     add_sfcontrol_arguments(p)
+    add_fidelity_arguments(p)
     add_precision_argument(p)
     add_guidance_cache_arguments(p)
     p.set_defaults(func=run)
+
+
+PROTOCOLS = ("suite", "sfcontrol", "fidelity")
+
+
+def _protocol(args: argparse.Namespace) -> str:
+    """The protocol asked for, by the positional name or ``--protocol`` (they must agree when both given)."""
+    name = args.protocol_name
+    if name is not None and args.protocol not in ("suite", name):
+        raise KinemaError(f"protocol {name!r} and --protocol {args.protocol} disagree")
+    return name or args.protocol
 
 
 def _apply_sampling_options(model, args: argparse.Namespace) -> None:
@@ -75,8 +95,11 @@ def run(args: argparse.Namespace) -> int:
     from kinema.evaluate.suite import save_suite
     from kinema.generate import load_model, resolve_model_path
 
+    args.protocol = _protocol(args)
     if args.protocol == "sfcontrol":
         return run_sfcontrol(args)
+    if args.protocol == "fidelity":
+        return run_fidelity_cli(args)
     t0 = time.perf_counter()
     _check_options(args)
     resolve_model_path(args.model)  # fail early on a missing model, before building anything

@@ -21,10 +21,11 @@ SPARSE_ROWS = ("direct", "keyjoint-planned", "direct + noise opt")
 def add_arguments(p) -> None:
     p.add_argument(
         "--protocol",
-        choices=("suite", "sfcontrol"),
+        choices=("suite", "sfcontrol", "fidelity"),
         default="suite",
-        help="'suite' (Kimodo-style test suite, default) or 'sfcontrol' (sparse keyjoint control, "
-        "goal reaching, implicit tasks; docs/objectives.md)",
+        help="'suite' (Kimodo-style test suite, default), 'sfcontrol' (sparse keyjoint control, "
+        "goal reaching, implicit tasks; docs/objectives.md) or 'fidelity' (per-action caption fidelity, "
+        "kinema.evaluate.fidelity)",
     )
     p.add_argument("--keyjoint-model",
                    help="sfcontrol: keyjoint model ('default' or a folder) for the keyjoint-planned rows")

@@ -30,11 +30,12 @@ from typing import NamedTuple
 
 import torch
 
-from kinema.data.captions import CONTENT_PHRASES, captions_for
+from kinema.data.captions import CONTENT_PHRASES, captions_for, mirror_content
 from kinema.data.humanoid_actions import HUMANOID_ACTIONS, HumanoidAction, humanoid_captions
 from kinema.data.phrasings import heldout_captions
 from kinema.errors import KinemaError
 from kinema.evaluate.probe_measures import body_forward, follows_side, ground_speed, hand_heights, head_ranges
+from kinema.model.sides import mirror_caption
 from kinema.motion.core import Motion
 from kinema.representation.kimodo_features import features_to_motion
 
@@ -464,3 +465,162 @@ def capture_values(dataset, contents: Iterable[str] | None = None) -> dict[str, 
         for n in names:
             out[n].setdefault(rec["content"], []).append(DETECTORS[n](motion).value)
     return out
+
+
+# ------------------------------------------------------------------ prompts
+#: Held-out phrasings of the humanoid actions (left sides; right ones are their mirrors): none is a training
+#: caption (tests/test_fidelity.py). "delivers a kick with the right leg" and "collapses" are the issue's
+#: own examples of phrasings the shipped model missed.
+HUMANOID_HELDOUT: dict[str, tuple[str, ...]] = {
+    "kick-left": ("Someone delivers a kick with the left leg.", "A fighter swings the left leg up in a kick."),
+    "punch-left": ("Somebody strikes forward with the left fist.", "A boxer throws a jab with the left hand."),
+    "jump": ("Somebody springs up off both feet.", "A character bounces up into the air."),
+    "roll": ("Somebody tumbles forward across the ground.", "A character somersaults forward on the floor."),
+    "duck": ("Somebody drops low to dodge something.", "A character ducks under a swing and rises again."),
+    "nod-yes": ("Somebody nods to agree.", "A character bobs the head up and down to say yes."),
+    "shake-head-no": ("Somebody shakes the head to disagree.",
+                      "A character turns the head from side to side to say no."),
+    "dance": ("Somebody grooves on the spot.", "A character busts out some dance moves."),
+    "pick-up": ("Somebody reaches down and grabs something off the floor.", "A character stoops to pick up an item."),
+    "fall-forward": ("Somebody topples forward onto the floor.", "The man collapses face down on the ground."),
+    "fall-backward": ("Somebody topples backward onto the floor.", "The man collapses onto his back."),
+}
+for _label in [k for k in HUMANOID_HELDOUT if k.endswith("-left")]:
+    HUMANOID_HELDOUT[mirror_content(_label)] = tuple(mirror_caption(p) for p in HUMANOID_HELDOUT[_label])
+assert set(HUMANOID_HELDOUT) == set(HUMANOID_DETECTORS), "every humanoid action needs held-out phrasings"
+
+#: How many captions of each kind an action is asked with.
+PROMPTS_PER_KIND = 2
+
+
+def _humanoid_action(content: str) -> tuple[HumanoidAction, str | None]:
+    """The humanoid action behind a content label and its side word (None when it names none)."""
+    for action, _ in HUMANOID_ACTIONS.values():
+        if action.sided is None and action.content == content:
+            return action, None
+        prefix = action.content.replace("{side}", "")
+        if action.sided is not None and content.startswith(prefix):
+            return action, content[len(prefix):]
+    raise KinemaError(f"no humanoid action has content {content!r}")
+
+
+def own_captions(action: str) -> list[str]:
+    """The action's first :data:`PROMPTS_PER_KIND` training captions (Bandai: the 'normal' style's
+    template captions; humanoid: the action's phrasings)."""
+    if action in BANDAI_DETECTORS:
+        return captions_for(action, "normal")[:PROMPTS_PER_KIND]
+    return humanoid_captions(*_humanoid_action(action))[:PROMPTS_PER_KIND]
+
+
+def heldout_prompts(action: str) -> list[str]:
+    """The action's held-out phrasings (no training caption uses them)."""
+    if action in BANDAI_DETECTORS:
+        return heldout_captions(action)[:PROMPTS_PER_KIND]
+    return list(HUMANOID_HELDOUT[action][:PROMPTS_PER_KIND])
+
+
+def resolve_actions(names: Iterable[str] | None) -> list[str]:
+    """The actions to measure: ``names`` (each a :data:`DETECTORS` key, or a family such as 'wave' that
+    starts several) in table order, default all; a name that matches none is a KinemaError."""
+    if not names:
+        return list(DETECTORS)
+    out: list[str] = []
+    for name in names:
+        hits = [a for a in DETECTORS if a == name] or [a for a in DETECTORS if a.startswith(name + "-")]
+        if not hits:
+            raise KinemaError(f"unknown action {name!r}; known: {', '.join(DETECTORS)}")
+        out += [a for a in hits if a not in out]
+    return out
+
+
+# ------------------------------------------------------------------ runner
+def holds(passes: int, samples: int) -> bool:
+    """Whether a prompt holds: it passes at least two thirds of its seeds (2 of 3)."""
+    return samples > 0 and 3 * passes >= 2 * samples
+
+
+def _summary(prompts: list[dict]) -> dict:
+    """Per kind (own / held-out): samples passed and total, whether every prompt holds, the median value,
+    and the prompts warned unknown (far from every training caption)."""
+    samples = [s for p in prompts for s in p["samples"]]
+    return {
+        "passed": sum(s["passed"] for s in samples),
+        "total": len(samples),
+        "holds": all(holds(sum(s["passed"] for s in p["samples"]), len(p["samples"])) for p in prompts),
+        "median": statistics.median(s["value"] for s in samples) if samples else None,
+        "unknown": [p["prompt"] for p in prompts if not p["known"]],
+    }
+
+
+def measure_prompt(model, prompt: str, detector: Detector, seeds: Sequence[int], seconds: float,
+                   steps: int | None = None) -> dict:
+    """One prompt generated at each seed and measured: per sample (seed, passed, value), whether the
+    model knew the prompt (``known``: near a training caption) and its warnings."""
+    options = {} if steps is None else {"steps": steps}
+    row: dict = {"prompt": prompt, "samples": [], "known": True, "warnings": []}
+    for seed in seeds:
+        result = model.generate(prompt, seconds=seconds, seed=seed, **options)
+        check = detector(result[0])
+        row["samples"].append({"seed": seed, "passed": bool(check.passed), "value": check.value})
+        row["what"] = check.what
+        info = result.report.prompts[0]
+        row["known"] = row["known"] and bool(info.get("known", True))
+        row["grounding"] = info.get("grounding", {}).get("status") if isinstance(info.get("grounding"), dict) else None
+        row["warnings"] += [w for w in result.report.warnings if w not in row["warnings"]]
+    return row
+
+
+def run_fidelity(model, seeds: Sequence[int] = (0, 1, 2), seconds: float = 4.0,
+                 actions: Iterable[str] | None = None, steps: int | None = None,
+                 log: Callable[[str, dict], None] | None = None) -> dict:
+    """Generate every action's own captions and held-out phrasings at each seed and apply its detector.
+
+    Returns ``{"seeds", "seconds", "steps", "actions": {action: {"what", "own", "heldout", "prompts"}}}``:
+    ``own`` / ``heldout`` are :func:`_summary`; ``prompts`` every prompt's samples. ``log`` gets a line
+    per action and the result so far."""
+    out: dict = {"seeds": list(seeds), "seconds": seconds, "steps": steps, "actions": {}}
+    for action in resolve_actions(actions):
+        detector = DETECTORS[action]
+        entry: dict = {"source": "bandai" if action in BANDAI_DETECTORS else "humanoid", "prompts": []}
+        for kind, prompts in (("own", own_captions(action)), ("heldout", heldout_prompts(action))):
+            rows = [measure_prompt(model, p, detector, seeds, seconds, steps) | {"kind": kind} for p in prompts]
+            entry["prompts"] += rows
+            entry[kind] = _summary(rows)
+        entry["what"] = entry["prompts"][0]["what"]
+        out["actions"][action] = entry
+        if log is not None:
+            log(_row(action, entry), out)
+    return out
+
+
+def _cell(summary: dict) -> str:
+    """``passed/total (median) holds|fails``, with the unknown prompts counted."""
+    median = "-" if summary["median"] is None else f"{summary['median']:.2f}"
+    warned = f", {len(summary['unknown'])} unknown" if summary["unknown"] else ""
+    return f"{summary['passed']}/{summary['total']} ({median}) {'**holds**' if summary['holds'] else 'fails'}{warned}"
+
+
+def _row(action: str, entry: dict) -> str:
+    return f"| {action} | {entry['what']} | {_cell(entry['own'])} | {_cell(entry['heldout'])} |"
+
+
+def format_fidelity(result: dict) -> str:
+    """The markdown table: per action its detector's value (unit), and for its own captions and its
+    held-out phrasings the samples passed / total, the median value, whether every prompt holds (passes
+    at least 2 of 3 seeds) and how many prompts were warned unknown; then the totals."""
+    actions = result["actions"]
+    lines = [
+        f"Caption fidelity: {len(actions)} actions, {PROMPTS_PER_KIND} own captions and {PROMPTS_PER_KIND} "
+        f"held-out phrasings each, seeds {' '.join(map(str, result['seeds']))}, {result['seconds']:g} s"
+        + ("" if result.get("steps") is None else f", {result['steps']} steps") + ".",
+        "",
+        "| action | detector value | own captions: passed (median) | held-out phrasings: passed (median) |",
+        "|---|---|---|---|",
+    ]
+    lines += [_row(a, e) for a, e in actions.items()]
+    for kind, title in (("own", "own captions"), ("heldout", "held-out phrasings")):
+        held = sum(e[kind]["holds"] for e in actions.values())
+        passed = sum(e[kind]["passed"] for e in actions.values())
+        total = sum(e[kind]["total"] for e in actions.values())
+        lines.append(f"\n{title}: {held}/{len(actions)} actions hold, {passed}/{total} samples pass.")
+    return "\n".join(lines)

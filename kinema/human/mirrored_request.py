@@ -21,6 +21,7 @@ image, and of what.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import torch
@@ -44,13 +45,16 @@ from kinema.skeleton import Skeleton
 _X3, _X2, _HEADING = torch.tensor([-1.0, 1.0, 1.0]), torch.tensor([-1.0, 1.0]), torch.tensor([1.0, -1.0])
 
 
-def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, objectives: bool) -> dict[str, str]:
+def mirrored_prompts(prompts: list[str], expert: ActionExpert | None, objectives: bool,
+                     words: Callable[[str], str] = str) -> dict[str, str]:
     """``{prompt: the prompt it is made as}`` for a request of ``prompts`` (a timeline's, in order) to be
     generated as its mirror image, or ``{}`` when it is made as it is: no expert or no ``mirror_side``,
-    ``objectives`` given, no prompt the expert mirrors, or a prompt naming the other side."""
+    ``objectives`` given, no prompt the expert mirrors, or a prompt naming the other side. ``words(p)``: the
+    words prompt ``p`` is conditioned on (its grounding caption), which decide; default its own."""
     if expert is None or expert.mirror_side is None or objectives:
         return {}
-    if not any(expert.mirrors(p) for p in prompts) or any(sides(p) - {expert.mirror_side} for p in prompts):
+    said = [words(p) for p in prompts]
+    if not any(expert.mirrors(w) for w in said) or any(sides(w) - {expert.mirror_side} for w in said):
         return {}
     return {p: mirror_caption(p) for p in prompts}
 

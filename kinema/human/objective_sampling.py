@@ -68,7 +68,7 @@ def sample_with_objectives(
     heading, samples = call.heading, call.samples
     text = model.prompt_condition(plan.segments[0].prompt, call.texts)
     targets, shift = stack_targets([plan.segment_targets(0, None, heading)] * samples)
-    rep, L = model.representation, model.loaded.for_prompt(plan.segments[0].prompt)
+    rep, L = model.representation, model.weights_for(plan.segments[0].prompt, call.texts)
     text = None if text is None else text.expand(samples, -1)
     feats, z, report = optimise_noise(L, text, targets, settings, bound, opt, generator=call.generator,
                                       progress=progress)

@@ -173,7 +173,7 @@ class HumanPipeline(MotionPipeline):
         plan = plan_segments(self.representation, segments, r.constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
         bound = collect_objectives(r.constraints, r.objectives, self.skeleton, self.fps, plan.total_frames)
-        made_as, sampled = self._mirrored(segments, plan, bool(bound))
+        made_as, sampled = self._mirrored(segments, plan, bool(bound), r.grounding_settings())
         texts = self.ground_prompts([s.prompt for s in sampled.segments], r.grounding_settings())
         planner = self._planner(r.keyjoint_model, sampled, bound)
         obj_report: dict = {}
@@ -216,14 +216,32 @@ class HumanPipeline(MotionPipeline):
         and, for a request made as its mirror image (kinema.human.mirrored_request), the prompt it was made as."""
         made = made_as.get(match.prompt, match.prompt)
         mirrored = {"made_as_mirror_of": made} if made_as else {}
-        return match.to_dict() | {"grounding": texts[made].to_dict()} | self._weights_used(made) | mirrored
+        weights = self._weights_used(self.conditioned_text(made, texts))
+        return match.to_dict() | {"grounding": texts[made].to_dict()} | weights | mirrored
 
     # ------------------------------------------------------------------ internals
-    def _mirrored(self, segments: list[Segment], plan: SegmentPlan,
-                  objectives: bool) -> tuple[dict[str, str], SegmentPlan]:
+    def conditioned_text(self, prompt: str, texts: dict[str, Grounded] | None) -> str:
+        """The words ``prompt`` is conditioned on: the first caption of its grounding blend, else its own.
+        The choice of weights (action expert or main) and of mirroring decide on these, as grounding does
+        (issue 58: "The man collapses to the ground." is grounded on "Someone collapses and falls forward.",
+        which the expert makes and the main weights do not, but its own words name no expert action)."""
+        grounded = None if texts is None else texts.get(prompt)
+        return grounded.captions[0][0] if grounded is not None and grounded.captions else prompt
+
+    def weights_for(self, prompt: str, texts: dict[str, Grounded] | None) -> LoadedModel:
+        """The model that denoises ``prompt``: the action expert's weights or the main ones, by
+        :meth:`conditioned_text` (kinema.model.loading.LoadedModel.for_prompt)."""
+        return self.loaded.for_prompt(self.conditioned_text(prompt, texts))
+
+    def _mirrored(self, segments: list[Segment], plan: SegmentPlan, objectives: bool,
+                  grounding=None) -> tuple[dict[str, str], SegmentPlan]:
         """For a request made as its mirror image (kinema.human.mirrored_request): ``{prompt: the prompt it is
-        made as}`` and the plan the sampler runs (mirrored prompts and constraints); else ``({}, plan)``."""
-        made_as = mirrored_prompts([s.prompt for s in segments], self.loaded.expert, objectives)
+        made as}`` and the plan the sampler runs (mirrored prompts and constraints); else ``({}, plan)``.
+        Decided on the words each prompt is conditioned on (:meth:`conditioned_text`)."""
+        prompts = [s.prompt for s in segments]
+        texts = self.ground_prompts(prompts, grounding)
+        made_as = mirrored_prompts(prompts, self.loaded.expert, objectives,
+                                   words=lambda p: self.conditioned_text(p, texts))
         cons = mirror_constraints(plan.constraints, self.skeleton) if made_as else None
         if cons is None:
             return {}, plan
@@ -377,7 +395,7 @@ class HumanPipeline(MotionPipeline):
     def _sample_pass(self, prompt: str, rows, num_frames: int, call: SamplingCall, bar, on_step,
                      strength: float = 1.0) -> list[Motion]:
         """One denoiser pass over a batch of rows (one per sample) of one prompt; world-placed motions."""
-        rep, L = self.representation, self.loaded.for_prompt(prompt)  # the action expert's weights or the main ones
+        rep, L = self.representation, self.weights_for(prompt, call.texts)  # the action expert's or the main ones
         targets, shift = stack_targets(rows)
         text = self.prompt_condition(prompt, call.texts)
         text = None if text is None else text.expand(len(rows), -1)

@@ -31,6 +31,11 @@ ACTION_WORDS: dict[str, tuple[str, ...]] = {
              r"hik(?:e|es|ed|ing)", r"step(?:s|ped|ping)?", r"on foot"),
     "run": (r"run(?:s|ning)?", r"ran", r"jog(?:s|ged|ging)?", r"sprint(?:s|ed|ing)?", r"dash(?:es|ed|ing)?",
             r"rac(?:e|es|ed|ing)", r"bolt(?:s|ed|ing)?"),
+    # walking backwards (walk-back): its own action so that the action expert, which walks backwards where
+    # the main weights walk forward (issue 58), can serve it; "falls backward" is not one
+    "walk back": (r"(?:walk|step|mov)(?:s|ed|ing|e|es|ped|ping)?(?: \w+ly)? back(?:ward|wards)?",
+                  r"back(?:s|ed|ing)? (?:up|away)", r"retreat(?:s|ed|ing)?", r"backpedal(?:s|led|ling|ed|ing)?",
+                  r"in reverse"),
     "turn": (r"turn(?:s|ed|ing)?", r"veer(?:s|ed|ing)?", r"pivot(?:s|ed|ing)?", r"chang(?:e|es|ed|ing) direction"),
     "bow": (r"bow(?:s|ed|ing)?", r"curts(?:y|ies|ied|eys?)"),
     "wave": (r"wav(?:e|es|ed|ing)", r"flap(?:s|ped|ping)?(?: \w+){0,2} hands?"),
@@ -78,7 +83,7 @@ _PATTERNS = {a: re.compile(r"\b(?:" + "|".join(forms) + r")\b", re.IGNORECASE) f
 
 #: per action, the word its one-word synonyms become in :func:`reworded` (the form captions use)
 ACTION_VERBS: dict[str, str] = {
-    "walk": "walks", "run": "runs", "turn": "turns", "bow": "bows", "wave": "waves", "raise": "raises",
+    "walk": "walks", "walk back": "walks back", "run": "runs", "turn": "turns", "bow": "bows", "wave": "waves", "raise": "raises",
     "guide": "guides", "call": "calls", "kick": "kicks", "spin": "spins", "slash": "slashes", "dance": "dances",
     "punch": "punches", "jump": "jumps", "sit": "sits", "get up": "gets up", "crouch": "crouches",
     "lie down": "lies down", "reach": "reaches", "crawl": "crawls", "climb": "climbs", "swim": "swims",

@@ -89,9 +89,11 @@ _AWAY_FROM_FORWARD = re.compile(
 
 def off_forward(text: str) -> frozenset[str]:
     """The directions other than forward a text moves in: a subset of {'backward', 'sideways'}
-    ("walks backwards" and "steps back" name 'backward'; "sideward" is 'sideways')."""
-    return frozenset("sideways" if m.lower().startswith("side") else "backward"
-                     for m in _AWAY_FROM_FORWARD.findall(text))
+    ("walks backwards", "steps back" and every other wording of the 'walk back' action, such as "backs up",
+    name 'backward'; "sideward" is 'sideways')."""
+    named = frozenset("sideways" if m.lower().startswith("side") else "backward"
+                      for m in _AWAY_FROM_FORWARD.findall(text))
+    return named | {"backward"} if "walk back" in actions_in(text) else named  # "backs up", "retreats"
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,43 @@
+"""One chain from words to motion (issue 58): the choice of weights (action expert or main) decides on the
+caption a prompt is conditioned on, and walking backwards is the expert's, which walks backwards where the
+main weights walked forward."""
+
+from __future__ import annotations
+
+import pytest
+
+import kinema
+from kinema.model.actions import actions_in
+from kinema.model.grounding import off_forward
+
+
+@pytest.fixture(scope="module")
+def model():
+    return kinema.load_model()
+
+
+def test_a_prompt_is_routed_by_the_caption_it_is_grounded_on(model):
+    prompt = "The man collapses to the ground."
+    assert not model.loaded.serves_with_expert(prompt)  # its own words name no expert action
+    texts = model.ground_prompts([prompt])
+    assert model.conditioned_text(prompt, texts) == "Someone collapses and falls forward."
+    result = model.generate(prompt, seconds=4, seed=0)
+    assert result.report.prompts[0]["weights"] == "action expert"
+    head = result[0].positions[:, result[0].skeleton.names.index("Head"), 1]
+    assert float(head[-10:].mean()) < 0.5  # on the ground at the end (the main weights kept it at 1.2-1.3 m)
+
+
+def test_backs_up_is_a_backward_walk_grounded_on_one(model):
+    assert actions_in("Somebody backs up step by step.") == {"walk", "walk back"}
+    assert actions_in("Someone falls backward.") == {"fall"}
+    assert off_forward("Somebody backs up step by step.") == {"backward"}
+    grounded = model.ground_prompts(["Somebody backs up step by step."])["Somebody backs up step by step."]
+    assert grounded.status == "grounded" and off_forward(grounded.captions[0][0]) == {"backward"}
+
+
+def test_the_training_caption_of_a_backward_walk_walks_backwards(model):
+    result = model.generate("A person walks backward.", seconds=4, seed=0)
+    assert result.report.prompts[0]["weights"] == "action expert"
+    motion = result[0]
+    forward = float(motion.root_translation[-1, 2] - motion.root_translation[0, 2])
+    assert forward < -1.5, forward  # first frame faces +Z; the main weights walked 2.3-3.4 m forward
