@@ -30,6 +30,7 @@ def test_a_prompt_is_routed_by_the_caption_it_is_grounded_on(model):
 def test_backs_up_is_a_backward_walk_grounded_on_one(model):
     assert actions_in("Somebody backs up step by step.") == {"walk", "walk back"}
     assert actions_in("Someone falls backward.") == {"fall"}
+    assert "walk back" not in actions_in("Someone ducks down and stands back up.")
     assert off_forward("Somebody backs up step by step.") == {"backward"}
     grounded = model.ground_prompts(["Somebody backs up step by step."])["Somebody backs up step by step."]
     assert grounded.status == "grounded" and off_forward(grounded.captions[0][0]) == {"backward"}

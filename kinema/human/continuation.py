@@ -8,8 +8,12 @@ at 1.0-1.6 m/s for 7 s, then 0.4-0.9 m/s at 7-9 s. So a prompt is sampled in one
 `CAPTURE_SHARE` of its captures' length (the median length of the training clips of the caption it is
 grounded on, or its nearest caption: ``KnownPrompts.caption_seconds``) and of the model's window; a
 longer one is a stream (kinema.stream: the same prompt, each window continuing the last frames generated,
-imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then four
-2.4-s windows that each keep running.
+imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then five
+2.35-s windows that each keep running. After the first window the stream is steered straight on at the
+speed that window settled at (`cruising_speed`, a root path every later window follows, kinema.stream.
+controls.Steer): left alone, each window picked its own speed and two walks of six (held-out phrasings,
+seeds 0-2, 10 s) slowed to 0.67-0.71 x their first seconds; steered, the same six keep 0.88-0.98 x and the
+runs 0.98-1.00 x.
 
 Only prompts whose actions are all travel (`CONTINUED_ACTIONS`: walks and runs, "A person walks forward
 happily.", not "walks and turns left" nor "bows") are continued: another action is made once, in one
@@ -30,11 +34,14 @@ from kinema.motion.core import Motion
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.stream import open_stream
+from kinema.stream.controls import MAX_SPEED
 
 #: share of an action's capture length (and of the model's window) that one window holds
 CAPTURE_SHARE = 0.75
 #: the shortest window (s): a few captions are carried only by a short clip (a 0.65-s dash)
 MIN_WINDOW_SECONDS = 2.0
+#: seconds of the first window after which its speed is measured (its first second starts from standing)
+SETTLE_SECONDS = 1.0
 #: the actions (kinema.model.actions) a prompt may name to be continued: travel goes on for as long as asked,
 #: while a bow, a kick or a turn made again in every window would be made several times
 CONTINUED_ACTIONS = frozenset({"walk", "run"})
@@ -82,6 +89,18 @@ def captured_seconds(pipeline, prompt: str, grounding=None) -> float | None:
     return known.seconds_of(caption)
 
 
+def cruising_speed(motion: Motion) -> float:
+    """Ground speed (m/s, straight line) of a window from `SETTLE_SECONDS` (or its middle) to its end: the
+    speed its prompt was made at, after the start every window of the model makes from standing."""
+    settle = min(round(SETTLE_SECONDS * motion.fps), motion.num_frames // 2)
+    xz = motion.root_translation[:, [0, 2]].double()
+    return float((xz[-1] - xz[settle]).norm()) * motion.fps / max(motion.num_frames - 1 - settle, 1)
+
+
+def _motion(frames, pipeline) -> Motion:
+    return Motion(pipeline.skeleton, pipeline.fps, frames.root_translation, frames.local_rotations)
+
+
 def continued(pipeline, request: GenerationRequest, seconds: float, window: float, steps: int) -> GenerationResult:
     """``request.samples`` motions of ``seconds`` each, made as streams of ``window``-second windows with
     ``steps`` DDIM steps, post-processed whole when the request asks; the report of the call."""
@@ -93,9 +112,11 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
     for i in range(request.samples):
         stream = open_stream(pipeline, window_request.replace(seed=(request.seed + i) % 2**63),
                              window_seconds=window, lookahead=0.0, steps=steps)
-        out = stream.next_frames(frames)
+        head = _motion(stream.next_frames(1), pipeline)
+        first = head.concatenate(_motion(stream.next_frames(stream.buffered_frames), pipeline))  # window 1
+        stream.steer(None, min(MAX_SPEED, cruising_speed(first)))  # straight on at the first window's speed
+        motion = first.concatenate(_motion(stream.next_frames(frames - first.num_frames), pipeline))
         windows += len(stream.windows)
-        motion = Motion(pipeline.skeleton, pipeline.fps, out.root_translation, out.local_rotations)
         t_raw = time.perf_counter()
         report: dict = {}
         if request.postprocess:

@@ -34,7 +34,7 @@ ACTION_WORDS: dict[str, tuple[str, ...]] = {
     # walking backwards (walk-back): its own action so that the action expert, which walks backwards where
     # the main weights walk forward (issue 58), can serve it; "falls backward" is not one
     "walk back": (r"(?:walk|step|mov)(?:s|ed|ing|e|es|ped|ping)?(?: \w+ly)? back(?:ward|wards)?",
-                  r"back(?:s|ed|ing)? (?:up|away)", r"retreat(?:s|ed|ing)?", r"backpedal(?:s|led|ling|ed|ing)?",
+                  r"back(?:s|ed|ing) (?:up|away)", r"retreat(?:s|ed|ing)?", r"backpedal(?:s|led|ling|ed|ing)?",
                   r"in reverse"),
     "turn": (r"turn(?:s|ed|ing)?", r"veer(?:s|ed|ing)?", r"pivot(?:s|ed|ing)?", r"chang(?:e|es|ed|ing) direction"),
     "bow": (r"bow(?:s|ed|ing)?", r"curts(?:y|ies|ied|eys?)"),
