@@ -7,10 +7,10 @@ import pytest
 import torch
 
 import kinema
-from kinema.pipeline.request import GenerationRequest
+from kinema.errors import KinemaError
 from kinema.human.continuation import CAPTURE_SHARE, continuation_window
 from kinema.model.vocabulary import KnownPrompts, median_seconds
-from kinema.errors import KinemaError
+from kinema.pipeline.request import GenerationRequest
 from kinema.text import get_text_encoder
 
 RUN = "A man runs quickly down the road."

@@ -8,19 +8,19 @@ at 1.0-1.6 m/s for 7 s, then 0.4-0.9 m/s at 7-9 s. So a prompt is sampled in one
 `CAPTURE_SHARE` of its captures' length (the median length of the training clips of the caption it is
 grounded on, or its nearest caption: ``KnownPrompts.caption_seconds``) and of the model's window; a
 longer one is a stream (kinema.stream: the same prompt, each window continuing the last frames generated,
-imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then five
+imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then six
 2.35-s windows that each keep running. After the first window the stream is steered straight on at the
 speed that window settled at (`cruising_speed`, a root path every later window follows, kinema.stream.
 controls.Steer): left alone, each window picked its own speed and two walks of six (held-out phrasings,
-seeds 0-2, 10 s) slowed to 0.67-0.71 x their first seconds; steered, the same six keep 0.88-0.98 x and the
-runs 0.98-1.00 x.
+seeds 0-2, 10 s; scripts/long_motion_probe.py) slowed to 0.67-0.71 x their first seconds; steered, all six
+keep 0.95-0.99 x and the runs 1.00-1.03 x.
 
 Only prompts whose actions are all travel (`CONTINUED_ACTIONS`: walks and runs, "A person walks forward
 happily.", not "walks and turns left" nor "bows") are continued: another action is made once, in one
-window of up to 10 s, as before. Only requests that are a single prompt without constraints, objectives or keyjoint planning are continued.
-A timeline's segment longer than its `learned_window` is made of equal pieces of the same prompt no longer
-than it, joined like any two segments (transition windows, kinema.human.segments), so a 10-s run after a
-walk runs for 10 s as well.
+window of up to 10 s, as before. Only requests that are a single prompt without constraints, objectives or
+keyjoint planning are continued. A timeline's segment longer than its `learned_window` is made of equal
+pieces of the same prompt no longer than it, joined like any two segments (transition windows,
+kinema.human.segments), so a 10-s run after a walk runs for 10 s as well.
 Sample ``i`` of a continued request is the stream of seed ``seed + i``.
 """
 

@@ -83,7 +83,8 @@ _PATTERNS = {a: re.compile(r"\b(?:" + "|".join(forms) + r")\b", re.IGNORECASE) f
 
 #: per action, the word its one-word synonyms become in :func:`reworded` (the form captions use)
 ACTION_VERBS: dict[str, str] = {
-    "walk": "walks", "walk back": "walks back", "run": "runs", "turn": "turns", "bow": "bows", "wave": "waves", "raise": "raises",
+    "walk": "walks", "walk back": "walks back", "run": "runs", "turn": "turns", "bow": "bows", "wave": "waves",
+    "raise": "raises",
     "guide": "guides", "call": "calls", "kick": "kicks", "spin": "spins", "slash": "slashes", "dance": "dances",
     "punch": "punches", "jump": "jumps", "sit": "sits", "get up": "gets up", "crouch": "crouches",
     "lie down": "lies down", "reach": "reaches", "crawl": "crawls", "climb": "climbs", "swim": "swims",
