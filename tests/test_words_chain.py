@@ -17,14 +17,23 @@ def model():
 
 
 def test_a_prompt_is_routed_by_the_caption_it_is_grounded_on(model):
-    prompt = "The man collapses to the ground."
+    prompt = "A person drops to the floor."
     assert not model.loaded.serves_with_expert(prompt)  # its own words name no expert action
     texts = model.ground_prompts([prompt])
-    assert model.conditioned_text(prompt, texts) == "Someone collapses and falls forward."
+    assert model.conditioned_text(prompt, texts) == "A person falls forward to the ground."
     result = model.generate(prompt, seconds=4, seed=0)
     assert result.report.prompts[0]["weights"] == "action expert"
     head = result[0].positions[:, result[0].skeleton.names.index("Head"), 1]
-    assert float(head[-10:].mean()) < 0.5  # on the ground at the end (the main weights kept it at 1.2-1.3 m)
+    assert float(head[-10:].mean()) < 0.5  # on the ground at the end
+
+
+def test_collapsing_and_toppling_are_falls(model):
+    for prompt in ("The man collapses to the ground.", "Somebody topples forward onto the floor."):
+        assert actions_in(prompt) == {"fall"}
+    result = model.generate("The man collapses to the ground.", seconds=4, seed=0)
+    assert result.report.prompts[0]["weights"] == "action expert"
+    head = result[0].positions[:, result[0].skeleton.names.index("Head"), 1]
+    assert float(head[-10:].mean()) < 0.5  # the main weights kept the head at 1.2-1.3 m
 
 
 def test_backs_up_is_a_backward_walk_grounded_on_one(model):
