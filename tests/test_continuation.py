@@ -47,6 +47,7 @@ def test_a_long_run_keeps_running_and_is_reproducible(model):
     result = model.generate(RUN, seconds=7, seed=1, steps=10)
     motion = result[0]
     assert motion.num_frames == 140
+    assert motion.foot_contacts is not None and tuple(motion.foot_contacts.shape) == (140, 4)  # evaluators read them
     early, late = speed(motion, 1, 3), speed(motion, 4.9, 6.9)
     assert early > 1.8 and late >= 0.75 * early, (early, late)
     made = result.report.prompts[0]["continued"]

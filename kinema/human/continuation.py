@@ -27,9 +27,11 @@ Sample ``i`` of a continued request is the stream of seed ``seed + i``.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 from kinema.human.targets import run_postprocess
 from kinema.model.actions import actions_in
+from kinema.motion.contacts import foot_contacts
 from kinema.motion.core import Motion
 from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
@@ -117,6 +119,8 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
         stream.steer(None, min(MAX_SPEED, cruising_speed(first)))  # straight on at the first window's speed
         motion = first.concatenate(_motion(stream.next_frames(frames - first.num_frames), pipeline))
         windows += len(stream.windows)
+        # the stream's frames carry no predicted contacts: label them as the training data's are labelled
+        motion = replace(motion, foot_contacts=foot_contacts(motion.positions, motion.fps, motion.skeleton))
         t_raw = time.perf_counter()
         report: dict = {}
         if request.postprocess:
