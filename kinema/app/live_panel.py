@@ -97,7 +97,8 @@ class LiveRun:
         self.session = session
         model = session.model
         rig = session.rig.skeleton if getattr(model, "needs_rig", False) else None
-        self.stream = open_stream(model, GenerationRequest(prompt=prompt, seed=int(session.seed.value), rig=rig))
+        self.stream = open_stream(model, GenerationRequest(prompt=prompt, seed=int(session.seed.value), rig=rig),
+                                  sized_by_prompt=False)  # interactive: short windows, short command latency
         self.fps = self.stream.fps
         self.view = SkeletonView(session.client.scene, "/live", self.stream.skeleton, color=SELECTED_COLOR,
                                  contacts=[])

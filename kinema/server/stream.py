@@ -207,7 +207,8 @@ def _start(message: dict, registry: ModelRegistry, config: ServerConfig, limits:
     try:
         request = GenerationRequest(prompt=prompt, seed=_number(message, "seed", 0, 0, 2**63 - 1, int), rig=rig)
         stream = open_stream(served.model, request, window_seconds=_number(message, "window_seconds", None, 0, 60),
-                             lookahead=_number(message, "lookahead", 0.15, 0, 10), steps=steps)
+                             lookahead=_number(message, "lookahead", 0.15, 0, 10), steps=steps,
+                             sized_by_prompt=False)
     except KinemaError as err:
         raise StreamClosed(1008, f"start: {err}") from None
     seconds = _number(message, "seconds", limits.max_seconds, 0, limits.max_seconds)

@@ -439,7 +439,8 @@ class MotionStream:
 
 
 def open_stream(model, request=None, *, window_seconds: float | None = None,
-                lookahead: float = LOOKAHEAD_SECONDS, steps: int | None = None) -> MotionStream:
+                lookahead: float = LOOKAHEAD_SECONDS, steps: int | None = None,
+                sized_by_prompt: bool = True) -> MotionStream:
     """A `MotionStream` of ``model`` (a loaded `MotionPipeline`); ``request`` (a `GenerationRequest`,
     optional) gives the first prompt, seed, heading, guidance and grounding, and for a model that
     needs one (the any-rig model) the rig; its ``seconds``, ``constraints`` and ``timeline`` are the
@@ -447,6 +448,10 @@ def open_stream(model, request=None, *, window_seconds: float | None = None,
     at once (``model.window_for``: a run 2.35 s, a walk 5.9 s, a slow walk 7.5 s on the shipped human
     model; issue 57: in 3-s windows at 10 steps "walks at an easy pace" moved at 2.1-2.4 m/s, as fast as
     a jog, and 1.4-1.8 m/s in 5.9-s ones), else `WINDOW_SECONDS` or the model's window if shorter.
+    ``sized_by_prompt=False``: windows of that default length whatever the prompt. The interactive faces (the
+    app's live mode, the server's WebSocket stream) ask for it: a command is seen once the window made after
+    it is, so a 5.9-s window doubles a command's wall-clock latency, and a bounded stream that makes 5.9 s at
+    once can end before a client's next command arrives.
     ``steps``: DDIM steps per window (default `STREAM_STEPS`)."""
     if request is not None and not hasattr(request, "replace"):
         raise KinemaError(f"open_stream: request must be a GenerationRequest, got {type(request).__name__}")
@@ -464,7 +469,7 @@ def open_stream(model, request=None, *, window_seconds: float | None = None,
             raise KinemaError("rig: a stream of this model moves its own skeleton; retarget the written stream "
                               "(kinema retarget) or stream an any-rig model (--model creatures) on the rig")
         body = HumanBody(model.skeleton)
-    from_prompt = window_seconds is None
+    from_prompt = window_seconds is None and sized_by_prompt
     if window_seconds is None:
         window_seconds = min(WINDOW_SECONDS, float(model.window_seconds))
     seed = 0 if request is None else int(request.seed)
