@@ -37,6 +37,7 @@ from kinema.pipeline.request import GenerationRequest
 from kinema.pipeline.result import GenerationReport, GenerationResult
 from kinema.stream import open_stream
 from kinema.stream.controls import MAX_SPEED
+from kinema.stream.measure import frames_to_motion
 
 #: share of an action's capture length (and of the model's window) that one window holds
 CAPTURE_SHARE = 0.75
@@ -99,10 +100,6 @@ def cruising_speed(motion: Motion) -> float:
     return float((xz[-1] - xz[settle]).norm()) * motion.fps / max(motion.num_frames - 1 - settle, 1)
 
 
-def _motion(frames, pipeline) -> Motion:
-    return Motion(pipeline.skeleton, pipeline.fps, frames.root_translation, frames.local_rotations)
-
-
 def continued(pipeline, request: GenerationRequest, seconds: float, window: float, steps: int) -> GenerationResult:
     """``request.samples`` motions of ``seconds`` each, made as streams of ``window``-second windows with
     ``steps`` DDIM steps, post-processed whole when the request asks; the report of the call."""
@@ -110,22 +107,24 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
     frames = round(seconds * pipeline.fps)
     window_request = request.replace(rig=None, robot=None, robot_mapping=None, fps=None, format=None,
                                      seconds=None, samples=1)
-    motions, residuals, raw_seconds, windows = [], [], 0.0, 0
+    motions, residuals, post_seconds, windows = [], [], 0.0, 0
     for i in range(request.samples):
         stream = open_stream(pipeline, window_request.replace(seed=(request.seed + i) % 2**63),
                              window_seconds=window, lookahead=0.0, steps=steps)
-        head = _motion(stream.next_frames(1), pipeline)
-        first = head.concatenate(_motion(stream.next_frames(stream.buffered_frames), pipeline))  # window 1
+        parts = [stream.next_frames(1)]
+        parts.append(stream.next_frames(stream.buffered_frames))  # the rest of window 1
+        first = frames_to_motion(parts, pipeline.skeleton)
         stream.steer(None, min(MAX_SPEED, cruising_speed(first)))  # straight on at the first window's speed
-        motion = first.concatenate(_motion(stream.next_frames(frames - first.num_frames), pipeline))
+        parts.append(stream.next_frames(frames - first.num_frames))
+        motion = frames_to_motion(parts, pipeline.skeleton)
         windows += len(stream.windows)
         # the stream's frames carry no predicted contacts: label them as the training data's are labelled
         motion = replace(motion, foot_contacts=foot_contacts(motion.positions, motion.fps, motion.skeleton))
-        t_raw = time.perf_counter()
+        t_post = time.perf_counter()
         report: dict = {}
         if request.postprocess:
             motion, report = run_postprocess(motion, None, pipeline.representation)
-        raw_seconds += time.perf_counter() - t_raw
+        post_seconds += time.perf_counter() - t_post
         motions.append(motion)
         residuals.append(report)
     matches = pipeline.match_prompts([request.prompt])
@@ -140,6 +139,6 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
         prompts=[pipeline.prompt_report(m, {}, texts) | {"continued": {"window_seconds": round(window, 3),
                                                                         "windows": windows // request.samples}}
                  for m in matches],
-        timings={"sampling": t1 - t0 - raw_seconds, "postprocess": raw_seconds}, joints=pipeline.skeleton.num_joints,
+        timings={"sampling": t1 - t0 - post_seconds, "postprocess": post_seconds}, joints=pipeline.skeleton.num_joints,
     )
     return GenerationResult(motions, result_report)
