@@ -10,6 +10,11 @@ The request's own bounds (seconds, samples, steps, ...) live in kinema.pipeline.
   joints, so 256 leaves room for rigs five times larger than any it learnt from. Override it for a
   process with the environment variable ``KINEMA_MAX_RIG_JOINTS`` or per call with ``max_joints=``.
 
+- ``MAX_JSON_BYTES`` (16 MiB): the largest JSON, JSON-lines or CSV input file (mappings, rig overrides,
+  timelines, constraints, stream scripts, jobs files); the largest shipped one is a few hundred KB.
+- ``MAX_ASSET_BYTES`` (1 GiB): the largest rig or motion file (BVH, glTF/GLB and its buffer files). Both
+  are read through kinema.input_files, which stops after ``max + 1`` bytes (``/dev/zero`` included).
+
 Reading and inspecting a rig has no joint limit (the tree walks are iterative; ``kinema inspect`` on a
 5000-joint chain takes a few seconds).
 """
@@ -21,6 +26,8 @@ from kinema.runtime import positive_from_env
 
 MAX_RIG_JOINTS = 256
 RIG_JOINTS_ENV = "KINEMA_MAX_RIG_JOINTS"
+MAX_JSON_BYTES = 16 * 1024 * 1024
+MAX_ASSET_BYTES = 1024 * 1024 * 1024
 
 
 def max_rig_joints() -> int:

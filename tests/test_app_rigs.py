@@ -107,7 +107,7 @@ def test_cli_rig_arguments(capsys, tmp_path):
     args = build_parser().parse_args(["app", "--rig", "Fox.glb", "--rig-units", "metres"])
     assert str(args.rig) == "Fox.glb" and args.rig_units == "metres"
     assert main(["app", "--rig", str(tmp_path / "missing.glb")]) == 2
-    assert capsys.readouterr().err.strip().endswith("missing.glb: no such file")
+    assert capsys.readouterr().err.strip().endswith("missing.glb: no such rig file")
 
 
 class _FakeAnyRig(AnyRigModel):

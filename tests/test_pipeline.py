@@ -192,7 +192,8 @@ def test_a_batch_line_names_the_creatures_model_and_a_rig_file(tmp_path) -> None
 
 
 def test_a_robot_through_the_request_on_every_face(tmp_path) -> None:
-    """issue 39 through the one request: Python, the server (a built-in robot by name only) and batch."""
+    """issue 39 through the one request: Python, the server (a built-in robot by name only) and batch; an
+    inline robot_mapping is read as a mapping file is on all three (issue 61: it used to be a 500)."""
     from fastapi.testclient import TestClient
 
     from kinema.batch.runner import run_batch
@@ -201,20 +202,26 @@ def test_a_robot_through_the_request_on_every_face(tmp_path) -> None:
     from kinema.server.config import ServerConfig
     from kinema.server.models import ModelRegistry
 
-    res = load_model("default").generate(GenerationRequest(prompt="A person walks.", seconds=1.0, steps=2, robot="g1"))
+    res = load_model("default").generate(GenerationRequest(prompt="A person walks.", seconds=1.0, steps=2, robot="g1",
+                                                           robot_mapping={"pelvis": "pelvis"}))
     (rm,) = res.robot_motions
     assert rm.num_frames == res[0].num_frames and res.report.robot[0]["range_overshoot_rad"] == 0.0
     with pytest.raises(KinemaError, match="csv is a robot's joint angles"):
         GenerationRequest(prompt="x", format="csv")
     client = TestClient(create_app(ServerConfig(limits=ServerLimits(max_steps=4)), ModelRegistry.load(["default"])))
     body = {"prompt": "A person waves.", "seconds": 1.0, "steps": 2, "robot": "g1", "format": "csv"}
-    answer = client.post("/v1/generate", json=body)
+    answer = client.post("/v1/generate", json=body | {"robot_mapping": {"head": {"body": "torso_link",
+                                                                               "offset": [0, 0, 0.43]}}})
     assert answer.status_code == 200, answer.text
+    for mapping, message in (({"tail": "pelvis"}, "robot_mapping: unknown landmark(s) ['tail']"),
+                             ({"left_hip": "pelvis"}, "puts 'pelvis' and 'left_hip' at the same point")):
+        refused = client.post("/v1/generate", json=body | {"robot_mapping": mapping})
+        assert refused.status_code == 422 and message in refused.text, refused.text
     csv = answer.json()["motions"][0]["data"]
     assert csv.startswith("time,root_x,root_y,root_z,root_qw") and len(csv.splitlines()) == 21
     assert client.post("/v1/generate", json=body | {"robot": "../g1.xml"}).status_code == 422  # names only
     jobs = tmp_path / "jobs.jsonl"
     jobs.write_text(json.dumps({"id": "g1walk", "prompt": "A person walks.", "seconds": 1.0, "steps": 2,
-                                "robot": "g1", "format": "csv"}) + "\n")
+                                "robot": "g1", "robot_mapping": {"pelvis": "pelvis"}, "format": "csv"}) + "\n")
     assert run_batch(jobs, tmp_path / "out", workers=1, progress=False).done == 1
     assert load_robot_motion(tmp_path / "out" / "g1walk.csv", "g1").num_frames == 20

@@ -20,6 +20,7 @@ from kinema.batch.executors import make_executor
 from kinema.batch.manifest import FolderLock, Manifest, remove_stale_temps
 from kinema.batch.spec import Task, read_jobs
 from kinema.errors import KinemaError
+from kinema.input_files import check_input_file
 
 
 @dataclass
@@ -122,8 +123,7 @@ def run_batch(jobs_path: str | Path, out: str | Path, *, model: str = "default",
     from tqdm import tqdm
 
     jobs_path, out = Path(jobs_path), Path(out)
-    if not jobs_path.is_file():
-        raise KinemaError(f"{jobs_path}: no such jobs file")
+    check_input_file(jobs_path, "jobs file")
     make_output_folder(out)
     lock = FolderLock(out)
     manifest = Manifest(out)

@@ -19,6 +19,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, ValidationError
 
 from kinema.errors import KinemaError
+from kinema.input_files import read_json_bounded, read_text_bounded
 from kinema.pipeline.request_json import Segment, request_model, to_request
 
 Format = Literal["bvh", "bvh.gz", "npz", "glb", "csv"]
@@ -69,12 +70,7 @@ def output_names(job_id: str, fmt: str, samples: int) -> list[str]:
 
 
 def _read_json(path: Path, what: str):
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as err:
-        raise KinemaError(f"{what} {path}: cannot read it ({err})") from None
-    except (json.JSONDecodeError, RecursionError) as err:
-        raise KinemaError(f"{what} {path}: not valid JSON ({err})") from None
+    return read_json_bounded(path, f"{what} file")
 
 
 def _absolute_bvh(constraints, folder: Path):
@@ -156,10 +152,7 @@ def read_jobs(path: str | Path) -> list[tuple[int, str, Task | KinemaError]]:
 
     A second job with an id already used is an error of its own line (its outputs would overwrite)."""
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError) as err:
-        raise KinemaError(f"{path}: cannot read the jobs file ({err})") from None
+    lines = read_text_bounded(path, "jobs file").splitlines()
     out: list[tuple[int, str, Task | KinemaError]] = []
     seen: dict[str, int] = {}
     for n, text in enumerate(lines, 1):

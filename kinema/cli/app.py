@@ -85,11 +85,12 @@ def run(args: argparse.Namespace) -> int:
     from kinema.app.files_panel import UNITS
     from kinema.app.rigs import load_rig
     from kinema.generate import load_model
+    from kinema.input_files import check_input_file
     from kinema.robot import load_robot
     from kinema.runtime import configure_threads
 
-    if args.rig is not None and not args.rig.is_file():
-        raise KinemaError(f"--rig {args.rig}: no such file")
+    if args.rig is not None:
+        check_input_file(args.rig, "rig file")
     configure_threads(args.threads)
     model = load_model(args.model)
     rig = None if args.rig is None else load_rig(args.rig, fps=model.fps, scale=UNITS[args.rig_units])

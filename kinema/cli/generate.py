@@ -80,6 +80,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     """Output suffix, constraint and timeline files: checked before anything is loaded."""
     from kinema.errors import KinemaError
     from kinema.human.keyjoint_planning import KeyjointPlanner
+    from kinema.input_files import check_input_file
     from kinema.objectives.io import load_objectives
     from kinema.pipeline.timeline import parse_timeline
 
@@ -97,8 +98,8 @@ def _check_inputs(args: argparse.Namespace) -> None:
         raise KinemaError(f"{args.out}: FBX output is for a character: give --rig CHARACTER (GLB, BVH or FBX)")
     if suffix.endswith(".csv") and args.robot is None:
         raise KinemaError(f"{args.out}: .csv holds a robot's joint angles; add --robot g1 (or an MJCF file)")
-    if args.constraints is not None and not args.constraints.is_file():
-        raise KinemaError(f"{args.constraints}: no such constraints file")
+    if args.constraints is not None:
+        check_input_file(args.constraints, "constraints file")
     if args.constraints is not None:
         load_objectives(args.constraints)  # objective syntax errors before the model loads
     if args.keyjoint_model not in (None, "none"):
@@ -106,8 +107,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     if args.timeline is not None:
         if args.timeline.suffix.lower() != ".json":
             raise KinemaError(f"{args.timeline}: a timeline must be a .json file")
-        if not args.timeline.is_file():
-            raise KinemaError(f"{args.timeline}: no such timeline file")
+        check_input_file(args.timeline, "timeline file")
         parse_timeline(args.timeline)  # a mistake in it fails now, not after loading the model
 
 

@@ -79,14 +79,13 @@ def _clip_lines(clips: dict) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from kinema.errors import KinemaError
+    from kinema.input_files import check_input_file
     from kinema.io import load_motion
     from kinema.io.gltf import read_gltf
     from kinema.retarget import load_character
     from kinema.retarget.fbx import read_fbx
 
-    if not args.file.is_file():
-        raise KinemaError(f"{args.file}: no such file")
+    check_input_file(args.file, "rig or motion file")
     name = args.file.name.lower()
     lines = []
     if name.endswith(".glb") or name.endswith(".gltf"):

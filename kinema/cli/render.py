@@ -37,13 +37,13 @@ def run(args: argparse.Namespace) -> int:
 
     from kinema.atomic_files import check_output_path
     from kinema.errors import KinemaError
+    from kinema.input_files import check_input_file
     from kinema.io import load_motion
     from kinema.render import render_filmstrip, render_gif
     from kinema.robot.files import is_robot_npz
 
     src: Path = args.motion
-    if not src.is_file():
-        raise KinemaError(f"{src}: no such file")
+    check_input_file(src, "motion file")
     name = src.name.lower()
     is_bvh = name.endswith(".bvh") or name.endswith(".bvh.gz")
     is_gltf = name.endswith(".glb") or name.endswith(".gltf")

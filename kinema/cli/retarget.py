@@ -14,7 +14,6 @@ correspondence. Prints the mapping kind, the body scale and how well the result 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from kinema.cli._args import positive_float
@@ -39,15 +38,11 @@ def register(sub) -> None:
 
 def _mapping(path: Path | None) -> dict | None:
     from kinema.errors import KinemaError
+    from kinema.input_files import read_json_bounded
 
     if path is None:
         return None
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise KinemaError(f"{path}: no such mapping file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise KinemaError(f"{path}: not a JSON mapping ({err})") from None
+    data = read_json_bounded(path, "mapping file")
     if not isinstance(data, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in data.items()):
         raise KinemaError(f"{path}: the mapping must be a JSON object {{character joint: motion joint}}")
     return data
@@ -55,11 +50,11 @@ def _mapping(path: Path | None) -> dict | None:
 
 def _load_source(args):
     from kinema.errors import KinemaError
+    from kinema.input_files import check_input_file
     from kinema.io import load_motion
     from kinema.retarget.fbx import read_fbx
 
-    if not args.motion.is_file():
-        raise KinemaError(f"{args.motion}: no such file")
+    check_input_file(args.motion, "motion file")
     name = args.motion.name.lower()
     if name.endswith(".fbx"):
         motion = read_fbx(args.motion).motion

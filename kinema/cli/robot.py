@@ -33,13 +33,13 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     # imported here like every sub-command's work, so that `kinema --help` does not load torch and mujoco
     from kinema.atomic_files import check_output_path
+    from kinema.input_files import check_input_file
     from kinema.io import load_motion
     from kinema.robot import load_robot, replay_report, retarget_to_robot
 
     if args.out.suffix.lower() not in OUTPUTS:
         raise KinemaError(f"{args.out}: --out must end in .csv or .npz")
-    if not args.motion.is_file():
-        raise KinemaError(f"{args.motion}: no such file")
+    check_input_file(args.motion, "motion file")
     name = args.motion.name.lower()
     is_bvh = name.endswith((".bvh", ".bvh.gz"))
     if args.scale is not None and not (is_bvh and args.scale > 0):

@@ -54,13 +54,13 @@ def run(args: argparse.Namespace) -> int:
 
     from kinema.atomic_files import atomic_write_text, check_output_path
     from kinema.generate import load_model
+    from kinema.input_files import check_input_file
     from kinema.pipeline.request import GenerationRequest
     from kinema.runtime import configure_threads, text_cache_dir
     from kinema.stream import open_stream
     from kinema.stream.script import read_script, run_script
 
-    if not args.script.is_file():
-        raise KinemaError(f"{args.script}: no such stream script")
+    check_input_file(args.script, "stream script")
     commands = read_script(args.script)
     if not (args.seconds > 0 and args.seconds <= 3600):
         raise KinemaError(f"--seconds must be in (0, 3600], got {args.seconds:g}")

@@ -23,7 +23,6 @@ Frames are at the model's fps; lengths in metres; Y up, +Z forward. `JointRepres
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from pathlib import Path
 import torch
 
 from kinema.errors import KinemaError
+from kinema.input_files import read_json_bounded
 from kinema.io.gltf import read_gltf
 from kinema.io.registry import load_motion
 from kinema.motion.core import Motion
@@ -224,10 +224,7 @@ def read_constraints(path: str | Path, fps: float | None = None) -> list[Constra
     "frame": 40, "clip": "Fox.glb", "animation": "Gallop", "clip_frame": 5}`` (a pose of a clip on the
     same skeleton; clip frames at ``fps``, the model's)."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as err:
-        raise KinemaError(f"{path}: cannot read constraints ({err})") from None
+    data = read_json_bounded(path, "constraints file")
     return parse_constraints(data, str(path), path.parent, fps)
 
 

@@ -31,6 +31,7 @@ from kinema.constraints.types import (
     frames_from_times,
 )
 from kinema.errors import KinemaError
+from kinema.input_files import read_text_bounded
 
 FILE_KEYS = ("fps", "constraints", "objectives")  # objectives: read by kinema.objectives.io
 
@@ -45,12 +46,9 @@ def read_constraints_json(path_or_obj, base_dir=None) -> tuple[list, str | None,
     if isinstance(path_or_obj, str | os.PathLike):
         path = Path(path_or_obj)
         source = str(path_or_obj)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConstraintError("file not found", source=source) from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise ConstraintError(f"cannot read the file ({err})", source=source) from None
+        if not path.exists():
+            raise ConstraintError("file not found", source=source)
+        text = read_text_bounded(path, "constraints file")
         try:
             data = json.loads(text)
         except json.JSONDecodeError as err:

@@ -8,19 +8,19 @@ block is kinema.io.bvh_hierarchy's.
 
 from __future__ import annotations
 
-import gzip
 import io
 import math
 import os
 import re
-import zlib
 from pathlib import Path
 
 import numpy as np
 
-from kinema.errors import BVHError
+from kinema.errors import BVHError, KinemaError
+from kinema.input_files import read_bytes_bounded
 from kinema.io.bvh_data import MAX_DEGREES, BVHData
 from kinema.io.bvh_hierarchy import parse_hierarchy
+from kinema.limits import MAX_ASSET_BYTES
 
 _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.M)
 _FRAMES_RE = re.compile(r"Frames\s*:\s*(\S*)\s*$", re.I)
@@ -67,17 +67,11 @@ def _source_text(path_or_text: str | os.PathLike | bytes, source_name: str | Non
 
 
 def _read_bytes(path: Path, name: str) -> bytes:
-    """File contents, gunzipped when the name ends in ``.gz``."""
+    """File contents, gunzipped when the name ends in ``.gz``; both sizes bound by `MAX_ASSET_BYTES`."""
     try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise BVHError(f"cannot read file: {err.strerror or err}", name) from None
-    if path.name.lower().endswith(".gz"):
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, zlib.error) as err:
-            raise BVHError(f"not a readable gzip file ({err})", name) from None
-    return raw
+        return read_bytes_bounded(path, "BVH file", MAX_ASSET_BYTES)
+    except KinemaError as err:  # as a BVHError naming the file as the caller does
+        raise BVHError(str(err).removeprefix(f"{path}: "), name) from None
 
 
 def _decode(raw: bytes) -> str:

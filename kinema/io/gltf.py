@@ -27,8 +27,10 @@ import numpy as np
 import torch
 
 from kinema.geometry.rotations import quat_mul, quat_rotate
+from kinema.input_files import read_bytes_bounded
 from kinema.io.gltf_data import GltfBuffers, GltfDocument, GltfError, decompose, node_matrix, parse_document, sample
 from kinema.io.gltf_mesh import RawPart, read_parts
+from kinema.limits import MAX_ASSET_BYTES
 from kinema.mesh import SkinnedMesh, vertex_normals
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
@@ -54,10 +56,7 @@ class GltfAsset:
 def load_document(path: str | Path) -> GltfDocument:
     """The parsed glTF document of ``path``; unreadable files raise a one-line `GltfError`."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as err:
-        raise GltfError(f"{path}: cannot be read ({err.strerror or err})") from None
+    raw = read_bytes_bounded(path, "glTF/GLB file", MAX_ASSET_BYTES, error=GltfError)
     gltf = parse_document(raw, path)
     if not gltf.nodes:
         raise GltfError(f"{path}: has no nodes")

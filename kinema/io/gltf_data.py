@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from kinema.errors import KinemaError
+from kinema.input_files import read_bytes_bounded
+from kinema.limits import MAX_ASSET_BYTES
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -123,11 +125,11 @@ class GltfBuffers:
                 return base64.b64decode(uri.split(",", 1)[1])
             except (IndexError, ValueError) as err:
                 raise GltfError(f"{self.path}: buffer {index} has a bad data URI ({err})") from None
-        file = self.path.parent / uri
         try:
-            return file.read_bytes()
-        except OSError as err:
-            raise GltfError(f"{self.path}: buffer {index} file {uri} cannot be read ({err.strerror})") from None
+            return read_bytes_bounded(self.path.parent / uri, f"buffer {index} of {self.path}", MAX_ASSET_BYTES,
+                                      error=GltfError)
+        except GltfError as err:
+            raise GltfError(f"{self.path}: buffer {index} file {uri}: {err}") from None
 
     def view(self, index: int) -> tuple[bytes, int, int, int | None]:
         """(buffer bytes, start, length, byte stride) of a bufferView."""

@@ -16,10 +16,10 @@ import json
 import math
 import numbers
 import os
-from pathlib import Path
 
 from kinema.constraints.types import ConstraintError
 from kinema.errors import KinemaError
+from kinema.input_files import read_text_bounded
 from kinema.objectives.path import PathTimeAgnostic
 from kinema.objectives.terms import Avoid, JointDistance, Objective, Reach, Realism, StayWithin
 
@@ -187,13 +187,12 @@ def load_objectives(path_or_obj) -> list[Objective]:
         return []
     if isinstance(path_or_obj, str | os.PathLike):
         source = str(path_or_obj)
+        text = read_text_bounded(path_or_obj, "constraints file")
         try:
-            data = json.loads(Path(path_or_obj).read_text(encoding="utf-8"))
+            data = json.loads(text)
         except json.JSONDecodeError as err:  # before ValueError: a syntax error is no unreadable file
             raise ObjectiveError(f"not valid JSON: line {err.lineno}, column {err.colno}: {err.msg}",
                                  source=source) from None
-        except (OSError, ValueError) as err:
-            raise ObjectiveError(f"cannot read the file ({err})", source=source) from None
         except RecursionError:
             raise ObjectiveError("JSON nested too deeply to read (not a constraints file)", source=source) from None
         items = data.get("objectives", []) if isinstance(data, dict) else []

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from kinema.errors import KinemaError
+from kinema.input_files import check_input_file
 from kinema.pipeline import stages
 from kinema.pipeline.progress import ProgressFn
 from kinema.pipeline.request import GenerationRequest
@@ -145,6 +146,8 @@ class MotionPipeline(ABC):
         else:
             request = request_from_keywords(request, **keywords)
         character = self._character(request)
+        robot = None if request.robot is None else load_stage(stages.ROBOT_DESCRIPTION)(request.robot,
+                                                                                        request.robot_mapping)
         if character is None:
             result = self.run(request, progress=progress)
         else:
@@ -155,9 +158,8 @@ class MotionPipeline(ABC):
             result.motions, result.report.character, unmet = character.finish(model_motions, request.constraints,
                                                                               self.fps)
             result.report.warnings += unmet
-        if request.robot is not None:
-            to_robot = load_stage(stages.ROBOT)
-            result.robot_motions, result.report.robot = to_robot(model_motions, request.robot, request.robot_mapping)
+        if robot is not None:
+            result.robot_motions, result.report.robot = load_stage(stages.ROBOT)(model_motions, robot)
         return result
 
     def _character(self, request: GenerationRequest):
@@ -166,8 +168,9 @@ class MotionPipeline(ABC):
         rig = request.rig
         if rig is None or self.needs_rig or not isinstance(rig, str | Path):
             return None
-        if str(rig) in {r.name for r in self.rigs()} or not Path(rig).is_file():
-            return None  # its own rig, or no character file: the pipeline says what it drives
+        if str(rig) in {r.name for r in self.rigs()} or not (Path(rig).suffix or Path(rig).exists()):
+            return None  # its own rig, or a rig id it does not drive: the pipeline says what it drives
+        check_input_file(rig, "rig file")
         return load_stage(stages.CHARACTER).open(rig, self.resolve_rig(None).skeleton)
 
     def stream(self, request: GenerationRequest | None = None, **options) -> MotionStream:

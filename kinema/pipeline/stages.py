@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib
 
 ROBOT = "kinema.robot.stage:robot_motions"
+ROBOT_DESCRIPTION = "kinema.robot.description:load_robot"  # read before sampling: a bad robot fails fast
 CHARACTER = "kinema.retarget.stage:CharacterStage"
 
 

@@ -9,7 +9,6 @@ frames so the join has no seam.
 from __future__ import annotations
 
 import difflib
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ import torch
 
 from kinema.errors import KinemaError
 from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
+from kinema.input_files import read_json_bounded
 from kinema.motion.core import Motion
 from kinema.pipeline.request import request_bounds
 
@@ -37,16 +37,7 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
     """Segments from a JSON list of ``{"prompt": str, "seconds": float}`` (or ``[prompt, seconds]``)."""
     if isinstance(obj, (str, Path)) and Path(obj).suffix.lower() == ".json":
         path = Path(obj)
-        if not path.exists():
-            raise KinemaError(f"{path}: no such timeline file")
-        try:
-            obj = json.loads(path.read_text())
-        except json.JSONDecodeError as err:
-            raise KinemaError(f"{path}:{err.lineno}: not valid JSON ({err.msg})") from None
-        except RecursionError:
-            raise KinemaError(f"{path}: JSON nested too deeply to read (not a timeline)") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise KinemaError(f"{path}: cannot read the timeline file ({err})") from None
+        obj = read_json_bounded(path, "timeline file")
         source = str(path)
     if not isinstance(obj, list) or not obj:
         raise KinemaError(f"{source}: a timeline is a non-empty JSON list of {{'prompt', 'seconds'}} objects")

@@ -12,7 +12,6 @@ End-effector targets written for the character are then met on the character its
 from __future__ import annotations
 
 import copy
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import torch
 
 from kinema.constraints.fps import read_constraints_json
 from kinema.errors import KinemaError
+from kinema.input_files import read_json_bounded
 from kinema.motion.core import Motion
 from kinema.retarget.character import Character, load_character
 from kinema.retarget.core import retarget_with_map
@@ -85,7 +85,7 @@ class CharacterStage:
         if not isinstance(constraints, str | Path):
             return copy.deepcopy(constraints)
         items, _source, dirs, _fps = read_constraints_json(constraints)
-        raw = json.loads(Path(constraints).read_text(encoding="utf-8"))
+        raw = read_json_bounded(constraints, "constraints file")
         for obj in items:
             if isinstance(obj, dict) and isinstance(obj.get("bvh"), str) and not Path(obj["bvh"]).is_absolute():
                 found = next((d / obj["bvh"] for d in dirs if (d / obj["bvh"]).is_file()), None)

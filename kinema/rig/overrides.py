@@ -15,11 +15,11 @@ naming the closest valid key, and ``comment`` / ``_anything`` keys are ignored (
 from __future__ import annotations
 
 import difflib
-import json
 from collections.abc import Mapping
 from pathlib import Path
 
 from kinema.errors import SkeletonError
+from kinema.input_files import read_json_bounded
 from kinema.skeleton import Skeleton
 
 OVERRIDE_KEYS = ("root", "up", "forward", "contacts", "end_effectors", "limbs")
@@ -32,14 +32,7 @@ def read_overrides(overrides: str | Path | Mapping | None) -> tuple[dict, str]:
     source = "overrides"
     if isinstance(overrides, (str, Path)):
         source = str(overrides)
-        try:
-            overrides = json.loads(Path(overrides).read_text())
-        except FileNotFoundError:
-            raise SkeletonError(f"{source}: no such rig override file") from None
-        except json.JSONDecodeError as err:
-            raise SkeletonError(f"{source}:{err.lineno}: not valid JSON ({err.msg})") from None
-        except (OSError, UnicodeDecodeError) as err:
-            raise SkeletonError(f"{source}: cannot read the rig override file ({err})") from None
+        overrides = read_json_bounded(overrides, "rig override file", error=SkeletonError)
     if not isinstance(overrides, Mapping):
         raise SkeletonError(f"{source}: rig overrides must be a JSON object with keys {list(OVERRIDE_KEYS)}")
     out = {}

@@ -15,7 +15,9 @@ import mujoco
 import numpy as np
 
 from kinema.errors import KinemaError
-from kinema.robot.mapping import BodyPoint, read_mapping_file, resolve_mapping
+from kinema.input_files import check_input_file
+from kinema.limits import MAX_JSON_BYTES
+from kinema.robot.mapping import BodyPoint, read_mapping, resolve_mapping
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "assets" / "robots"
 #: Robots shipped with kinema, by name.
@@ -73,8 +75,9 @@ class Robot:
 
 
 def _read_model(path: Path) -> mujoco.MjModel:
-    if not path.is_file():
-        raise KinemaError(f"{path}: no such robot file (use 'g1' or a MuJoCo MJCF .xml)")
+    check_input_file(path, "robot file (use 'g1' or a MuJoCo MJCF .xml)")
+    if path.stat().st_size > MAX_JSON_BYTES:
+        raise KinemaError(f"{path}: larger than {MAX_JSON_BYTES} bytes, too large for an MJCF robot file")
     if path.suffix.lower() != ".xml":
         raise KinemaError(f"{path}: a robot must be a MuJoCo MJCF .xml file")
     try:
@@ -143,14 +146,14 @@ def _check_facing(robot: Robot, data: mujoco.MjData, where: str) -> None:
 
 
 def load_robot(name_or_path: str | Path, mapping: str | Path | dict | None = None) -> Robot:
-    """A robot by built-in name (``"g1"``) or MJCF path; ``mapping`` is a JSON file path or an already read
-    dict of landmark -> BodyPoint for robots whose body names are not recognised (kinema.robot.mapping)."""
+    """A robot by built-in name (``"g1"``) or MJCF path; ``mapping`` is a JSON file path or an inline
+    dict (kinema.robot.mapping.read_mapping) for robots whose body names are not recognised."""
     key = str(name_or_path)
     path = BUILTIN_ROBOTS.get(key.lower(), Path(key))
     model = _read_model(Path(path))
     where = key if key.lower() in BUILTIN_ROBOTS else str(path)
     names, qadr, dadr, ranges = _hinges(model, where)
-    given = read_mapping_file(Path(mapping)) if isinstance(mapping, str | Path) else mapping
+    given = None if mapping is None else read_mapping(mapping)
     bodies = [model.body(b).name for b in range(1, model.nbody)]
     points = resolve_mapping(bodies, given, key.lower() == "g1", where)
     body_ids = {k: model.body(p.body).id for k, p in points.items()}

@@ -16,6 +16,8 @@ import numpy as np
 
 from kinema.atomic_files import atomic_write_bytes
 from kinema.errors import KinemaError
+from kinema.input_files import read_text_bounded
+from kinema.limits import MAX_ASSET_BYTES
 
 ROOT_COLUMNS = ("time", "root_x", "root_y", "root_z", "root_qw", "root_qx", "root_qy", "root_qz")
 NPZ_KEYS = ("time", "root_position", "root_quaternion", "joint_angles", "joint_names", "fps", "robot")
@@ -41,10 +43,7 @@ def write_npz(path: Path, arrays: dict) -> Path:
 
 
 def read_csv(path: Path) -> dict:
-    try:
-        lines = Path(path).read_text().splitlines()
-    except (OSError, UnicodeDecodeError) as err:
-        raise KinemaError(f"{path}: cannot read ({err})") from None
+    lines = read_text_bounded(path, "robot motion CSV", MAX_ASSET_BYTES).splitlines()
     header = [h.strip() for h in lines[0].split(",")] if lines else []
     if tuple(header[: len(ROOT_COLUMNS)]) != ROOT_COLUMNS:
         raise KinemaError(f"{path}: header must start with {','.join(ROOT_COLUMNS)}")

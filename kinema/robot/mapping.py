@@ -10,7 +10,6 @@ names it. The feet's soles are not mapped: they are found from the foot bodies' 
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from kinema.errors import KinemaError
+from kinema.input_files import read_json_bounded
 
 #: Robot landmarks, in the order the retargeting uses them. ``*_hip`` is the hip joint centre, ``*_foot``
 #: the body that carries the sole (the last ankle link), ``*_hand`` the wrist.
@@ -107,32 +107,33 @@ def _guess(key: str, body_names: list[str]) -> str | None:
 
 
 def _read_entry(key: str, value, where: str) -> BodyPoint:
-    """One JSON entry: a body name or {"body": NAME, "offset": [x, y, z]}."""
+    """One entry: a BodyPoint, a body name or {"body": NAME, "offset": [x, y, z]}."""
+    if isinstance(value, BodyPoint):
+        return value
     if isinstance(value, str):
         return BodyPoint(value)
     if not isinstance(value, dict) or not isinstance(value.get("body"), str):
         raise KinemaError(f'{where}: {key!r} must be a body name or {{"body": NAME, "offset": [x, y, z]}}')
     offset = value.get("offset", [0.0, 0.0, 0.0])
-    arr = np.asarray(offset, dtype=object)
-    if arr.shape != (3,) or not all(isinstance(x, int | float) and np.isfinite(x) for x in offset):
+    if not isinstance(offset, list | tuple) or len(offset) != 3 or not all(
+        isinstance(x, int | float) and not isinstance(x, bool) and np.isfinite(float(x)) for x in offset
+    ):
         raise KinemaError(f"{where}: {key!r} offset must be three finite numbers (metres), got {offset!r}")
     return BodyPoint(value["body"], tuple(float(x) for x in offset))
 
 
-def read_mapping_file(path: Path) -> dict[str, BodyPoint]:
-    """A JSON mapping file (see the module docstring), validated for its keys and shapes."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise KinemaError(f"{path}: no such mapping file") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
-        raise KinemaError(f"{path}: not a JSON mapping ({err})") from None
-    if not isinstance(data, dict):
-        raise KinemaError(f"{path}: a mapping must be a JSON object of landmark -> body")
-    unknown = sorted(set(data) - set(ROBOT_POINTS))
+def read_mapping(source: str | Path | dict, where: str = "robot_mapping") -> dict[str, BodyPoint]:
+    """A mapping from a JSON file path or an inline object (a request's ``robot_mapping``), validated for
+    its keys and shapes the same way for both; errors name the file, or ``where`` for an inline one."""
+    if isinstance(source, str | Path):
+        where = str(source)
+        source = read_json_bounded(source, "mapping file")
+    if not isinstance(source, dict):
+        raise KinemaError(f"{where}: a mapping must be a JSON object of landmark -> body")
+    unknown = sorted(set(map(str, source)) - set(ROBOT_POINTS))
     if unknown:
-        raise KinemaError(f"{path}: unknown landmark(s) {unknown}; expected some of {list(ROBOT_POINTS)}")
-    return {key: _read_entry(key, value, str(path)) for key, value in data.items()}
+        raise KinemaError(f"{where}: unknown landmark(s) {unknown}; expected some of {list(ROBOT_POINTS)}")
+    return {key: _read_entry(key, value, where) for key, value in source.items()}
 
 
 def resolve_mapping(
@@ -158,10 +159,17 @@ def resolve_mapping(
                 missing.append(key)
     if missing:
         raise KinemaError(
-            f"{where}: cannot tell which body is {missing}; give them in a --mapping JSON file "
-            f"(landmark -> body name; bodies: {body_names})"
+            f"{where}: cannot tell which body is {missing}; name them in a mapping (a JSON object landmark "
+            f"-> body name: `kinema robot --mapping FILE`, `kinema generate --robot-mapping FILE`, or "
+            f"robot_mapping in a request; bodies: {body_names})"
         )
     for key, point in out.items():
         if point.body not in body_names:
             raise KinemaError(f"{where}: mapping {key!r} names body {point.body!r}, which the MJCF does not have")
+    first: dict[BodyPoint, str] = {}
+    for key, point in out.items():
+        other = first.setdefault(point, key)
+        if other != key and _FALLBACK.get(key) != other:
+            raise KinemaError(f"{where}: the mapping puts {other!r} and {key!r} at the same point (body "
+                              f"{point.body!r}); each landmark needs its own body or offset")
     return out

@@ -7,17 +7,17 @@ most of a second to import and nothing else needs it.
 
 from __future__ import annotations
 
-from kinema.robot.description import load_robot
+from kinema.robot.description import Robot, load_robot
 from kinema.robot.motion import RobotMotion
 from kinema.robot.replay import replay_report
 from kinema.robot.retarget import retarget_to_robot
 
 
-def robot_motions(motions, robot: str, mapping=None) -> tuple[list[RobotMotion], list[dict]]:
-    """Each motion on the robot (``"g1"`` or an MJCF path; ``mapping``: a JSON file or dict naming its
-    bodies) and the replay measurements of each: range overshoot (rad), lowest sole and planted-sole
-    slide (m, m/s), travel (m), leg overlap (m)."""
-    description = load_robot(robot, mapping=mapping)
+def robot_motions(motions, robot: str | Robot, mapping=None) -> tuple[list[RobotMotion], list[dict]]:
+    """Each motion on the robot (a loaded `Robot`, or ``"g1"`` or an MJCF path; ``mapping``: a JSON file or
+    dict naming its bodies) and the replay measurements of each: range overshoot (rad), lowest sole and
+    planted-sole slide (m, m/s), travel (m), leg overlap (m)."""
+    description = robot if isinstance(robot, Robot) else load_robot(robot, mapping=mapping)
     out, measured = [], []
     for motion in motions:
         robot_motion = retarget_to_robot(motion, description)

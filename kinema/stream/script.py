@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from kinema.errors import KinemaError
+from kinema.input_files import read_text_bounded
 from kinema.motion.core import Motion
 from kinema.stream.continuation import MotionStream
 from kinema.stream.measure import JOIN_RADIUS, JoinReport, frames_to_motion, join_report
@@ -72,10 +73,7 @@ def parse_command(obj, where: str) -> ScriptCommand:
 def read_script(path: str | Path) -> list[ScriptCommand]:
     """The commands of a JSON-lines script file, in order (times must not decrease)."""
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except (OSError, UnicodeDecodeError) as err:
-        raise KinemaError(f"{path}: cannot read the stream script ({err})") from None
+    lines = read_text_bounded(path, "stream script").splitlines()
     out: list[ScriptCommand] = []
     for i, line in enumerate(lines, 1):
         if not line.strip() or line.lstrip().startswith("#"):

@@ -1,0 +1,64 @@
+"""Issue 61 (hardening, round 3: characters, robots, streams): inputs that used to end in a traceback, an
+unbounded read or a silently wrong result are one-line errors (exit 2 in the CLI) or carry a warning.
+Shared helpers: tests/hardening_fixtures.py."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from kinema.cli import main
+from kinema.errors import KinemaError
+from kinema.input_files import read_json_bounded
+from tests import hardening_fixtures as fixtures
+from tests.hardening_fixtures import one_line_error
+
+bvh_file = fixtures.bvh_file
+
+
+# ---------------------------------------------------------------------------- bounded reads
+def test_a_bounded_read_stops_at_its_limit(tmp_path):
+    big = tmp_path / "big.json"
+    big.write_text(json.dumps({"a": "x" * 100}))
+    assert read_json_bounded(big, "mapping file", max_bytes=200) == {"a": "x" * 100}
+    with pytest.raises(KinemaError, match=r"big\.json: larger than 50 bytes, too large for a mapping file"):
+        read_json_bounded(big, "mapping file", max_bytes=50)
+    with pytest.raises(KinemaError, match=r"is a folder, not a mapping file"):
+        read_json_bounded(tmp_path, "mapping file")
+
+
+@pytest.mark.parametrize(
+    ("args", "what"),
+    [
+        (["robot", "{bvh}", "--robot", "g1", "--mapping", "/dev/zero"], "mapping file"),
+        (["retarget", "{bvh}", "--rig", "{bvh}", "--mapping", "/dev/zero"], "mapping file"),
+        (["retarget", "{bvh}", "--rig", "{bvh}", "--overrides", "/dev/zero"], "rig override file"),
+        (["generate", "walk", "--robot", "g1", "--robot-mapping", "/dev/zero", "--steps", "2"], "mapping file"),
+    ],
+)
+def test_dev_zero_as_an_input_file_is_refused_after_a_bounded_read(tmp_path, capsys, bvh_file, args, what):
+    out = ["--out", str(tmp_path / ("o" if args[0] == "batch" else "o.csv" if "g1" in args else "o.bvh"))]
+    assert main([a.format(bvh=bvh_file) for a in args] + out) == 2
+    one_line_error(capsys, "/dev/zero: larger than", what)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["robot", "{bvh}", "--robot", "{bad}"],
+        ["robot", "{bad}", "--robot", "g1"],
+        ["batch", "{bad}"],
+        ["stream", "--script", "{bad}", "--seconds", "1"],
+        ["generate", "walk", "--constraints", "{bad}"],
+        ["generate", "walk", "--rig", "{bad}"],
+    ],
+)
+@pytest.mark.parametrize(("bad", "message"), [("/dev/zero", "is not a regular file"), ("{tmp}", "is a folder")])
+def test_an_input_that_is_no_file_says_what_it_is(tmp_path, capsys, bvh_file, args, bad, message):
+    """Not "no such file" (nor, for --rig, "the model drives its own skeleton"): what the path is."""
+    bad = bad.format(tmp=tmp_path)
+    out = tmp_path / ("o.csv" if "robot" in args else "o" if "batch" in args else "o.bvh")
+    assert main([a.format(bvh=bvh_file, bad=bad) for a in args] + ["--out", str(out)]) == 2
+    one_line_error(capsys, bad, message)
