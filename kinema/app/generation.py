@@ -120,9 +120,14 @@ def on_rig(motion: Motion, rig: AppRig) -> Motion:
 
 
 def _robot_words(measures: list[dict]) -> str:
-    """The robot replay's worst range overshoot and sole slide, in words (empty when not measured)."""
+    """The robot replay's worst range overshoot and sole slide, and each sample's inverse dynamics, in words
+    (empty when not measured); a sample that is not feasible also has its warning in the outcome's warnings."""
     if not measures:
         return ""
     over = math.degrees(max(float(m.get("range_overshoot_rad", 0.0)) for m in measures))
     slide = max(float(m.get("planted_slide_m_s", 0.0)) for m in measures)
-    return f" (joint range overshoot {over:.1f} deg, planted-sole slide {slide:.2f} m/s)"
+    feasible = sum(bool(m.get("feasible")) for m in measures)
+    dynamics = "".join(f"; sample {i} dynamics: {m['dynamics_summary']}" for i, m in enumerate(measures)
+                       if "dynamics_summary" in m)
+    return (f" (joint range overshoot {over:.1f} deg, planted-sole slide {slide:.2f} m/s; {feasible} of {len(measures)} "
+            f"feasible in MuJoCo inverse dynamics{dynamics})")

@@ -152,4 +152,5 @@ def print_report(result) -> None:
         print(f"sample {i} on {r['robot']} (replayed in MuJoCo): range overshoot {r['range_overshoot_rad']:.3f} rad, "
               f"lowest sole {100 * r['lowest_sole_m']:.1f} cm, planted-sole slide {r['planted_slide_m_s']:.2f} m/s, "
               f"travel {r['travel_m']:.2f} m")
+        print(f"sample {i} dynamics (MuJoCo inverse dynamics): {r['dynamics_summary']}")
     print_warnings([*rep.left_out, *rep.warnings])

@@ -6,7 +6,9 @@ joints (kinema.robot) and writes MuJoCo poses: a CSV (time, root position and qu
 hinge joint, radians, Z up) or an npz with the same arrays. ``--robot`` is ``g1`` (the Unitree G1 shipped
 with kinema) or an MJCF file; ``--mapping`` a JSON file naming which bodies are the robot's hips, knees,
 feet, shoulders, elbows and hands when its body names are not recognised (docs/robots.md). The replay
-measurements (joint-range overshoot, lowest sole, planted-sole slide, travel) are printed.
+measurements (joint-range overshoot, lowest sole, planted-sole slide, travel) are printed, then the
+inverse dynamics (kinema.robot.dynamics: torques against actuator limits, the floating base's residual,
+joint speeds, self-collision) and one warning line when the motion is not feasible.
 """
 
 from __future__ import annotations
@@ -35,7 +37,9 @@ def run(args: argparse.Namespace) -> int:
     from kinema.atomic_files import check_output_path
     from kinema.input_files import check_input_file
     from kinema.io import load_motion
+    from kinema.cli.report import print_warnings
     from kinema.robot import load_robot, replay_report, retarget_to_robot
+    from kinema.robot.dynamics import dynamics_report
 
     if args.out.suffix.lower() not in OUTPUTS:
         raise KinemaError(f"{args.out}: --out must end in .csv or .npz")
@@ -58,4 +62,7 @@ def run(args: argparse.Namespace) -> int:
         f"{robot.name}; range overshoot {rep.range_overshoot:.3f} rad, lowest sole {100 * rep.lowest_sole:+.1f} cm, "
         f"planted-sole slide {rep.planted_slide:.2f} m/s, travel {rep.travel:.2f} m"
     )
+    dynamics = dynamics_report(robot_motion, robot)
+    print(f"dynamics (MuJoCo inverse dynamics): {dynamics.summary()}")
+    print_warnings([dynamics.warning()] if dynamics.warning() else [])
     return 0

@@ -160,6 +160,7 @@ class MotionPipeline(ABC):
             result.report.warnings += unmet
         if robot is not None:
             result.robot_motions, result.report.robot = load_stage(stages.ROBOT)(model_motions, robot)
+            result.report.warnings += [m["warning"] for m in result.report.robot if m["warning"]]
         return result
 
     def _character(self, request: GenerationRequest):

@@ -72,6 +72,15 @@ class HingeIK:
         mujoco.mj_jac(self.model, self.data, self._jacp, None, point, body)
         return self._jacp.copy(), target - point, weight
 
+    def _relative_rows(self, key: str, anchor: str, target: np.ndarray, weight: float):
+        """Rows that bring landmark ``key`` to ``target``, a point given relative to landmark ``anchor`` (a
+        knee from its hip, an elbow or hand from its shoulder): the Jacobian is the difference of the two,
+        since moving the anchor moves the target with it."""
+        r, d = self.robot, self.data
+        J, e, w = self._point_rows(r.body_ids[key], r.point(d, key), target, weight)
+        mujoco.mj_jac(self.model, d, self._jacp, None, r.point(d, anchor), r.body_ids[anchor])
+        return J - self._jacp, e, w
+
     def _rotation_rows(self, body: int, target: np.ndarray, weight: float):
         mujoco.mj_jacBody(self.model, self.data, None, self._jacr, body)
         return self._jacr.copy(), rotation_error(target, self.data.xmat[body].reshape(3, 3)), weight
@@ -101,12 +110,12 @@ class HingeIK:
             rows += self._floor_rows(s)
             rows.append(self._rotation_rows(foot, tg.foot_frame[s][t] @ self.rest[s], w.foot_rotation))
             knee = r.point(d, f"{s}_hip") + self.sizes.thigh * tg.knee_dir[s][t]
-            rows.append(self._point_rows(ids[f"{s}_knee"], r.point(d, f"{s}_knee"), knee, w.knee))
+            rows.append(self._relative_rows(f"{s}_knee", f"{s}_hip", knee, w.knee))
             shoulder = r.point(d, f"{s}_shoulder")
             elbow = shoulder + self.sizes.upper_arm * tg.elbow_dir[s][t]
-            rows.append(self._point_rows(ids[f"{s}_elbow"], r.point(d, f"{s}_elbow"), elbow, w.elbow))
+            rows.append(self._relative_rows(f"{s}_elbow", f"{s}_shoulder", elbow, w.elbow))
             hand = shoulder + tg.hand_reach[s][t]
-            rows.append(self._point_rows(ids[f"{s}_hand"], r.point(d, f"{s}_hand"), hand, w.hand))
+            rows.append(self._relative_rows(f"{s}_hand", f"{s}_shoulder", hand, w.hand))
         return rows
 
     def _step(self, q: np.ndarray, q_prev: np.ndarray | None, tg: FrameTargets, t: int) -> np.ndarray:
