@@ -62,3 +62,26 @@ def test_an_input_that_is_no_file_says_what_it_is(tmp_path, capsys, bvh_file, ar
     out = tmp_path / ("o.csv" if "robot" in args else "o" if "batch" in args else "o.bvh")
     assert main([a.format(bvh=bvh_file, bad=bad) for a in args] + ["--out", str(out)]) == 2
     one_line_error(capsys, bad, message)
+
+
+# ---------------------------------------------------------------------------- glTF skins
+def _glb_with_skin_joints(tmp_path, joints) -> Path:
+    """The synthetic test GLB (tests/gltf_synthetic.py) with its skin's joint list replaced."""
+    import pygltflib
+
+    from tests.gltf_synthetic import write_synthetic_glb
+
+    glb = pygltflib.GLTF2().load(str(write_synthetic_glb(tmp_path / "good.glb")))
+    glb.skins[0].joints = joints
+    path = tmp_path / "skin.glb"
+    glb.save(str(path))
+    return path
+
+
+@pytest.mark.parametrize("joints", [[], [1.5]])
+def test_a_skin_without_joints_is_one_line_error(tmp_path, capsys, bvh_file, joints):
+    path = _glb_with_skin_joints(tmp_path, joints)
+    assert main(["inspect", str(path)]) == 2
+    one_line_error(capsys, "skin.glb: skin 0 lists no joints")
+    assert main(["retarget", str(bvh_file), "--rig", str(path), "--out", str(tmp_path / "o.glb")]) == 2
+    one_line_error(capsys, "skin.glb: skin 0 lists no joints")

@@ -86,6 +86,17 @@ def _world(gltf, parent: dict[int, int]) -> np.ndarray:
     return world
 
 
+def _check_skins(gltf, path: Path) -> None:
+    """Each skin lists its joints as a non-empty list of node indices, and each node's ``skin`` is a skin."""
+    for i, skin in enumerate(gltf.skins):
+        joints = skin.joints
+        if not isinstance(joints, list) or not joints or not all(type(j) is int for j in joints):
+            raise GltfError(f"{path}: skin {i} lists no joints ('joints' must be a non-empty list of node indices)")
+    for n, node in enumerate(gltf.nodes):
+        if node.skin is not None and not (type(node.skin) is int and 0 <= node.skin < len(gltf.skins)):
+            raise GltfError(f"{path}: node {n} uses skin {node.skin!r}, which does not exist")
+
+
 def _select_joints(gltf, parent, parts: list[RawPart], keep_helpers: bool):
     """(kept joint nodes, helper names): skin joints + nodes between them, less weightless leaves."""
     joints = {j for s in gltf.skins for j in s.joints}
@@ -311,6 +322,7 @@ def read_gltf(
     gltf = load_document(path)
     if not gltf.skins:
         raise GltfError(f"{path}: has no skin (armature); kinema reads skinned, rigged models")
+    _check_skins(gltf, path)
     buffers = GltfBuffers(gltf, path)
     parent = _parents(gltf, path)
     world = _world(gltf, parent)
