@@ -217,3 +217,23 @@ def test_render_of_an_npz_whose_robot_file_is_not_here(bow, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "names robot 'elsewhere/robot.xml'" in err and "--robot" in err and len(err.strip().splitlines()) == 1
     assert main(["render", str(path), "--robot", "g1", "--out", str(tmp_path / "x.png"), "--frames", "2"]) == 0
+
+
+def test_generate_and_app_take_mapping_like_robot(tmp_path, capsys):
+    """`--mapping` wherever `--robot` is taken (issue 62): the error of an unrecognised MJCF names it, and
+    `kinema generate --robot X.xml --mapping map.json` then works."""
+    from kinema.cli import build_parser
+
+    path, renames = _renamed_g1(tmp_path)
+    parts = {"hip": "hip_roll", "knee": "knee", "foot": "ankle_roll", "shoulder": "shoulder_roll", "elbow": "elbow",
+             "hand": "wrist_yaw"}
+    mapping = {f"{s}_{k}": renames[f"{s}_{v}_link"] for s in ("left", "right") for k, v in parts.items()}
+    (tmp_path / "map.json").write_text(json.dumps(mapping | {"pelvis": "pelvis", "torso": "torso_link"}))
+    out = tmp_path / "walk.csv"
+    args = ["generate", "A person walks.", "--seconds", "1", "--steps", "2", "--robot", str(path), "--out", str(out)]
+    assert main(args) == 2
+    assert "--mapping FILE with --robot on any command" in capsys.readouterr().err
+    assert main([*args, "--mapping", str(tmp_path / "map.json")]) == 0
+    assert load_robot_motion(out, str(path)).num_frames == 20
+    parsed = build_parser().parse_args(["app", "--robot", str(path), "--mapping", str(tmp_path / "map.json")])
+    assert parsed.mapping == tmp_path / "map.json"

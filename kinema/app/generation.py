@@ -41,10 +41,12 @@ class Outcome:
 
 @dataclass(frozen=True)
 class AppRobot:
-    """The robot shown beside each sample: what requests name (``"g1"`` or an MJCF path) and its description."""
+    """The robot shown beside each sample: what requests name (``"g1"`` or an MJCF path), its description and
+    the mapping file that names its bodies (None: names recognised)."""
 
     spec: str
     description: object  # kinema.robot.description.Robot
+    mapping: Path | None = None
 
 
 def is_any_rig(model) -> bool:
@@ -85,7 +87,8 @@ def outcome(model, rig: AppRig, timeline: list[dict], *, constraints, samples: i
     request = GenerationRequest(timeline=timeline, constraints=list(constraints) if constraints else None,
                                 samples=samples, steps=steps, seed=seed,
                                 rig=rig.skeleton if is_any_rig(model) else None,
-                                robot=None if robot is None else robot.spec)
+                                robot=None if robot is None else robot.spec,
+                                robot_mapping=None if robot is None else robot.mapping)
     if is_character(model, rig):
         with tempfile.TemporaryDirectory(prefix="kinema-app-character-") as tmp:
             path = Path(tmp) / rig.name

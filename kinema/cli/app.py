@@ -45,6 +45,8 @@ def register(sub) -> None:
         help="also retarget every generated motion onto a robot and draw it beside the human: 'g1' or an MJCF "
         "file (docs/robots.md; human model only)",
     )
+    p.add_argument("--mapping", type=Path, help="with --robot: JSON landmark -> body mapping of an MJCF whose body "
+                   "names kinema does not recognise (docs/robots.md)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only; "
                    "another address needs --public)")
     p.add_argument("--public", action="store_true", help="allow a --host other than loopback: the app has no "
@@ -96,7 +98,10 @@ def run(args: argparse.Namespace) -> int:
     rig = None if args.rig is None else load_rig(args.rig, fps=model.fps, scale=UNITS[args.rig_units])
     if args.steps is not None and args.steps > max_steps(model):
         raise KinemaError(f"--steps: at most {max_steps(model)} for this model, got {args.steps}")
-    robot = None if args.robot is None else AppRobot(args.robot, load_robot(args.robot))
+    if args.mapping is not None and args.robot is None:
+        raise KinemaError("--mapping names the bodies of a --robot MJCF; give --robot too")
+    robot = None if args.robot is None else AppRobot(args.robot, load_robot(args.robot, mapping=args.mapping),
+                                                     args.mapping)
     app = AppServer(model, rig=rig, model_name=str(args.model), host=args.host, port=args.port, steps=args.steps,
                     robot=robot)
     print(f"kinema app: open {app.url} (Ctrl+C to stop)", flush=True)

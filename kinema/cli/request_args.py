@@ -4,7 +4,7 @@ Every request field becomes a flag (``--name-with-dashes``) typed and bounded by
 its Option says ``cli=False`` (``format`` comes from ``--out``'s suffix, ``objectives`` from the
 constraints file). Special spellings: ``prompt`` is the positional argument, a field whose default is
 True is turned off by ``--no-NAME``, a pair takes two numbers, ``file`` fields take a path, and
-``--heading`` takes degrees (the request holds radians). Every flag defaults to None ("not given"), so
+``--heading`` takes degrees (the request holds radians), and ``--robot-mapping`` is also ``--mapping``. Every flag defaults to None ("not given"), so
 a command can fill what the user left out (a Kimodo meta.json) and the request keeps its own defaults.
 """
 
@@ -17,6 +17,8 @@ from pathlib import Path
 
 from kinema.pipeline.request import GenerationRequest, Option, RequestBounds, options
 
+#: other spellings of a field's flag: ``--mapping`` as every command that takes ``--robot`` spells it
+CLI_ALIASES = {"robot_mapping": ("--mapping",)}
 #: fields the CLI spells in a unit other than the request's: name -> (help in the CLI's unit, to request unit)
 CLI_UNITS = {"heading": ("first-frame facing about +Y in degrees (0 faces +Z, 90 faces +X)", math.radians)}
 
@@ -72,8 +74,8 @@ def add_request_arguments(p: argparse.ArgumentParser, cls: type = GenerationRequ
             p.add_argument(flag(f.name, opt), dest=f.name, type=_bounded(f.name, opt, bounds),
                            metavar=opt.metavar, default=None, help=help_text)
         else:
-            p.add_argument(flag(f.name, opt), dest=f.name, type=Path if opt.file else str, metavar=opt.metavar,
-                           choices=opt.choices, default=None, help=help_text)
+            p.add_argument(flag(f.name, opt), *CLI_ALIASES.get(f.name, ()), dest=f.name, type=Path if opt.file else str,
+                           metavar=opt.metavar, choices=opt.choices, default=None, help=help_text)
 
 
 def request_from_args(args: argparse.Namespace, cls: type = GenerationRequest, **extra) -> GenerationRequest:

@@ -160,8 +160,8 @@ def resolve_mapping(
     if missing:
         raise KinemaError(
             f"{where}: cannot tell which body is {missing}; name them in a mapping (a JSON object landmark "
-            f"-> body name: `kinema robot --mapping FILE`, `kinema generate --robot-mapping FILE`, or "
-            f"robot_mapping in a request; bodies: {body_names})"
+            f"-> body name: --mapping FILE with --robot on any "
+            f"command, or robot_mapping in a request; bodies: {body_names})"
         )
     for key, point in out.items():
         if point.body not in body_names:
