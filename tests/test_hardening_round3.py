@@ -85,3 +85,25 @@ def test_a_skin_without_joints_is_one_line_error(tmp_path, capsys, bvh_file, joi
     one_line_error(capsys, "skin.glb: skin 0 lists no joints")
     assert main(["retarget", str(bvh_file), "--rig", str(path), "--out", str(tmp_path / "o.glb")]) == 2
     one_line_error(capsys, "skin.glb: skin 0 lists no joints")
+
+
+# ---------------------------------------------------------------------------- stream scripts
+def test_a_stream_script_is_checked_whole_before_the_stream_starts(tmp_path, capsys, monkeypatch):
+    """A target naming no joint of the skeleton at line 3 is refused, with its line, before any window."""
+    script = tmp_path / "s.jsonl"
+    script.write_text('{"t": 0, "prompt": "A person walks."}\n{"t": 1, "clear": true}\n'
+                      '{"t": 2, "target": {"joint": "tail", "position": [0, 1, 0]}}\n')
+    monkeypatch.setattr("kinema.stream.continuation.MotionStream.next_frames",
+                        lambda *a, **k: pytest.fail("a window was generated before the script was checked"))
+    assert main(["stream", "--script", str(script), "--seconds", "3", "--out", str(tmp_path / "o.bvh")]) == 2
+    one_line_error(capsys, "s.jsonl:3: target: unknown joint 'tail'")
+    assert not (tmp_path / "o.bvh").exists()
+
+
+@pytest.mark.parametrize("fields", [{"seed": 10**400}, {"seconds": 10**400}, {"guidance": (10**400, 1)}])
+def test_a_request_number_too_large_for_a_float_is_one_line(fields):
+    from kinema.pipeline.request import GenerationRequest
+
+    name = next(iter(fields))
+    with pytest.raises(KinemaError, match=rf"^{name}: expected .*, got 1000+\.\.\.0+$"):
+        GenerationRequest(prompt="x", **fields)

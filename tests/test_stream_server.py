@@ -103,6 +103,11 @@ def test_frames_out_commands_in_until_the_bound(url) -> None:
     ({"type": "start", "realtime": False}, {"type": "steer", "direction_deg": 0, "speed": 50}, "speed"),
     ({"type": "start", "realtime": False}, {"type": "jump"}, "unknown message type 'jump'"),
     ({"type": "start", "realtime": False}, "not json", "not valid JSON"),
+    # issue 61: numbers too large for a float were an OverflowError and a drop without a close frame
+    ({"type": "start", "seed": 10**400}, None, "'seed' must be an integer"),
+    ({"type": "start", "realtime": False}, {"type": "steer", "speed": 10**400}, "speed must be a finite number"),
+    ({"type": "start", "realtime": False}, {"type": "target", "joint": "right_hand", "position": [10**400, 0, 0]},
+     "position must be three numbers"),
 ])
 def test_bad_input_closes_with_a_reason(url, first, then, reason) -> None:
     with connect(url, additional_headers=AUTH) as ws:

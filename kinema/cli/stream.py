@@ -58,12 +58,12 @@ def run(args: argparse.Namespace) -> int:
     from kinema.pipeline.request import GenerationRequest
     from kinema.runtime import configure_threads, text_cache_dir
     from kinema.stream import open_stream
-    from kinema.stream.script import read_script, run_script
+    from kinema.stream.script import MAX_SECONDS, read_script, run_script
 
     check_input_file(args.script, "stream script")
     commands = read_script(args.script)
-    if not (args.seconds > 0 and args.seconds <= 3600):
-        raise KinemaError(f"--seconds must be in (0, 3600], got {args.seconds:g}")
+    if not (args.seconds > 0 and args.seconds <= MAX_SECONDS):
+        raise KinemaError(f"--seconds must be in (0, {MAX_SECONDS:g}], got {args.seconds:g}")
     log = args.log or log_path(args.out)
     check_output_path(args.out)
     check_output_path(log)

@@ -16,11 +16,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import reprlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from kinema.errors import KinemaError
+from kinema.finite import is_finite_real
 from kinema.runtime import positive_from_env
 
 #: largest seed `torch.Generator.manual_seed` takes as it is
@@ -224,10 +226,10 @@ def _range(opt: Option, bounds: RequestBounds, integer: bool) -> str:
 def _number(name: str, value: Any, opt: Option, bounds: RequestBounds, integer: bool) -> None:
     kinds = (int,) if integer else (int, float)
     low, high = opt.low, opt.high_value(bounds)
-    ok = not isinstance(value, bool) and isinstance(value, kinds) and math.isfinite(value)
+    ok = isinstance(value, kinds) and is_finite_real(value)
     ok = ok and (low is None or (value > low if opt.open_low else value >= low)) and (high is None or value <= high)
     if not ok:
-        raise KinemaError(f"{name}: expected {_range(opt, bounds, integer)}, got {value!r}")
+        raise KinemaError(f"{name}: expected {_range(opt, bounds, integer)}, got {reprlib.repr(value)}")
 
 
 def _check_field(name: str, value: Any, opt: Option, bounds: RequestBounds) -> None:

@@ -29,8 +29,10 @@ limits of `kinema serve`.
 import asyncio
 import hmac
 import json
+import logging
 import math
 import os
+import reprlib
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -39,6 +41,7 @@ from dataclasses import dataclass
 from fastapi import FastAPI, WebSocket, WebSocketDisconnect
 
 from kinema.errors import KinemaError
+from kinema.finite import is_finite_real
 from kinema.pipeline.request import GenerationRequest
 from kinema.server.config import ServerConfig
 from kinema.server.models import ModelRegistry
@@ -138,6 +141,9 @@ def add_stream_route(app: FastAPI, registry: ModelRegistry, config: ServerConfig
             await _close(websocket, closed.code, closed.reason)
         except (WebSocketDisconnect, OSError):
             pass  # the client went away (uvicorn raises an OSError subclass on a send after that)
+        except Exception:  # a bug, not bad input: the client still gets a close frame that says so
+            logging.getLogger("kinema.server").exception("stream failed")
+            await _close(websocket, 1011, "internal error in the stream (the server log has the details)")
         finally:
             slots.give()
 
@@ -182,10 +188,9 @@ def _number(message: dict, key: str, default, low: float, high: float, kind=floa
     value = message.get(key, default)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) \
-            or not low <= value <= high or (kind is int and value != int(value)):
+    if not is_finite_real(value) or not low <= value <= high or (kind is int and value != int(value)):
         raise StreamClosed(1008, f"start: '{key}' must be a{'n integer' if kind is int else ' number'} in "
-                                 f"[{low:g}, {high:g}], got {value!r}")
+                                 f"[{low:g}, {high:g}], got {reprlib.repr(value)}")
     return kind(value)
 
 

@@ -41,7 +41,7 @@ from kinema.errors import KinemaError
 from kinema.motion.core import Motion
 from kinema.motion.smoothing import DEFAULT_ROOT_SIGMA_SECONDS, smooth_time
 from kinema.stream.bodies import HumanBody, RigBody
-from kinema.stream.controls import Controls, Steer, Target, WindowFrame
+from kinema.stream.controls import DEFAULT_SPEED, MAX_PROMPT_CHARS, Controls, Steer, Target, WindowFrame
 from kinema.stream.frames import StreamFrames, ease_root_velocity, ground_level, shifted, stitch, turn_xz, turned
 
 #: default seconds of one window (the denoiser sees at most the model's window_seconds)
@@ -239,13 +239,14 @@ class MotionStream:
     # ------------------------------------------------------------------ commands
     def set_prompt(self, text: str) -> CommandRecord:
         """Switch what the character does (from ``lookahead`` seconds on)."""
-        if not isinstance(text, str) or len(text) > 2000:
-            raise KinemaError(f"prompt must be a string of at most 2000 characters, got {type(text).__name__}")
+        if not isinstance(text, str) or len(text) > MAX_PROMPT_CHARS:
+            raise KinemaError(f"prompt must be a string of at most {MAX_PROMPT_CHARS} characters, "
+                              f"got {type(text).__name__}")
         self.controls.prompt = text
         self._switch_windows = 1
         return self._command("prompt", text)
 
-    def steer(self, direction_deg: float | None = None, speed: float = 1.2) -> CommandRecord:
+    def steer(self, direction_deg: float | None = None, speed: float = DEFAULT_SPEED) -> CommandRecord:
         """Move towards world heading ``direction_deg`` (0 = +Z, 90 = +X; None: straight on) at ``speed`` m/s."""
         steer = Steer.checked(direction_deg, speed)
         if steer.direction_deg is None and self.controls.steer is not None:

@@ -16,12 +16,13 @@ motion; the controls constrain the free frames ``[C, W)``:
 from __future__ import annotations
 
 import math
-import numbers
+import reprlib
 from dataclasses import dataclass, field
 
 import torch
 
 from kinema.errors import KinemaError
+from kinema.finite import is_finite_real
 from kinema.geometry.rotations import quat_to_axis_angle
 from kinema.motion.core import Motion
 from kinema.stream.frames import wrap_angle
@@ -34,6 +35,10 @@ SPEED_RAMP_SECONDS = 0.5
 REACH_SECONDS = 0.5
 #: fastest steered speed, m/s (a sprint)
 MAX_SPEED = 6.0
+#: the speed of a steer that gives none (m/s)
+DEFAULT_SPEED = 1.2
+#: the longest prompt a stream takes (characters)
+MAX_PROMPT_CHARS = 2000
 #: how far a target may be from the origin of the world, metres
 MAX_TARGET_DISTANCE = 1000.0
 
@@ -51,8 +56,8 @@ class Steer:
         for name, v in (("direction_deg", direction_deg), ("speed", speed)):
             if v is None and name == "direction_deg":
                 continue
-            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
-                raise KinemaError(f"steer: {name} must be a finite number, got {v!r}")
+            if not is_finite_real(v):
+                raise KinemaError(f"steer: {name} must be a finite number, got {reprlib.repr(v)}")
         if not 0 <= speed <= MAX_SPEED:
             raise KinemaError(f"steer: speed must be in [0, {MAX_SPEED:g}] m/s, got {speed!r}")
         return cls(None if direction_deg is None else float(direction_deg), float(speed))
@@ -71,11 +76,12 @@ class Target:
             raise KinemaError(f"target: unknown joint {joint!r} (roles: {sorted(roles)})")
         try:
             xyz = tuple(float(v) for v in position)
-        except (TypeError, ValueError):
-            raise KinemaError(f"target: position must be three numbers [x, y, z], got {position!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise KinemaError(f"target: position must be three numbers [x, y, z], "
+                              f"got {reprlib.repr(position)}") from None
         if len(xyz) != 3 or not all(math.isfinite(v) and abs(v) <= MAX_TARGET_DISTANCE for v in xyz):
             raise KinemaError(f"target: position must be three finite numbers within {MAX_TARGET_DISTANCE:g} m, "
-                              f"got {position!r}")
+                              f"got {reprlib.repr(position)}")
         return cls(joint, xyz)
 
 

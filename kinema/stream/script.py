@@ -8,27 +8,32 @@ One object per line, ``t`` (seconds of stream time, not decreasing) and exactly 
     {"t": 14, "clear": true}
 
 Blank lines and lines starting with ``#`` are skipped; ``comment`` keys are ignored. A command is
-issued when the stream has handed out every frame before ``t``.
+issued when the stream has handed out every frame before ``t``. Every line is checked before the stream
+starts (a target's joint against the stream's skeleton too), and an error names the line.
 """
 
 from __future__ import annotations
 
 import json
-import math
+import reprlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from kinema.errors import KinemaError
+from kinema.finite import is_finite_real
 from kinema.input_files import read_text_bounded
 from kinema.motion.core import Motion
 from kinema.stream.continuation import MotionStream
+from kinema.stream.controls import DEFAULT_SPEED, MAX_PROMPT_CHARS, Steer, Target
 from kinema.stream.measure import JOIN_RADIUS, JoinReport, frames_to_motion, join_report
 
 COMMANDS = ("prompt", "steer", "target", "clear")
 #: most commands one script may hold
 MAX_COMMANDS = 10_000
+#: the longest stream a script plays, and so the latest ``t`` (seconds)
+MAX_SECONDS = 3600.0
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,7 @@ class ScriptCommand:
     t: float
     kind: str
     value: Any
+    where: str = "script"  # the file and line, for errors
 
     def apply(self, stream: MotionStream):
         """Issue the command; returns the stream's `CommandRecord`."""
@@ -49,25 +55,41 @@ class ScriptCommand:
             return stream.target(self.value["joint"], self.value["position"])
         return stream.clear()
 
+    def check(self, stream: MotionStream) -> None:
+        """A target's joint and position checked against ``stream``'s skeleton before it starts."""
+        if self.kind == "target":
+            skel = stream.skeleton
+            try:
+                Target.checked(self.value["joint"], self.value["position"], skel.names, skel.roles)
+            except KinemaError as err:
+                raise KinemaError(f"{self.where}: {err}") from None
+
 
 def parse_command(obj, where: str) -> ScriptCommand:
     """One script line (a decoded JSON object) as a `ScriptCommand`; ``where`` names it in errors."""
     if not isinstance(obj, dict):
         raise KinemaError(f"{where}: expected a JSON object like {{\"t\": 0, \"prompt\": \"...\"}}")
     t = obj.get("t")
-    if isinstance(t, bool) or not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
-        raise KinemaError(f"{where}: 't' must be a number of seconds >= 0, got {t!r}")
+    if not is_finite_real(t) or not 0 <= t <= MAX_SECONDS:
+        raise KinemaError(f"{where}: 't' must be a number of seconds in [0, {MAX_SECONDS:g}], got {reprlib.repr(t)}")
     keys = [k for k in obj if k not in ("t", "comment")]
     if len(keys) != 1 or keys[0] not in COMMANDS:
         raise KinemaError(f"{where}: expected exactly one of {', '.join(COMMANDS)} besides 't', got {keys}")
     kind, value = keys[0], obj[keys[0]]
-    if kind == "prompt" and not isinstance(value, str):
-        raise KinemaError(f"{where}: 'prompt' must be a string")
+    if kind == "prompt" and not (isinstance(value, str) and len(value) <= MAX_PROMPT_CHARS):
+        raise KinemaError(f"{where}: 'prompt' must be a string of at most {MAX_PROMPT_CHARS} characters")
     if kind == "steer" and not (isinstance(value, dict) and set(value) <= {"direction_deg", "speed"}):
         raise KinemaError(f"{where}: 'steer' must be an object with 'direction_deg' and/or 'speed'")
+    if kind == "steer":
+        try:
+            Steer.checked(value.get("direction_deg"), value.get("speed", DEFAULT_SPEED))
+        except KinemaError as err:
+            raise KinemaError(f"{where}: {err}") from None
     if kind == "target" and not (isinstance(value, dict) and set(value) == {"joint", "position"}):
         raise KinemaError(f"{where}: 'target' must be an object with 'joint' and 'position'")
-    return ScriptCommand(float(t), kind, value)
+    if kind == "clear" and value is not True:
+        raise KinemaError(f"{where}: 'clear' must be true (it drops steering and targets), got {reprlib.repr(value)}")
+    return ScriptCommand(float(t), kind, value, where)
 
 
 def read_script(path: str | Path) -> list[ScriptCommand]:
@@ -127,8 +149,12 @@ class ScriptRun:
 def run_script(stream: MotionStream, commands: list[ScriptCommand], seconds: float,
                chunk_seconds: float = 0.5) -> ScriptRun:
     """Play ``commands`` into ``stream`` for ``seconds`` of motion, pulling ``chunk_seconds`` at a time."""
-    if not (isinstance(seconds, int | float) and math.isfinite(seconds) and seconds > 0):
+    if not (is_finite_real(seconds) and seconds > 0):
         raise KinemaError(f"seconds must be a positive number, got {seconds!r}")
+    if seconds > MAX_SECONDS:
+        raise KinemaError(f"seconds must be at most {MAX_SECONDS:g}, got {seconds:g}")
+    for command in commands:
+        command.check(stream)
     fps = stream.fps
     total = max(1, round(seconds * fps))
     chunk = max(1, round(chunk_seconds * fps))
