@@ -107,3 +107,32 @@ def test_a_request_number_too_large_for_a_float_is_one_line(fields):
     name = next(iter(fields))
     with pytest.raises(KinemaError, match=rf"^{name}: expected .*, got 1000+\.\.\.0+$"):
         GenerationRequest(prompt="x", **fields)
+
+
+# ---------------------------------------------------------------------------- the Python API
+@pytest.fixture(scope="module")
+def human_model():
+    import kinema
+
+    return kinema.load_model("default")
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"prompt": "walk", "constraints": "tensor"}, "expected a JSON list of constraint objects"),
+        ({"prompt": "walk", "constraints": "array"}, "expected a JSON list of constraint objects"),
+        ({"timeline": [("a",)]}, r"timeline: segment 0: expected an object .* got \('a',\)"),
+        ({"timeline": ("a", 1.0)}, "timeline: segment 0: expected an object"),
+        ({"timeline": [("a", 10**400)]}, "segment 0: field 'seconds' must be a positive number"),
+        ({"prompt": "walk", "keyjoint_model": object()}, "keyjoint_model: expected 'default', 'none'"),
+    ],
+)
+def test_python_api_odd_values_are_kinema_errors(human_model, fields, message):
+    import numpy as np
+    import torch
+
+    values = {"tensor": torch.zeros(3, 3), "array": np.zeros((3, 3))}
+    fields = {k: values.get(v, v) if isinstance(v, str) else v for k, v in fields.items()}
+    with pytest.raises(KinemaError, match=message):
+        human_model.generate(steps=2, **fields)

@@ -273,6 +273,9 @@ class HumanPipeline(MotionPipeline):
                               f"{self.max_seconds:g} s; this call has {len(plan.segments)} segments")
         if isinstance(keyjoint_model, KeyjointPlanner):
             return keyjoint_model
+        if not isinstance(keyjoint_model, str | Path):
+            raise KinemaError(f"keyjoint_model: expected 'default', 'none', a keyjoint model folder or a "
+                              f"KeyjointPlanner, got {type(keyjoint_model).__name__}")
         if keyjoint_model != "default":
             return KeyjointPlanner.load(keyjoint_model, self.precision)
         planner = self._default_planner()

@@ -14,7 +14,6 @@ grounding) are None when not given.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import reprlib
 from collections.abc import Mapping
@@ -163,7 +162,7 @@ class GenerationRequest:
         if isinstance(self.timeline, str | os.PathLike):
             raise KinemaError(f"timeline {self.timeline}: read the file first (kinema.pipeline.timeline)")
         if self.timeline is not None:
-            return [dict(s) if isinstance(s, Mapping) else {"prompt": s[0], "seconds": s[1]} for s in self.timeline]
+            return [segment_json(s, i) for i, s in enumerate(self.timeline)]
         return [{"prompt": self.prompt, "seconds": DEFAULT_SECONDS if self.seconds is None else self.seconds}]
 
     def total_seconds(self) -> float:
@@ -171,7 +170,7 @@ class GenerationRequest:
         total = 0.0
         for s in self.segments_json():
             v = s.get("seconds")
-            total += float(v) if isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) else 0.0
+            total += float(v) if is_finite_real(v) else 0.0
         return total
 
     def grounding_settings(self) -> dict | None:
@@ -221,6 +220,17 @@ def _range(opt: Option, bounds: RequestBounds, integer: bool) -> str:
     if low is not None:
         return f"{what} {'>' if opt.open_low else '>='} {fmt(low)}"
     return what if high is None else f"{what} <= {fmt(high)}"
+
+
+def segment_json(segment, i: int, source: str = "timeline") -> dict:
+    """Timeline segment ``i``, given as an object or a ``[prompt, seconds]`` pair, as an object (its fields
+    are checked by kinema.pipeline.timeline.parse_timeline); anything else is a one-line error."""
+    if isinstance(segment, Mapping):
+        return dict(segment)
+    if not isinstance(segment, list | tuple) or len(segment) != 2:
+        raise KinemaError(f"{source}: segment {i}: expected an object with 'prompt' and 'seconds' (or a "
+                          f"[prompt, seconds] pair), got {reprlib.repr(segment)}")
+    return {"prompt": segment[0], "seconds": segment[1]}
 
 
 def _number(name: str, value: Any, opt: Option, bounds: RequestBounds, integer: bool) -> None:

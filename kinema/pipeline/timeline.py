@@ -10,16 +10,18 @@ from __future__ import annotations
 
 import difflib
 import math
+import reprlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
 from kinema.errors import KinemaError
+from kinema.finite import is_finite_real
 from kinema.geometry.rotations import quat_make_continuous, quat_normalize, quat_slerp
 from kinema.input_files import read_json_bounded
 from kinema.motion.core import Motion
-from kinema.pipeline.request import request_bounds
+from kinema.pipeline.request import request_bounds, segment_json
 
 #: Keys of a timeline segment object (besides ``comment`` and keys starting with ``_``, ignored).
 SEGMENT_KEYS = ("prompt", "seconds")
@@ -46,17 +48,14 @@ def parse_timeline(obj, source: str = "timeline") -> list[Segment]:
         if isinstance(item, Segment):
             out.append(item)
             continue
-        if isinstance(item, (list, tuple)) and len(item) == 2:
-            item = {"prompt": item[0], "seconds": item[1]}
-        if not isinstance(item, dict):
-            raise KinemaError(f"{source}: segment {i}: expected an object with 'prompt' and 'seconds'")
+        item = segment_json(item, i, source)
         _check_keys(item, source, i)
         prompt, seconds = item.get("prompt"), item.get("seconds")
         if not isinstance(prompt, str):
             raise KinemaError(f"{source}: segment {i}: field 'prompt' must be a string")
-        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not math.isfinite(seconds) \
-                or seconds <= 0:
-            raise KinemaError(f"{source}: segment {i}: field 'seconds' must be a positive number, got {seconds!r}")
+        if not is_finite_real(seconds) or seconds <= 0:
+            raise KinemaError(f"{source}: segment {i}: field 'seconds' must be a positive number, "
+                              f"got {reprlib.repr(seconds)}")
         out.append(Segment(prompt, float(seconds)))
     total, limit = sum(seg.seconds for seg in out), request_bounds().max_seconds
     if total > limit + 1e-9:  # before any work: 1e9 s used to hang prompt matching (issue 36)
