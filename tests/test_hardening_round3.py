@@ -136,3 +136,29 @@ def test_python_api_odd_values_are_kinema_errors(human_model, fields, message):
     fields = {k: values.get(v, v) if isinstance(v, str) else v for k, v in fields.items()}
     with pytest.raises(KinemaError, match=message):
         human_model.generate(steps=2, **fields)
+
+
+# ---------------------------------------------------------------------------- robots
+@pytest.mark.parametrize(
+    ("quat", "message"),
+    [("0.7071 0 0.7071 0", r"pelvis to head is 8\d deg from \+Z"), ("0.7071 0 0 0.7071", "right to left hip 90 deg")],
+)
+def test_a_robot_lying_down_or_turned_at_rest_is_refused(tmp_path, quat, message):
+    """The G1 on its back (head above the pelvis by a few cm) or turned 90 deg used to pass the check."""
+    from kinema.robot import BUILTIN_ROBOTS, load_robot
+
+    text, pelvis = BUILTIN_ROBOTS["g1"].read_text(), '<body name="pelvis" pos="0 0 0.793"'
+    assert text.count(pelvis) == 1
+    path = tmp_path / "g1_lying.xml"
+    path.write_text(text.replace(pelvis, f'<body name="pelvis" pos="0 0 0.2" quat="{quat}"'))
+    with pytest.raises(KinemaError, match=message):
+        load_robot(path)
+
+
+def test_a_robot_without_hinge_joints_is_refused(tmp_path):
+    from kinema.robot import load_robot
+
+    path = tmp_path / "stone.xml"
+    path.write_text("<mujoco><worldbody><body name='pelvis'><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+    with pytest.raises(KinemaError, match="stone.xml: the robot has no hinge joints below its base"):
+        load_robot(path)

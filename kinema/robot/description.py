@@ -22,6 +22,8 @@ from kinema.robot.mapping import BodyPoint, read_mapping, resolve_mapping
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "assets" / "robots"
 #: Robots shipped with kinema, by name.
 BUILTIN_ROBOTS = {"g1": ROBOTS_DIR / "g1" / "g1.xml"}
+#: how far (degrees) a robot's rest pose may lean from Z up with its left towards +Y
+MAX_REST_TILT_DEG = 30.0
 _SOLE_BAND = 0.005  # geom bottoms within 5 mm of the lowest belong to the sole
 
 
@@ -97,6 +99,8 @@ def _hinges(model: mujoco.MjModel, where: str) -> tuple[tuple[str, ...], np.ndar
         raise KinemaError(
             f"{where}: only hinge joints are supported below the base; not {model.joint(others[0]).name!r}"
         )
+    if model.njnt == 1:
+        raise KinemaError(f"{where}: the robot has no hinge joints below its base (nothing to drive)")
     hinge = list(range(1, model.njnt))
     names = tuple(model.joint(j).name or f"joint{j}" for j in hinge)
     ranges = np.array([model.jnt_range[j] if model.jnt_limited[j] else (-np.inf, np.inf) for j in hinge]).reshape(-1, 2)
@@ -139,10 +143,22 @@ def _sole(model: mujoco.MjModel, data: mujoco.MjData, foot: int, where: str) -> 
 
 
 def _check_facing(robot: Robot, data: mujoco.MjData, where: str) -> None:
+    """At rest the pelvis-to-head line is within `MAX_REST_TILT_DEG` of +Z and the right-to-left hip line
+    within it of +Y (a robot lying down has its head above its pelvis too)."""
     left, right = robot.point(data, "left_hip"), robot.point(data, "right_hip")
     head, pelvis = robot.point(data, "head"), robot.point(data, "pelvis")
-    if left[1] <= right[1] or head[2] < pelvis[2]:
-        raise KinemaError(f"{where}: at rest the robot must stand Z up, face +X, with its left side towards +Y")
+    tilt = _degrees_from(head - pelvis, (0.0, 0.0, 1.0))
+    across = _degrees_from(left - right, (0.0, 1.0, 0.0))
+    if tilt > MAX_REST_TILT_DEG or across > MAX_REST_TILT_DEG:
+        raise KinemaError(f"{where}: at rest the robot must stand Z up, face +X, with its left side towards +Y "
+                          f"(pelvis to head is {tilt:.0f} deg from +Z, right to left hip {across:.0f} deg from +Y; "
+                          f"at most {MAX_REST_TILT_DEG:g})")
+
+
+def _degrees_from(v: np.ndarray, axis: tuple[float, float, float]) -> float:
+    """The angle between ``v`` and a unit ``axis`` (180 for a zero ``v``)."""
+    norm = float(np.linalg.norm(v))
+    return 180.0 if norm < 1e-9 else float(np.degrees(np.arccos(np.clip(np.dot(v, axis) / norm, -1.0, 1.0))))
 
 
 def load_robot(name_or_path: str | Path, mapping: str | Path | dict | None = None) -> Robot:
