@@ -10,6 +10,9 @@ The request's own bounds (seconds, samples, steps, ...) live in kinema.pipeline.
   joints, so 256 leaves room for rigs five times larger than any it learnt from. Override it for a
   process with the environment variable ``KINEMA_MAX_RIG_JOINTS`` or per call with ``max_joints=``.
 
+- ``MAX_RIG_REACH`` (1000 m): the longest root-to-joint chain of a glTF rig in metres, after its armature
+  scale. A character a kilometre across is a wrong export unit or scale (a GLB scaled by 1e6 moved its pelvis
+  at 4.3e6 m/s), as a BVH length beyond `kinema.io.bvh_data.MAX_METRES` is.
 - ``MAX_JSON_BYTES`` (16 MiB): the largest JSON, JSON-lines or CSV input file (mappings, rig overrides,
   timelines, constraints, stream scripts, jobs files); the largest shipped one is a few hundred KB.
 - ``MAX_ASSET_BYTES`` (1 GiB): the largest rig or motion file (BVH, glTF/GLB and its buffer files). Both
@@ -26,6 +29,7 @@ from kinema.runtime import positive_from_env
 
 MAX_RIG_JOINTS = 256
 RIG_JOINTS_ENV = "KINEMA_MAX_RIG_JOINTS"
+MAX_RIG_REACH = 1000.0
 MAX_JSON_BYTES = 16 * 1024 * 1024
 MAX_ASSET_BYTES = 1024 * 1024 * 1024
 

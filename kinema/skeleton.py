@@ -256,6 +256,16 @@ class Skeleton:
         )
         return new, keep
 
+    def reach(self) -> float:
+        """Length of the longest root-to-joint chain of rest offsets (the skeleton's units; an upper bound on
+        the rig's half-size that needs no forward kinematics)."""
+        lengths = [0.0] * self.num_joints
+        norms = self.offsets.double().norm(dim=-1).tolist()
+        for j, p in enumerate(self.parents):
+            if p >= 0:
+                lengths[j] = lengths[p] + norms[j]
+        return max(lengths, default=0.0)
+
     def scaled(self, factor: float) -> Skeleton:
         """The same skeleton with every length multiplied by ``factor``."""
         ends = {j: tuple(factor * x for x in v) for j, v in self.end_sites.items()}

@@ -162,3 +162,21 @@ def test_a_robot_without_hinge_joints_is_refused(tmp_path):
     path.write_text("<mujoco><worldbody><body name='pelvis'><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
     with pytest.raises(KinemaError, match="stone.xml: the robot has no hinge joints below its base"):
         load_robot(path)
+
+
+# ---------------------------------------------------------------------------- characters
+def test_a_glb_scaled_a_millionfold_is_refused(tmp_path, capsys, bvh_file):
+    """The synthetic GLB's armature scale (100) made 1e8: 1.7e6 m across, as a BVH of that size is refused."""
+    import pygltflib
+
+    from kinema.io.gltf import read_gltf
+    from tests.gltf_synthetic import write_synthetic_glb
+
+    good = write_synthetic_glb(tmp_path / "good.glb")
+    assert read_gltf(good).skeleton.reach() == pytest.approx(1.7, rel=0.01)
+    glb = pygltflib.GLTF2().load(str(good))
+    glb.nodes[0].scale = [1e8, 1e8, 1e8]
+    huge = tmp_path / "huge.glb"
+    glb.save(str(huge))
+    assert main(["retarget", str(bvh_file), "--rig", str(huge), "--out", str(tmp_path / "o.glb")]) == 2
+    one_line_error(capsys, "huge.glb: the rig reaches 1.7e+06 m from its root (armature scale 1e+08 applied)")

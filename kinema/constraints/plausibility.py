@@ -43,20 +43,9 @@ MAX_ROOT_SPEED = 12.0
 HUMAN_REACH = 1.0
 
 
-def reach(skeleton: Skeleton) -> float:
-    """Length of the longest root-to-joint chain of rest offsets (metres; an upper bound on the rig's
-    half-size that needs no forward kinematics)."""
-    lengths = [0.0] * skeleton.num_joints
-    norms = skeleton.offsets.double().norm(dim=-1).tolist()
-    for j, p in enumerate(skeleton.parents):
-        if p >= 0:
-            lengths[j] = lengths[p] + norms[j]
-    return max(lengths, default=0.0)
-
-
 def max_root_speed(skeleton: Skeleton) -> float:
     """`MAX_ROOT_SPEED`, scaled for rigs larger than a person."""
-    return MAX_ROOT_SPEED * max(1.0, reach(skeleton) / HUMAN_REACH)
+    return MAX_ROOT_SPEED * max(1.0, skeleton.reach() / HUMAN_REACH)
 
 
 def _positions(c: Constraint) -> list[tuple[str, torch.Tensor]]:

@@ -30,7 +30,7 @@ from kinema.geometry.rotations import quat_mul, quat_rotate
 from kinema.input_files import read_bytes_bounded
 from kinema.io.gltf_data import GltfBuffers, GltfDocument, GltfError, decompose, node_matrix, parse_document, sample
 from kinema.io.gltf_mesh import RawPart, read_parts
-from kinema.limits import MAX_ASSET_BYTES
+from kinema.limits import MAX_ASSET_BYTES, MAX_RIG_REACH
 from kinema.mesh import SkinnedMesh, vertex_normals
 from kinema.motion.core import Motion
 from kinema.skeleton import Skeleton
@@ -339,6 +339,10 @@ def read_gltf(
     rest_t, rest_r = rig.convert(rig.rest_t[None], rig.rest_r[None])
     mesh = _mesh(parts, index)
     skeleton = Skeleton(names, kparents, rest_t[0], rest_r[0], name=path.stem.removesuffix("-transformed"), mesh=mesh)
+    if not skeleton.reach() <= MAX_RIG_REACH:
+        raise GltfError(f"{path}: the rig reaches {skeleton.reach():.3g} m from its root (armature scale "
+                        f"{rig.root_scale:g} applied); at most {MAX_RIG_REACH:g} m: is the export's unit or scale "
+                        f"wrong?")
     anim_names = _unique([a.name or f"animation_{i}" for i, a in enumerate(gltf.animations)])
     chosen = _pick(anim_names, animations, path)
     chans = [_channels(gltf, buffers, gltf.animations[i], f"animation {anim_names[i]!r}") for i in chosen]
