@@ -19,6 +19,7 @@ from kinema.robot.replay import leg_geoms
 
 SLIDE_LIMIT = 0.15  # m/s, planted soles (issue 39)
 FLOOR_LIMIT = -0.02  # m, lowest sole point
+CLEARANCE_LIMIT = 0.03  # m, the swing foot's lowest sole point at the top of every step (issue 62)
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +101,7 @@ def test_captured_walk_on_g1(walk_clip, g1):
     assert rep.lowest_sole >= FLOOR_LIMIT
     assert rep.planted_fraction > 0.2 and rep.planted_slide <= SLIDE_LIMIT
     assert rep.travel > 2.0 and rep.leg_overlap <= 0.01
+    assert rep.steps >= 8 and rep.swing_clearance >= CLEARANCE_LIMIT  # steps, not shuffles (issue 62)
 
 
 def test_replay_measures_catch_bad_poses(walk, g1):
@@ -139,3 +141,17 @@ def test_retargeting_a_walk_takes_seconds_not_minutes(walk, g1):
     start = time.perf_counter()
     retarget_to_robot(human, g1)
     assert time.perf_counter() - start < 10.0  # about 0.3 s for 4 s at 20 fps on one free core
+
+
+def test_walk_steps_clear_the_floor_within_velocity_limits(walk, g1):
+    """Swing feet lift their lowest sole point 3 cm at least, and the IK keeps the robot's joint velocity
+    limits: with limits of 3 rad/s (the G1's are 20-37) no joint turns faster than that between frames."""
+    human, robot_motion = walk
+    rep = replay_report(robot_motion, g1)
+    assert rep.steps >= 3 and rep.swing_clearance >= CLEARANCE_LIMIT
+    speed = np.abs(np.diff(robot_motion.joint_angles, axis=0)) * robot_motion.fps
+    assert speed.max() > 3.0 and (speed <= g1.velocity_limits).all()
+    slow = load_robot("g1")
+    slow.velocity_limits = np.full(slow.num_joints, 3.0)
+    slowed = retarget_to_robot(human, slow)
+    assert np.abs(np.diff(slowed.joint_angles, axis=0)).max() * slowed.fps <= 3.0 + 1e-9

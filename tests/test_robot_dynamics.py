@@ -10,7 +10,7 @@ import pytest
 
 import kinema
 from kinema.robot import RobotMotion, load_robot, retarget_to_robot
-from kinema.robot.dynamics import RESIDUAL_LIMIT, dynamics_report, torque_limits, velocity_limits
+from kinema.robot.dynamics import RESIDUAL_LIMIT, dynamics_report, torque_limits
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_floating_and_teleported_motions_need_a_hand_of_god(g1):
 
 
 def test_torque_speed_and_collision_limits(g1):
-    limits, speeds = torque_limits(g1.model, g1), velocity_limits(g1.model, g1)
+    limits, speeds = torque_limits(g1.model, g1), g1.velocity_limits
     knee = g1.joint_names.index("left_knee_joint")
     assert limits[knee] == 139.0 and speeds[knee] == 20.0  # the MJCF's actuatorfrcrange, Unitree's URDF
     motion = _standing(g1, frames=30)

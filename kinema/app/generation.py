@@ -132,5 +132,6 @@ def _robot_words(measures: list[dict]) -> str:
     feasible = sum(bool(m.get("feasible")) for m in measures)
     dynamics = "".join(f"; sample {i} dynamics: {m['dynamics_summary']}" for i, m in enumerate(measures)
                        if "dynamics_summary" in m)
-    return (f" (joint range overshoot {over:.1f} deg, planted-sole slide {slide:.2f} m/s; {feasible} of {len(measures)} "
+    return (f" (joint range overshoot {over:.1f} deg, planted-sole slide {slide:.2f} m/s; "
+            f"{feasible} of {len(measures)} "
             f"feasible in MuJoCo inverse dynamics{dynamics})")

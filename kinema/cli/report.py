@@ -148,9 +148,10 @@ def print_report(result) -> None:
               + (f", planted feet {c['ankle_cm']:.1f} cm above their rest height (source {c['ankle_source_cm']:.1f})"
                  if "ankle_cm" in c else "")
               + "".join(f", target on {name} {err:.2f} cm" for name, err in c["targets_cm"].items()))
+    if rep.robot:
+        from kinema.robot.stage import replay_words  # MuJoCo is loaded already: the robot stage ran
+
     for i, r in enumerate(rep.robot):
-        print(f"sample {i} on {r['robot']} (replayed in MuJoCo): range overshoot {r['range_overshoot_rad']:.3f} rad, "
-              f"lowest sole {100 * r['lowest_sole_m']:.1f} cm, planted-sole slide {r['planted_slide_m_s']:.2f} m/s, "
-              f"travel {r['travel_m']:.2f} m")
+        print(f"sample {i} on {r['robot']} (replayed in MuJoCo): {replay_words(r)}")
         print(f"sample {i} dynamics (MuJoCo inverse dynamics): {r['dynamics_summary']}")
     print_warnings([*rep.left_out, *rep.warnings])

@@ -3,9 +3,10 @@
 Every request field becomes a flag (``--name-with-dashes``) typed and bounded by its `Option`, unless
 its Option says ``cli=False`` (``format`` comes from ``--out``'s suffix, ``objectives`` from the
 constraints file). Special spellings: ``prompt`` is the positional argument, a field whose default is
-True is turned off by ``--no-NAME``, a pair takes two numbers, ``file`` fields take a path, and
-``--heading`` takes degrees (the request holds radians), and ``--robot-mapping`` is also ``--mapping``. Every flag defaults to None ("not given"), so
-a command can fill what the user left out (a Kimodo meta.json) and the request keeps its own defaults.
+True is turned off by ``--no-NAME``, a pair takes two numbers, ``file`` fields take a path,
+``--heading`` takes degrees (the request holds radians), and ``--robot-mapping`` is also ``--mapping``.
+Every flag defaults to None ("not given"), so a command can fill what the user left out (a Kimodo
+meta.json) and the request keeps its own defaults.
 """
 
 from __future__ import annotations

@@ -6,7 +6,8 @@ joints (kinema.robot) and writes MuJoCo poses: a CSV (time, root position and qu
 hinge joint, radians, Z up) or an npz with the same arrays. ``--robot`` is ``g1`` (the Unitree G1 shipped
 with kinema) or an MJCF file; ``--mapping`` a JSON file naming which bodies are the robot's hips, knees,
 feet, shoulders, elbows and hands when its body names are not recognised (docs/robots.md). The replay
-measurements (joint-range overshoot, lowest sole, planted-sole slide, travel) are printed, then the
+measurements (joint-range overshoot, lowest sole, planted-sole slide, travel and its ratio to the
+human's, the steps' least swing clearance) are printed, then the
 inverse dynamics (kinema.robot.dynamics: torques against actuator limits, the floating base's residual,
 joint speeds, self-collision) and one warning line when the motion is not feasible.
 """
@@ -35,11 +36,11 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     # imported here like every sub-command's work, so that `kinema --help` does not load torch and mujoco
     from kinema.atomic_files import check_output_path
+    from kinema.cli.report import print_warnings
     from kinema.input_files import check_input_file
     from kinema.io import load_motion
-    from kinema.cli.report import print_warnings
-    from kinema.robot import load_robot, replay_report, retarget_to_robot
-    from kinema.robot.dynamics import dynamics_report
+    from kinema.robot import load_robot, retarget_to_robot
+    from kinema.robot.stage import replay_words, robot_measures
 
     if args.out.suffix.lower() not in OUTPUTS:
         raise KinemaError(f"{args.out}: --out must end in .csv or .npz")
@@ -56,13 +57,9 @@ def run(args: argparse.Namespace) -> int:
         raise KinemaError(f"{args.motion}: cannot read ({err})") from None
     robot_motion = retarget_to_robot(motion, robot)
     out = robot_motion.save(args.out)
-    rep = replay_report(robot_motion, robot)
-    print(
-        f"wrote {out}: {robot_motion.num_frames} frames @ {robot_motion.fps:g} fps, {robot.num_joints} joints of "
-        f"{robot.name}; range overshoot {rep.range_overshoot:.3f} rad, lowest sole {100 * rep.lowest_sole:+.1f} cm, "
-        f"planted-sole slide {rep.planted_slide:.2f} m/s, travel {rep.travel:.2f} m"
-    )
-    dynamics = dynamics_report(robot_motion, robot)
-    print(f"dynamics (MuJoCo inverse dynamics): {dynamics.summary()}")
-    print_warnings([dynamics.warning()] if dynamics.warning() else [])
+    measured = robot_measures(motion, robot_motion, robot)
+    print(f"wrote {out}: {robot_motion.num_frames} frames @ {robot_motion.fps:g} fps, {robot.num_joints} joints of "
+          f"{robot.name}; {replay_words(measured)}")
+    print(f"dynamics (MuJoCo inverse dynamics): {measured['dynamics_summary']}")
+    print_warnings([measured["warning"]] if measured["warning"] else [])
     return 0

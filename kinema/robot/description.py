@@ -4,6 +4,10 @@ the bodies that stand for human joints (kinema.robot.mapping), its soles, and it
 Conventions are MuJoCo's: metres, radians, world Z up; the robot is expected to face +X with its left
 side towards +Y in its rest pose (``qpos0``), as Menagerie's humanoids do; this is checked.
 ``load_robot("g1")`` reads the Unitree G1 shipped in kinema/assets/robots/g1 (see its README and LICENSE).
+
+Joint velocity limits: MJCF has no attribute for them, so kinema reads
+``<custom><numeric name="velocity_limit/JOINT" data="RAD_PER_S"/></custom>`` (the shipped G1 has them,
+from Unitree's URDF); a robot without any has ``velocity_limits`` None.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ BUILTIN_ROBOTS = {"g1": ROBOTS_DIR / "g1" / "g1.xml"}
 #: how far (degrees) a robot's rest pose may lean from Z up with its left towards +Y
 MAX_REST_TILT_DEG = 30.0
 _SOLE_BAND = 0.005  # geom bottoms within 5 mm of the lowest belong to the sole
+VELOCITY_PREFIX = "velocity_limit/"
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,7 @@ class Robot:
     dof_adr: np.ndarray  # (J,) int: each hinge's address in qvel
     ranges: np.ndarray  # (J, 2) radians; unlimited joints are (-inf, inf)
     soles: dict[str, Sole]  # "left" / "right"
+    velocity_limits: np.ndarray | None = None  # (J,) rad/s, inf where not given; None: the MJCF gives none
 
     @property
     def num_joints(self) -> int:
@@ -142,6 +148,18 @@ def _sole(model: mujoco.MjModel, data: mujoco.MjData, foot: int, where: str) -> 
     return Sole(foot, points, centre)
 
 
+def read_velocity_limits(model: mujoco.MjModel, joint_names: tuple[str, ...]) -> np.ndarray | None:
+    """(J,) each hinge's speed limit (rad/s; inf where none is given), or None when the MJCF gives none."""
+    given = {}
+    for n in range(model.nnumeric):
+        name = model.numeric(n).name
+        if name.startswith(VELOCITY_PREFIX) and model.numeric_size[n] >= 1:
+            given[name[len(VELOCITY_PREFIX):]] = float(model.numeric_data[model.numeric_adr[n]])
+    if not given:
+        return None
+    return np.array([given.get(name, np.inf) for name in joint_names])
+
+
 def _check_facing(robot: Robot, data: mujoco.MjData, where: str) -> None:
     """At rest the pelvis-to-head line is within `MAX_REST_TILT_DEG` of +Z and the right-to-left hip line
     within it of +Y (a robot lying down has its head above its pelvis too)."""
@@ -186,6 +204,7 @@ def load_robot(name_or_path: str | Path, mapping: str | Path | dict | None = Non
         dadr,
         ranges,
         soles,
+        read_velocity_limits(model, names),
     )
     _check_facing(robot, data, where)
     return robot

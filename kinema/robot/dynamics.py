@@ -21,9 +21,9 @@ are what the floor has to supply through the feet; the rest is what the actuator
 - **Joint torques**: the hinge rows of ``qfrc`` minus what the contact forces supply through the legs,
   as a share of each joint's actuator limit: the joint's ``actuatorfrcrange``, else its actuator's
   ``forcerange``, else ``gear x ctrlrange`` of a motor; a joint with none of these has no stated limit.
-- **Joint speeds** against velocity limits. MJCF has no velocity-limit attribute; kinema reads
-  ``<custom><numeric name="velocity_limit/JOINT" data="RAD_PER_S"/>`` (the shipped G1 has them, from
-  Unitree's URDF). Without them the report says so and gives the fastest joint only.
+- **Joint speeds** against the robot's velocity limits (kinema.robot.description: MJCF has no attribute
+  for them, the shipped G1 has them from Unitree's URDF). Without them the report says so and gives the
+  fastest joint only.
 - **Self-collision**: with the MJCF's collision geoms (those with ``contype``/``conaffinity``; where all are
   switched off, as in Menagerie's MJX variants, the geoms of group 3, Menagerie's collision group), the
   deepest penetration between bodies that are not parent and child and do not already touch at rest.
@@ -52,7 +52,6 @@ MOMENT_ARM = 0.1  # m: weighs residual moments against residual forces in the co
 RESIDUAL_LIMIT = 0.25  # share of body weight the base may need, averaged over WINDOW (docs/robots.md)
 WINDOW = 0.25  # s: residual forces are averaged over this long, as a tracker smooths a one-frame jolt
 COLLISION_LIMIT = 0.01  # m of penetration between two bodies
-VELOCITY_PREFIX = "velocity_limit/"
 _GRAVITY = 9.81
 _REGULARISE = 1e-3  # relative weight on contact forces, so that they spread over the contact points
 
@@ -94,9 +93,10 @@ class DynamicsReport:
 
     def summary(self) -> str:
         """The report in one line."""
-        torque = (f"peak torque {100 * self.torque.value:.0f}% of limit ({self.torque.what} at {self.torque.time:.2f} s)"
+        t, v = self.torque, self.speed
+        torque = (f"peak torque {100 * t.value:.0f}% of limit ({t.what} at {t.time:.2f} s)"
                   if self.torque else "no torque limits in the MJCF")
-        speed = (f"peak joint speed {100 * self.speed.value:.0f}% of limit ({self.speed.what} at {self.speed.time:.2f} s)"
+        speed = (f"peak joint speed {100 * v.value:.0f}% of limit ({v.what} at {v.time:.2f} s)"
                  if self.speed else f"no velocity limits in the MJCF (fastest {self.fastest_joint.what} "
                                     f"{self.fastest_joint.value:.1f} rad/s)")
         collision = ("no collision geoms" if self.collision is None else
@@ -105,7 +105,8 @@ class DynamicsReport:
         r = self.residual_force
         w = self.residual_force_window
         return (f"{torque}; base residual {100 * w.value:.0f}% of body weight over {WINDOW:g} s at {w.time:.2f} s "
-                f"({w.what}; one frame: {100 * r.value:.0f}% at {r.time:.2f} s, mean {100 * self.residual_force_mean:.0f}%), "
+                f"({w.what}; one frame: {100 * r.value:.0f}% at {r.time:.2f} s, "
+                f"mean {100 * self.residual_force_mean:.0f}%), "
                 f"moment arm {100 * self.residual_moment_arm.value:.1f} cm; "
                 f"{speed}; {collision}")
 
@@ -137,7 +138,8 @@ def torque_limits(model: mujoco.MjModel, robot: Robot) -> np.ndarray:
     limits = np.full(robot.num_joints, np.inf)
     joints = {int(j): i for i, j in enumerate(range(1, model.njnt))}
     for a in range(model.nu):
-        if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(model.actuator_trnid[a, 0]) not in joints:
+        on_joint = int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+        if not on_joint or int(model.actuator_trnid[a, 0]) not in joints:
             continue
         i, gear = joints[int(model.actuator_trnid[a, 0])], abs(float(model.actuator_gear[a, 0]))
         if model.actuator_forcelimited[a]:
@@ -149,18 +151,6 @@ def torque_limits(model: mujoco.MjModel, robot: Robot) -> np.ndarray:
         if model.jnt_actfrclimited[j]:
             limits[i] = np.abs(model.jnt_actfrcrange[j]).max()
     return limits
-
-
-def velocity_limits(model: mujoco.MjModel, robot: Robot) -> np.ndarray | None:
-    """(J,) each hinge's speed limit (rad/s; inf where none is given), or None when the MJCF gives none."""
-    given = {}
-    for n in range(model.nnumeric):
-        name = model.numeric(n).name
-        if name.startswith(VELOCITY_PREFIX) and model.numeric_size[n] >= 1:
-            given[name[len(VELOCITY_PREFIX):]] = float(model.numeric_data[model.numeric_adr[n]])
-    if not given:
-        return None
-    return np.array([given.get(name, np.inf) for name in robot.joint_names])
 
 
 def collision_geoms(model: mujoco.MjModel) -> np.ndarray:
@@ -268,7 +258,8 @@ def dynamics_report(motion: RobotMotion, robot: Robot) -> DynamicsReport:
     m = copy.deepcopy(robot.model)
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
     data, T, fps = mujoco.MjData(m), motion.num_frames, motion.fps
-    Q = np.array([robot.qpos(motion.root_position[t], motion.root_quaternion[t], motion.joint_angles[t]) for t in range(T)])
+    Q = np.array([robot.qpos(motion.root_position[t], motion.root_quaternion[t], motion.joint_angles[t])
+                  for t in range(T)])
     qvel, qacc = _finite_differences(m, Q, fps)
     mass = float(m.body_subtreemass[1])
     weight = mass * float(np.linalg.norm(m.opt.gravity)) if np.linalg.norm(m.opt.gravity) > 0 else mass * _GRAVITY
@@ -321,9 +312,10 @@ def _report(motion, robot, model, mass, torque, residual, arm, causes, in_contac
     limits = torque_limits(model, robot)
     limited = np.isfinite(limits)
     share = np.abs(torque) / np.where(limited, limits, 1.0)
-    torque_peak = _peak(share[:, limited], fps, lambda t, j: names[np.flatnonzero(limited)[j]]) if limited.any() else None
+    which = np.flatnonzero(limited)
+    torque_peak = _peak(share[:, limited], fps, lambda t, j: names[which[j]]) if limited.any() else None
     speeds = np.abs(qvel[:, robot.dof_adr])
-    vlimits = velocity_limits(model, robot)
+    vlimits = robot.velocity_limits
     speed_peak = None
     if vlimits is not None:
         speed_peak = _peak(speeds / vlimits, fps, lambda t, j: names[j])
@@ -353,13 +345,15 @@ def _report(motion, robot, model, mass, torque, residual, arm, causes, in_contac
 def _problems(rep: DynamicsReport) -> list[str]:
     out = []
     if rep.torque is not None and rep.torque.value > 1.0:
-        out.append(f"{rep.torque.what} needs {100 * rep.torque.value:.0f}% of its torque limit at {rep.torque.time:.2f} s")
+        t = rep.torque
+        out.append(f"{t.what} needs {100 * t.value:.0f}% of its torque limit at {t.time:.2f} s")
     if rep.residual_force_window.value > RESIDUAL_LIMIT:
         r = rep.residual_force_window
         out.append(f"the floating base needs {100 * r.value:.0f}% of body weight over {WINDOW:g} s at {r.time:.2f} s "
                    f"({r.what}; limit {100 * RESIDUAL_LIMIT:.0f}%)")
     if rep.speed is not None and rep.speed.value > 1.0:
-        out.append(f"{rep.speed.what} turns at {100 * rep.speed.value:.0f}% of its speed limit at {rep.speed.time:.2f} s")
+        v = rep.speed
+        out.append(f"{v.what} turns at {100 * v.value:.0f}% of its speed limit at {v.time:.2f} s")
     if rep.collision is not None and rep.collision.value > COLLISION_LIMIT:
         c = rep.collision
         out.append(f"{c.what} pass {100 * c.value:.1f} cm into each other at {c.time:.2f} s")

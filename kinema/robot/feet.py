@@ -13,6 +13,12 @@ from __future__ import annotations
 import numpy as np
 
 RAMP_FRAMES = 4
+#: A step's swing: the sole's lowest point at least CLEARANCE high at mid-swing (m), so that the robot does
+#: not shuffle. The foot is down where it is planted, or within DOWN_HEIGHT of its planted height (m, robot
+#: scale) and slower than SWING_SPEED (m/s: a generated foot that skates over the floor faster than that
+#: is stepping); a swing is a span of frames on which it is not down, in which it moves at least STEP_MIN
+#: (m) in at most MAX_SWING seconds (longer flights keep the source's lift).
+CLEARANCE, DOWN_HEIGHT, SWING_SPEED, STEP_MIN, MAX_SWING = 0.05, 0.015, 0.5, 0.05, 1.5
 
 
 def clean_flags(flags: np.ndarray) -> np.ndarray:
@@ -55,4 +61,17 @@ def hold_planted(source: np.ndarray, planted: np.ndarray, held: np.ndarray | Non
                 out[a - k] += w * (value - source[a])
             if b + k < T and not planted[b + k]:
                 out[b + k] += w * (value - source[b])
+    return out
+
+
+def swing_arches(ground: np.ndarray, down: np.ndarray, fps: float) -> np.ndarray:
+    """(T,) a smooth ``sin^2`` arch from 0 to 1 and back over each step's swing (see CLEARANCE), 0 elsewhere:
+    times CLEARANCE, the least height of the sole's lowest point. ``ground`` (T, 2): the sole's ground
+    position; ``down`` (T,) bool: the frames on which the foot is down (see DOWN_HEIGHT)."""
+    out = np.zeros(len(down))
+    for a, b in spans(~down):
+        if (b - a + 1) / fps > MAX_SWING or np.linalg.norm(ground[b] - ground[a]) < STEP_MIN:
+            continue
+        phase = (np.arange(a, b + 1) - a + 1) / (b - a + 2)
+        out[a : b + 1] = np.sin(np.pi * phase) ** 2
     return out

@@ -3,10 +3,12 @@ forward kinematics and Jacobians (``mj_kinematics``, ``mj_comPos``, ``mj_jac``, 
 
 Each frame is solved from the previous frame's solution (warm start), so the solver never jumps to
 another IK branch; a small pull towards that previous pose and towards the zero pose keeps redundant
-joints (wrists, waist) still. Sole points below the floor are pushed up by one-sided rows. Joint limits
-are enforced inside the iterations: a joint at a bound whose step points outwards is frozen for that
-step and the step is solved again without it, and every step is clamped into the ranges, so later
-iterations work with the clamped pose.
+joints (wrists, waist) still. Sole points below the floor (raised in a step's swing) are pushed up by
+one-sided rows. Joint limits are enforced inside the iterations: a joint at a bound whose step points
+outwards is frozen for that step and the step is solved again without it, and every step is clamped into
+the bounds, so later iterations work with the clamped pose. The bounds are the joint ranges and, from the
+previous frame's pose, how far each joint may turn in one frame at its velocity limit (where the robot
+gives them, kinema.robot.description).
 """
 
 from __future__ import annotations
@@ -54,13 +56,16 @@ def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
 class HingeIK:
     """Per-frame IK for one robot (see the module docstring)."""
 
-    def __init__(self, robot: Robot, sizes: RobotSizes, weights: IKWeights | None = None):
+    def __init__(self, robot: Robot, sizes: RobotSizes, weights: IKWeights | None = None, fps: float = 30.0):
         weights = weights or IKWeights()
         self.robot, self.sizes, self.w = robot, sizes, weights
         self.model, self.data = robot.model, mujoco.MjData(robot.model)
         nv = robot.model.nv
         self.hinge = np.zeros(nv, dtype=bool)
         self.hinge[robot.dof_adr] = True
+        speeds = robot.velocity_limits if robot.velocity_limits is not None else np.full(robot.num_joints, np.inf)
+        self.turn = speeds / fps  # radians a joint may turn between frames
+        self.lo, self.hi = robot.ranges[:, 0].copy(), robot.ranges[:, 1].copy()
         self._jacp, self._jacr = np.zeros((3, nv)), np.zeros((3, nv))
         self.pelvis_weights = np.array([weights.pelvis, weights.pelvis, weights.pelvis_height])
         self.sole_weights = np.array([weights.sole, weights.sole, weights.sole_height])
@@ -85,15 +90,15 @@ class HingeIK:
         mujoco.mj_jacBody(self.model, self.data, None, self._jacr, body)
         return self._jacr.copy(), rotation_error(target, self.data.xmat[body].reshape(3, 3)), weight
 
-    def _floor_rows(self, side: str) -> list:
-        """Rows pushing up every sole point that is below the floor (z = 0): an inequality, active only
-        where it is violated."""
+    def _floor_rows(self, side: str, floor: float) -> list:
+        """Rows pushing up every sole point that is below ``floor`` (z = 0, higher in a step's swing): an
+        inequality, active only where it is violated."""
         foot = self.robot.soles[side].body
         rows = []
         for p in self.robot.sole_points(self.data, side):
-            if p[2] < 0.0:
+            if p[2] < floor:
                 mujoco.mj_jac(self.model, self.data, self._jacp, None, p, foot)
-                rows.append((self._jacp[2:3].copy(), np.array([-p[2]]), self.w.floor))
+                rows.append((self._jacp[2:3].copy(), np.array([floor - p[2]]), self.w.floor))
         return rows
 
     def _tasks(self, tg: FrameTargets, t: int) -> list:
@@ -107,7 +112,7 @@ class HingeIK:
         for s in SIDES:
             foot = r.soles[s].body
             rows.append(self._point_rows(foot, r.sole_centre(d, s), tg.sole[s][t], self.sole_weights))
-            rows += self._floor_rows(s)
+            rows += self._floor_rows(s, tg.sole_floor[s][t])
             rows.append(self._rotation_rows(foot, tg.foot_frame[s][t] @ self.rest[s], w.foot_rotation))
             knee = r.point(d, f"{s}_hip") + self.sizes.thigh * tg.knee_dir[s][t]
             rows.append(self._relative_rows(f"{s}_knee", f"{s}_hip", knee, w.knee))
@@ -131,7 +136,7 @@ class HingeIK:
         prev = angles if q_prev is None else q_prev[r.qpos_adr]
         g[r.dof_adr] += pull * (prev - angles) - w.to_zero * angles
         dq = np.linalg.solve(H, g)
-        lo, hi = r.ranges[:, 0], r.ranges[:, 1]
+        lo, hi = self.lo, self.hi
         step = dq[r.dof_adr]
         frozen = ((angles <= lo + 1e-9) & (step < 0)) | ((angles >= hi - 1e-9) & (step > 0))
         if frozen.any():
@@ -146,13 +151,18 @@ class HingeIK:
         pulled towards, or (``first``) a starting guess it is not."""
         r, m, d = self.robot, self.model, self.data
         q_prev, q = (None if first else q.copy()), q.copy()
+        self.lo, self.hi = r.ranges[:, 0].copy(), r.ranges[:, 1].copy()
+        if q_prev is not None:
+            angles = q_prev[r.qpos_adr]
+            self.lo = np.minimum(np.maximum(self.lo, angles - self.turn), angles)  # a joint outside its range
+            self.hi = np.maximum(np.minimum(self.hi, angles + self.turn), angles)  # may stay where it is
         for _ in range(iterations):
             d.qpos[:] = q
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)
             dq = self._step(q, q_prev, tg, t)
             mujoco.mj_integratePos(m, q, dq, 1.0)
-            q[r.qpos_adr] = np.clip(q[r.qpos_adr], r.ranges[:, 0], r.ranges[:, 1])
+            q[r.qpos_adr] = np.clip(q[r.qpos_adr], self.lo, self.hi)
             if np.abs(dq).max() < 1e-4:
                 break
         return q

@@ -6,6 +6,11 @@ Planted frames are the motion's ``sole_planted`` flags (from the source's contac
 otherwise a sole counts as planted on frames where all of it is within 1 cm of the floor (flat on it) on
 this frame and the next. Leg self-intersection uses the MJCF's capsule and sphere geoms of the two legs
 (the bodies below each hip): the deepest overlap of a left-leg geom with a right-leg geom, in metres.
+
+Steps: a sole steps where its centre moves over the floor faster than ``STEP_SPEED`` for at least
+kinema.robot.feet.STEP_MIN; a step's clearance is how high the sole's lowest point gets above the floor
+during it (a foot that slides or shuffles clears little or nothing), and ``swing_clearance`` is the
+lowest over all steps of both soles; steps cut by the clip's first or last frame are left out.
 """
 
 from __future__ import annotations
@@ -16,10 +21,12 @@ import mujoco
 import numpy as np
 
 from kinema.robot.description import Robot, subtree
+from kinema.robot.feet import STEP_MIN, spans
 from kinema.robot.motion import RobotMotion
 from kinema.robot.targets import SIDES
 
 _PLANTED_HEIGHT = 0.01
+STEP_SPEED = 0.2  # m/s
 
 
 @dataclass(frozen=True)
@@ -32,6 +39,8 @@ class ReplayReport:
     planted_fraction: float  # share of sole-frames that are planted
     travel: float  # horizontal distance from the root's first to its last position
     leg_overlap: float  # deepest overlap of left- and right-leg capsules (0 when apart)
+    steps: int  # steps of both soles (see the module docstring)
+    swing_clearance: float  # the least clearance of any step (m; inf without steps)
     sole_centres: np.ndarray  # (T, 2, 3) left and right sole centres
     points: dict[str, np.ndarray]  # landmark -> (T, 3) world positions
 
@@ -82,6 +91,17 @@ def _planted(motion: RobotMotion, highest: np.ndarray) -> np.ndarray:
     return flags[1:] & flags[:-1]
 
 
+def step_clearances(centres: np.ndarray, lowest: np.ndarray, speed: np.ndarray) -> list[float]:
+    """Each step's clearance (m), both soles: ``centres`` (T, 2, 3), ``lowest`` (T, 2) lowest sole points,
+    ``speed`` (T - 1, 2) horizontal sole-centre speeds (see the module docstring)."""
+    out = []
+    for i in range(2):
+        for a, b in spans(speed[:, i] > STEP_SPEED):  # moving between frames a and b + 1
+            if a > 0 and b + 2 < len(lowest) and np.linalg.norm(centres[b + 1, i, :2] - centres[a, i, :2]) >= STEP_MIN:
+                out.append(float(lowest[a : b + 2, i].max()))
+    return out
+
+
 def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
     """Replay ``motion`` on ``robot`` frame by frame and measure it (see the module docstring)."""
     motion.check_joints(robot.joint_names, robot.name)
@@ -102,6 +122,7 @@ def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
     lo, hi = robot.ranges[:, 0], robot.ranges[:, 1]
     over = np.maximum(lo - motion.joint_angles, motion.joint_angles - hi).max(initial=0.0)
     speed = np.linalg.norm(np.diff(centres[..., :2], axis=0), axis=-1) * motion.fps
+    clearances = step_clearances(centres, lowest, speed)
     planted = _planted(motion, highest)
     return ReplayReport(
         range_overshoot=float(max(over, 0.0)),
@@ -110,6 +131,8 @@ def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
         planted_fraction=float(planted.mean()) if T > 1 else 0.0,
         travel=float(np.linalg.norm(motion.root_position[-1, :2] - motion.root_position[0, :2])),
         leg_overlap=float(overlap),
+        steps=len(clearances),
+        swing_clearance=float(min(clearances, default=np.inf)),
         sole_centres=centres,
         points=points,
     )

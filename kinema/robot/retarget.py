@@ -40,6 +40,7 @@ def robot_sizes(robot: Robot) -> RobotSizes:
         stand_height=float(robot.point(data, "pelvis")[2] - lowest),
         hips=hips,
         ankle_height=float(ankle),
+        sole_half_length=float(np.ptp(robot.soles["left"].points[:, 0]) / 2),
     )
 
 
@@ -66,7 +67,7 @@ def retarget_to_robot(motion, robot: Robot | str, weights: IKWeights | None = No
     robot = robot if isinstance(robot, Robot) else load_robot(robot)
     sizes = robot_sizes(robot)
     targets = frame_targets(motion, sizes)
-    ik = HingeIK(robot, sizes, weights or IKWeights())
+    ik = HingeIK(robot, sizes, weights or IKWeights(), motion.fps)
     q = robot.model.qpos0.copy()
     q[0:3] = targets.pelvis[0]
     q[3:7] = _quaternion(targets.pelvis_frame[0] @ ik.rest["pelvis"])

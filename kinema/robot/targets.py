@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kinema.motion.contacts import ContactThresholds, contact_joints, foot_contacts
-from kinema.robot.feet import clean_flags, hold_planted
+from kinema.robot.feet import CLEARANCE, DOWN_HEIGHT, SWING_SPEED, clean_flags, hold_planted, swing_arches
 from kinema.skeleton import Skeleton
 
 #: robot = AXES @ human: human +Z (forward) -> robot +X, human +X (left) -> +Y, human +Y (up) -> +Z.
@@ -43,6 +43,7 @@ class RobotSizes:
     stand_height: float
     hips: dict[str, np.ndarray]  # (3,) each hip in the root's frame at rest
     ankle_height: float  # foot body origin above the sole at rest
+    sole_half_length: float = 0.1  # from the sole's centre to its toe (or heel), m
 
 
 @dataclass
@@ -57,6 +58,7 @@ class FrameTargets:
     hand_reach: dict[str, np.ndarray]  # (T, 3) shoulder -> wrist at robot scale
     sole: dict[str, np.ndarray]  # (T, 3) sole centre
     foot_frame: dict[str, np.ndarray]  # (T, 3, 3)
+    sole_floor: dict[str, np.ndarray]  # (T,) no sole point below this height (0, or higher in a step's swing)
     planted: dict[str, np.ndarray]
 
 
@@ -87,9 +89,10 @@ def _planted_height(height: np.ndarray, planted: np.ndarray) -> float:
 
 
 def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: float, root: np.ndarray, widen: float):
-    """(sole centre (T, 3), foot frame (T, 3, 3)) targets of one side. ``root`` (T, 3, 3) is the root's frame:
-    its heading steadies the foot's when the foot points steeply up or down, and the foot moves ``widen``
-    metres outwards along its left axis (the robot's hips are further apart than the scaled human's)."""
+    """(ground position (T, 2), height (T,), yaw and pitch (T, 2)) of one side's sole centre, before steps
+    are lifted (_lift_steps). ``root`` (T, 3, 3) is the root's frame: its heading steadies the foot's when
+    the foot points steeply up or down, and the foot moves ``widen`` metres outwards along its left axis
+    (the robot's hips are further apart than the scaled human's)."""
     heading = root[:, :, 0]
     ankle, toe = P[:, roles[f"{side}_ankle"]], P[:, roles[f"{side}_toe"]]
     a0, t0 = _planted_height(ankle[:, 2], planted), _planted_height(toe[:, 2], planted)
@@ -106,7 +109,32 @@ def _foot(P: np.ndarray, roles: dict, side: str, planted: np.ndarray, scale: flo
     yaw = root_yaw + np.clip(turn, -MAX_FOOT_TURN, MAX_FOOT_TURN)
     angles = hold_planted(np.stack([yaw, pitch], 1), planted)
     angles[:, 1] = hold_planted(pitch[:, None], planted, held=np.zeros(1))[:, 0]
-    return np.concatenate([ground, up], axis=1), yaw_pitch_frames(angles[:, 0], angles[:, 1])
+    return ground, up[:, 0], angles
+
+
+def _feet_down(feet: dict, planted: dict, fps: float) -> dict[str, np.ndarray]:
+    """(T,) bool per side: the frames on which a foot is down (kinema.robot.feet): planted, or near its
+    planted height and slow; a foot near the floor that moves fast is stepping."""
+    out = {}
+    for s in SIDES:
+        ground, up, _ = feet[s]
+        speed = np.linalg.norm(np.gradient(ground, axis=0), axis=1) * fps if len(up) > 1 else np.zeros(1)
+        out[s] = planted[s] | ((up < DOWN_HEIGHT) & (speed < SWING_SPEED))
+    return out
+
+
+def _lift_steps(feet: dict, planted: dict, sizes: RobotSizes, fps: float):
+    """Per side (sole centre (T, 3), foot frame (T, 3, 3), sole floor (T,)): a step's swing lifts the sole's
+    lowest point at least kinema.robot.feet.CLEARANCE (swing_arches): the floor under it rises, and its
+    centre rises more where the foot pitches (its toe or heel hangs lower)."""
+    down, out = _feet_down(feet, planted, fps), {}
+    for s in SIDES:
+        ground, up, angles = feet[s]
+        arch = swing_arches(ground, down[s], fps)
+        up = np.maximum(up, arch * (CLEARANCE + sizes.sole_half_length * np.abs(np.sin(angles[:, 1]))))
+        out[s] = (np.concatenate([ground, up[:, None]], axis=1), yaw_pitch_frames(angles[:, 0], angles[:, 1]),
+                  CLEARANCE * arch)
+    return out
 
 
 def _human_stand_height(P: np.ndarray, roles: dict, sk: Skeleton, planted_ankle: float) -> float:
@@ -116,6 +144,11 @@ def _human_stand_height(P: np.ndarray, roles: dict, sk: Skeleton, planted_ankle:
     thigh = float(sk.offsets[roles["left_knee"]].norm())
     shin = float(sk.offsets[roles["left_ankle"]].norm())
     return drop + thigh + shin + planted_ankle
+
+
+def leg_scale(motion, sizes: RobotSizes) -> float:
+    """The robot's leg length over the human's (hip-knee-ankle): root travel and steps are scaled by it."""
+    return _limb_scales(motion.skeleton, motion.skeleton.roles, sizes)[0]
 
 
 def _limb_scales(sk: Skeleton, roles: dict, sizes: RobotSizes) -> tuple[float, float]:
@@ -160,7 +193,8 @@ def frame_targets(motion, sizes: RobotSizes) -> FrameTargets:
     pelvis_frame = frames_from(hip_line, P[:, roles["spine"]] - root)
     human_hips = float(np.median(np.linalg.norm(hip_line, axis=1))) / 2
     widen = max((sizes.hips["left"][1] - sizes.hips["right"][1]) / 2 - leg_scale * human_hips, 0.0)
-    feet = {s: _foot(P, roles, s, planted[s], leg_scale, pelvis_frame, widen) for s in SIDES}
+    feet = _lift_steps({s: _foot(P, roles, s, planted[s], leg_scale, pelvis_frame, widen) for s in SIDES}, planted,
+                       sizes, motion.fps)
     pelvis[:, 2] = _reachable_height(pelvis, pelvis_frame, {s: feet[s][0] for s in SIDES}, sizes)
 
     def limb(a: str, b: str, s: str) -> np.ndarray:
@@ -175,5 +209,6 @@ def frame_targets(motion, sizes: RobotSizes) -> FrameTargets:
         hand_reach={s: arm_scale * limb("upper_arm", "hand", s) for s in SIDES},
         sole={s: feet[s][0] for s in SIDES},
         foot_frame={s: feet[s][1] for s in SIDES},
+        sole_floor={s: feet[s][2] for s in SIDES},
         planted=planted,
     )
