@@ -180,3 +180,17 @@ def test_a_glb_scaled_a_millionfold_is_refused(tmp_path, capsys, bvh_file):
     glb.save(str(huge))
     assert main(["retarget", str(bvh_file), "--rig", str(huge), "--out", str(tmp_path / "o.glb")]) == 2
     one_line_error(capsys, "huge.glb: the rig reaches 1.7e+06 m from its root (armature scale 1e+08 applied)")
+
+
+def test_a_glb_with_two_joints_of_one_name_is_refused(tmp_path, capsys, bvh_file):
+    """A left foot also named like the right one was read as the right foot (renamed 'Foot.1')."""
+    import pygltflib
+
+    from tests.gltf_synthetic import write_synthetic_glb
+
+    glb = pygltflib.GLTF2().load(str(write_synthetic_glb(tmp_path / "good.glb")))
+    names = [n.name for n in glb.nodes]
+    glb.nodes[names.index("Neck")].name = "Leg"
+    glb.save(str(tmp_path / "dup.glb"))
+    assert main(["retarget", str(bvh_file), "--rig", str(tmp_path / "dup.glb"), "--out", str(tmp_path / "o.glb")]) == 2
+    one_line_error(capsys, "dup.glb: duplicate joint names ['Leg']")

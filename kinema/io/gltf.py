@@ -19,6 +19,7 @@ What is read, and how it maps to kinema (metres, Y up, quaternions ``(w, x, y, z
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,6 +140,14 @@ def _order(gltf, parent, kept: set[int]) -> tuple[list[int], list[int]]:
         kids = roots if n == -1 or (n == top and len(roots) > 1) else (gltf.nodes[n].children or [])
         todo.extend((c, len(order) - 1) for c in reversed(kids) if c in kept)
     return order, parents
+
+
+def _check_unique_names(names: list[str], path: Path) -> None:
+    """Joint names decide which limb and side a joint is (kinema.retarget.detect), so two joints with one
+    name are refused, as a BVH's are, not renamed: a left foot also named ``RightFoot`` drove the right leg."""
+    twice = sorted(n for n, count in Counter(names).items() if count > 1)
+    if twice:
+        raise GltfError(f"{path}: duplicate joint names {twice[:6]}; give each joint its own name")
 
 
 def _unique(names: list[str]) -> list[str]:
@@ -334,6 +343,7 @@ def read_gltf(
     kept, helpers = _select_joints(gltf, parent, parts, keep_helpers)
     order, kparents = _order(gltf, parent, kept)
     rig = _Rig(gltf, parent, world, order, kparents, warns)
+    _check_unique_names([_node_name(gltf, n) for n in order if n >= 0], path)
     names = _unique(["root" if n < 0 else _node_name(gltf, n) for n in order])
     index = {n: j for j, n in enumerate(order)}
     rest_t, rest_r = rig.convert(rig.rest_t[None], rig.rest_r[None])
