@@ -194,3 +194,19 @@ def test_a_glb_with_two_joints_of_one_name_is_refused(tmp_path, capsys, bvh_file
     glb.save(str(tmp_path / "dup.glb"))
     assert main(["retarget", str(bvh_file), "--rig", str(tmp_path / "dup.glb"), "--out", str(tmp_path / "o.glb")]) == 2
     one_line_error(capsys, "dup.glb: duplicate joint names ['Leg']")
+
+
+def test_a_humanoid_missing_a_leg_gets_no_arm_or_spine_as_that_leg(tmp_path, bandai_root, capsys):
+    """The rest-pose geometry used to take the spine, chest, shoulder and upper arm for the missing right leg."""
+    from kinema.io import load_motion
+    from kinema.retarget import find_humanoid
+
+    clip = sorted(bandai_root.glob("*/data/*.bvh.gz"))[0]
+    out = tmp_path / "one_leg.bvh"
+    assert main(["convert", str(clip), str(out), "--in-scale", "0.01",
+                 "--drop", "UpperLeg_R", "LowerLeg_R", "Foot_R", "Toes_R"]) == 0
+    found = find_humanoid(load_motion(out).skeleton)
+    names = found.skeleton.names
+    assert names[found.slots["left_foot"]] == "Foot_L"
+    assert not any(slot.startswith("right_") and slot.endswith(("_leg", "_foot", "_toes")) for slot in found.slots)
+    assert not found.is_humanoid and "right_upper_leg" in found.missing

@@ -3,7 +3,9 @@
 In the rest pose (Y up, the character's left on +X as in every kinema rig), leaving out helper
 bones (kinema.rig.find.helpers):
 
-- the feet are the two lowest leaf joints on opposite sides of the body (x of opposite sign); each
+- the feet are the two lowest leaf joints on opposite sides of the body (x of opposite sign), both in
+  the lowest ``FOOT_BAND`` of the height (a rig missing a leg has no second foot: its lowest leaf on
+  that side is a hand, and its arm was driven as a leg, 177 deg off); each
   leg is the chain from just below their lowest common ancestor (the hips) down to the leaf: the
   last bone is a toe when it is more horizontal than vertical, so the chain ends ``upper_leg,
   lower_leg, foot, toes`` (a second flat bone after it is a toe end site and left out), else
@@ -83,7 +85,7 @@ def geometric_limbs(skeleton: Skeleton) -> dict[str, int]:
     if sum(float(P[j, 1]) < floor + FOOT_BAND * (top - floor) for j in leaves) > 2:
         return {}
     feet = _pair(leaves, P, key=lambda j: float(P[j, 1]))
-    if feet is None:
+    if feet is None or any(float(P[j, 1]) >= floor + FOOT_BAND * (top - floor) for j in feet):
         return {}
     hips = common_ancestor(skeleton, list(feet))
     out: dict[str, int] = {}
