@@ -37,6 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
         train,
         train_anyrig,
         train_anyrig_root,
+        web,
     )
 
     parser = argparse.ArgumentParser(prog="kinema", description="Text + constraint driven motion generation.")
@@ -60,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
         evaluate,
         evaluate_anyrig,
         evaluate_retrieval,
+        web,
         *faces,
     ):
         module.register(sub)
