@@ -210,3 +210,21 @@ def test_a_humanoid_missing_a_leg_gets_no_arm_or_spine_as_that_leg(tmp_path, ban
     assert names[found.slots["left_foot"]] == "Foot_L"
     assert not any(slot.startswith("right_") and slot.endswith(("_leg", "_foot", "_toes")) for slot in found.slots)
     assert not found.is_humanoid and "right_upper_leg" in found.missing
+
+
+@pytest.mark.parametrize("drop", [0.0, 1.0, -0.5])
+def test_a_character_stands_on_the_world_floor_whatever_its_rest_height(drop):
+    """A Mixamo-style A-pose rig whose rest pose has its hips at the origin (feet 0.93 m below, as CMU-derived
+    and some FBX rigs have) was animated under the floor: the floor was taken from the rest pose."""
+    from kinema.retarget import retarget
+    from kinema.skeleton import Skeleton
+    from tests.retarget_rigs import MIXAMO, build_rig, source_walk
+
+    rig = build_rig(MIXAMO, a_pose=True, prefix="mixamorig:")
+    offsets = rig.offsets.clone()
+    offsets[0, 1] -= drop
+    moved = Skeleton(rig.names, rig.parents, offsets, rig.rest_rotations, name="moved")
+    height = 1.78
+    P = retarget(source_walk(), moved).positions
+    lowest = float(P[..., 1].min())
+    assert -0.02 * height <= lowest <= 0.08 * height, lowest

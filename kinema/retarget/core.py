@@ -48,6 +48,7 @@ from kinema.retarget.proportions import (
     lowest_rest_height,
     placed_positions,
     planted_floor_shift,
+    rest_on_floor,
     source_foot_height,
     target_body,
 )
@@ -96,12 +97,13 @@ def _leg_goals(G, P, jm: JointMap, Ps, planted, s: float, fps: float) -> list[to
     _, P0s = rest_frames(jm.source)
     hips_t, hips_s = jm.hips
     low_t = lowest_rest_height(jm.target, target_body(jm))
+    on_floor = rest_on_floor(jm)  # else the rest pose gives no foot height: the source's, scaled
     base = float(P0t[hips_t, 1]) - s * float(P0s[hips_s, 1])  # target y = base + s * source y at the hips
     goals = []
     for leg in jm.legs:
         goal = P[:, leg.upper] + s * (Ps[:, leg.source_foot] - Ps[:, leg.source_upper])
         heel = planted.get(leg.source_foot, torch.zeros(goal.shape[0], dtype=torch.bool))
-        lift = (float(P0t[leg.foot, 1]) - low_t) - s * source_foot_height(jm, leg, Ps, heel)
+        lift = (float(P0t[leg.foot, 1]) - low_t) - s * source_foot_height(jm, leg, Ps, heel) if on_floor else 0.0
         goal[:, 1] = base + s * Ps[:, leg.source_foot, 1] + lift
         toe_off = None
         if leg.toes is not None:

@@ -9,8 +9,12 @@
   ``P0_t + s (P_s - P0_s)``: its rest position plus the source's displacement from rest, scaled.
 - Root motion: a static joint above the hips (an armature or ``Root`` bone at the origin) moves
   across the floor with the hips, at its rest height, so IK/pole helpers hanging from it come along.
-- Floor: the whole motion is then shifted vertically so that its lowest joint over the clip sits
-  where the target's rest pose puts its lowest joint (helper bones left out, kinema.rig.find.helpers).
+- Floor: the whole motion is then shifted vertically so that its planted feet stand at their rest
+  heights (else its lowest joint over the clip sits where the target's rest pose puts its lowest joint;
+  helper bones left out, kinema.rig.find.helpers). That holds when the rest pose stands on the world
+  floor (:func:`rest_on_floor`); a rest pose that does not (the hips at the origin and the feet 0.92 m
+  below, as CMU-derived and some FBX rigs have, or Bandai's lying along +X) says nothing about the
+  floor, and the world's y = 0 is the floor instead: planted feet at the source's scaled heights.
 
 Shapes: positions ``(T, J, 3)``, float64.
 """
@@ -25,6 +29,9 @@ from kinema.retarget.align import rest_frames
 from kinema.retarget.mapping import JointMap, Leg
 from kinema.rig.find import helpers
 from kinema.skeleton import Skeleton
+
+#: a rest pose stands on the world floor when its lowest joint is this fraction of its height from y = 0
+REST_FLOOR_TOLERANCE = 0.1
 
 
 def body_joints(skeleton: Skeleton, top: int | None = None, extra: tuple[int, ...] = ()) -> list[int]:
@@ -123,6 +130,19 @@ def rest_stands(skeleton: Skeleton, hips: int, leg: tuple[int, int, int]) -> boo
     return float(P0[hips, 1] - P0[leg[2], 1]) > 0.5 * _chain_length(skeleton, list(leg))
 
 
+def rest_on_floor(jm: JointMap) -> bool:
+    """Whether the target's rest pose stands on the world floor: it stands (:func:`rest_stands`, each leg)
+    and its lowest body joint is within `REST_FLOOR_TOLERANCE` of its height from y = 0 (a sole's
+    thickness, a toe joint above the ground)."""
+    _, P0 = rest_frames(jm.target)
+    body = target_body(jm)
+    low = lowest_rest_height(jm.target, body)
+    if jm.legs and not all(rest_stands(jm.target, jm.hips[0], (g.upper, g.lower, g.foot)) for g in jm.legs):
+        return False
+    height = float(P0[body, 1].max()) - low
+    return abs(low) <= REST_FLOOR_TOLERANCE * height
+
+
 def source_foot_height(jm: JointMap, leg: Leg, positions: torch.Tensor, heel: torch.Tensor) -> float:
     """How high the source's foot joint sits above its floor when standing: from its rest pose when
     that pose stands (:func:`rest_stands`), else from the clip (:func:`standing_height`)."""
@@ -182,9 +202,22 @@ def foot_pitch_turns(
 
 
 def floor_shift(jm: JointMap, positions: torch.Tensor) -> float:
-    """Vertical shift putting the clip's lowest body joint at the rest pose's lowest joint height."""
-    body = target_body(jm)
-    return lowest_rest_height(jm.target, body) - float(positions[:, body, 1].min())
+    """Vertical shift putting the clip's lowest body joint at the rest pose's lowest joint height (at y = 0
+    when the rest pose does not stand on the floor, :func:`rest_on_floor`)."""
+    return rest_floor(jm) - float(positions[:, target_body(jm), 1].min())
+
+
+def rest_floor(jm: JointMap) -> float:
+    """Where the target's lowest body joint stands: its rest height when the rest pose stands on the floor
+    (:func:`rest_on_floor`), else the world floor, 0."""
+    return lowest_rest_height(jm.target, target_body(jm)) if rest_on_floor(jm) else 0.0
+
+
+def target_standing_height(jm: JointMap, joint: int, source_stand: float, s: float, on_floor: bool) -> float:
+    """Height of the target's ``joint`` standing: its rest height when the rest pose stands on the floor
+    (``on_floor``, :func:`rest_on_floor`), else the source's standing height ``source_stand`` scaled."""
+    _, P0t = rest_frames(jm.target)
+    return float(P0t[joint, 1]) if on_floor else s * source_stand
 
 
 def source_standing_ankle(
@@ -228,12 +261,15 @@ def planted_floor_shift(
     target joint goes to its rest height plus the source joint's scaled height above its own standing
     height (median over those frames). None without legs or planted frames (then :func:`floor_shift`).
     The clip's lowest joint is no reference here: at a toe-off the ball of the foot dips below its
-    standing height (the default model's by 2 cm) and that lifted whole walks 3-4 cm off the floor."""
-    _, P0t = rest_frames(jm.target)
+    standing height (the default model's by 2 cm) and that lifted whole walks 3-4 cm off the floor. A rest
+    pose off the floor (:func:`rest_on_floor`) gives no rest heights: there the target joint goes to the
+    source joint's scaled height above the world floor."""
     s = body_scale(jm)
+    on_floor = rest_on_floor(jm)
     gaps = []
     for leg, joint, source_joint, on in planted_joints(jm, planted):
         stand = source_standing_ankle(jm, leg, source_positions, on, source_joint)
-        want = float(P0t[joint, 1]) + s * (source_positions[on, source_joint, 1] - stand)
+        rest = target_standing_height(jm, joint, stand, s, on_floor)
+        want = rest + s * (source_positions[on, source_joint, 1] - stand)
         gaps.append(want - positions[on, joint, 1])
     return float(torch.cat(gaps).median()) if gaps else None

@@ -6,8 +6,9 @@
 - ``skate_cm_s``: foot skate of source and target (kinema.postprocess.footlock.foot_skate: mean
   horizontal speed of the contact joints over consecutive planted frames, the source's planted flags
   for both), the target's divided by the body scale so both are in source centimetres per second;
-- ``lowest``: the target's lowest body joint over the clip and where its rest pose puts it (a toe-off
-  may dip below it, as the source's ball of the foot dips below its standing height);
+- ``lowest``: the target's lowest body joint over the clip and where its rest pose puts it, or 0 for a
+  rest pose off the floor (kinema.retarget.proportions.rest_floor; a toe-off may dip below it, as the
+  source's ball of the foot dips below its standing height);
 - ``ankle_cm`` / ``ankle_source_cm``: feet on the floor, the median over the frames a source foot is
   planted of the target's ankle (heel planted) or ball of the foot (only the toe) above its rest
   height, divided by the body scale, and of the source's above its standing height, source
@@ -31,10 +32,12 @@ from kinema.retarget.core import source_planted
 from kinema.retarget.mapping import JointMap
 from kinema.retarget.proportions import (
     body_scale,
-    lowest_rest_height,
     planted_joints,
+    rest_floor,
+    rest_on_floor,
     source_standing_ankle,
     target_body,
+    target_standing_height,
 )
 
 
@@ -104,12 +107,12 @@ def bone_twists(motion: Motion) -> dict[str, float]:
 def planted_ankles(source: Motion, target: Motion, jm: JointMap, planted: dict, s: float) -> dict:
     """``ankle_cm`` and ``ankle_source_cm`` of the module docstring ({} without planted feet): ankles
     while the heel is planted, balls of the feet while only the toe is (proportions.planted_joints)."""
-    _, P0t = rest_frames(jm.target)
     Ps, Pt = source.positions.double(), target.positions.double()
+    on_floor = rest_on_floor(jm)
     mine, theirs = [], []
     for leg, joint, source_joint, on in planted_joints(jm, planted):
         stand = source_standing_ankle(jm, leg, Ps, on, source_joint)
-        mine.append((Pt[on, joint, 1] - float(P0t[joint, 1])) / s)
+        mine.append((Pt[on, joint, 1] - target_standing_height(jm, joint, stand, s, on_floor)) / s)
         theirs.append(Ps[on, source_joint, 1] - stand)
     if not mine:
         return {}
@@ -135,7 +138,7 @@ def retarget_report(source: Motion, target: Motion, jm: JointMap) -> dict:
         out["twist_deg"] = twists[out["twist_bone"]]
     body = target_body(jm)
     out["lowest"] = float(target.positions[:, body, 1].min())
-    out["lowest_rest"] = lowest_rest_height(target.skeleton, body)
+    out["lowest_rest"] = rest_floor(jm)
     planted = source_planted(source)
     out.update(planted_ankles(source, target, jm, planted, s))
     feet = [(g.foot, g.source_foot) for g in jm.legs if g.source_foot in planted]
