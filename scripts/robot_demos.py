@@ -1,11 +1,13 @@
 """Robot demonstrations for docs/robots.md: prompts generated with the default model (and captured Bandai
-Namco clips) retargeted onto the Unitree G1, replayed in MuJoCo, drawn as a human filmstrip above the
-G1's, and measured in one markdown table.
+Namco clips) retargeted onto a robot (the Unitree G1 by default), replayed in MuJoCo, drawn as a human
+filmstrip above the robot's, and measured in two markdown tables: the replay, and what a tracker needs
+(joint speeds, steps, MuJoCo inverse dynamics: kinema.robot.dynamics).
 
-    python scripts/robot_demos.py --out docs/images [--steps 10] [--seconds 4] [--seed 0] \
-        [--bandai ../shared/datasets/bandai-namco]
+    python scripts/robot_demos.py --out docs/images [--robot g1|h1|MJCF] [--steps 10] [--seconds 4] \
+        [--seeds 0 1 2] [--bandai ../shared/datasets/bandai-namco]
 
-Writes ``robot_<name>.png`` per case and prints the table. Look at the pictures before shipping them.
+Writes ``robot_<name>.png`` (``robot_<robot>_<name>.png`` for a robot other than the G1) per case for the
+first seed and prints the tables. Look at the pictures before shipping them.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from PIL import Image
 
 import kinema
 from kinema.render import render_filmstrip
-from kinema.robot import load_robot, replay_report, retarget_to_robot
+from kinema.robot import dynamics_report, load_robot, replay_report, retarget_to_robot
 from kinema.robot.drawing import robot_motion_for_drawing
 
 PROMPTS = [
@@ -34,7 +36,12 @@ CLIPS = [
 ]
 HEADER = (
     "| case | frames | range overshoot (rad) | lowest sole (cm) | planted-sole slide (m/s) | planted share "
-    "| travel human / G1 (m) | leg overlap (cm) | retarget (s) |\n|---|---|---|---|---|---|---|---|---|"
+    "| travel human / robot (m) | leg overlap (cm) | retarget (s) |\n|---|---|---|---|---|---|---|---|---|"
+)
+TRACKER_HEADER = (
+    "| case | seed | fastest joint (% of limit) | steps / least swing clearance (cm) | peak torque (% of limit) "
+    "| base residual over 0.25 s (% of weight) | per frame: peak / mean (%) | self-penetration (cm) | feasible |\n"
+    "|---|---|---|---|---|---|---|---|---|"
 )
 
 
@@ -47,24 +54,35 @@ def stacked(top: Path, bottom: Path, out: Path) -> None:
     sheet.save(out)
 
 
-def case_row(name: str, label: str, human, robot, out_dir: Path) -> str:
-    """Retarget, replay, draw; the table row of one case."""
+def case_rows(name: str, label: str, human, robot, out_dir: Path | None, seed: str) -> tuple[str, str]:
+    """Retarget, replay, draw (into ``out_dir`` unless None); the rows of one case in the two tables."""
     start = time.perf_counter()
     robot_motion = retarget_to_robot(human, robot)
     seconds = time.perf_counter() - start
     rep = replay_report(robot_motion, robot)
+    dyn = dynamics_report(robot_motion, robot)
     root = human.positions[:, human.skeleton.roles["pelvis"]].numpy()
     human_travel = float(np.linalg.norm(root[-1, [0, 2]] - root[0, [0, 2]]))
-    with tempfile.TemporaryDirectory() as tmp:
-        a = render_filmstrip(human, Path(tmp) / "h.png", frames=8, title=f"human: {label}")
-        b = render_filmstrip(
-            robot_motion_for_drawing(robot_motion, robot), Path(tmp) / "r.png", frames=8, title=f"Unitree G1: {label}"
-        )
-        stacked(a, b, out_dir / f"robot_{name}.png")
+    if out_dir is not None:
+        title = {"g1": "Unitree G1", "h1": "Unitree H1"}.get(robot.name, Path(robot.name).stem)
+        with tempfile.TemporaryDirectory() as tmp:
+            a = render_filmstrip(human, Path(tmp) / "h.png", frames=8, title=f"human: {label}")
+            b = render_filmstrip(
+                robot_motion_for_drawing(robot_motion, robot), Path(tmp) / "r.png", frames=8, title=f"{title}: {label}"
+            )
+            stacked(a, b, out_dir / (f"robot_{name}.png" if robot.name == "g1" else f"robot_{robot.name}_{name}.png"))
+    steps = f"{rep.steps} / {100 * rep.swing_clearance:.1f}" if rep.steps else "0 / -"
+    speed = f"{100 * dyn.speed.value:.0f} ({dyn.speed.what})" if dyn.speed else "no limits"
+    torque = f"{100 * dyn.torque.value:.0f} ({dyn.torque.what})" if dyn.torque else "no limits"
+    window = dyn.residual_force_window
+    collision = "-" if dyn.collision is None else f"{100 * dyn.collision.value:.1f}"
     return (
         f"| {label} | {robot_motion.num_frames} | {rep.range_overshoot:.3f} | {100 * rep.lowest_sole:+.1f} "
         f"| {rep.planted_slide:.3f} | {rep.planted_fraction:.2f} | {human_travel:.2f} / {rep.travel:.2f} "
-        f"| {100 * rep.leg_overlap:.1f} | {seconds:.2f} |"
+        f"| {100 * rep.leg_overlap:.1f} | {seconds:.2f} |",
+        f"| {label} | {seed} | {speed} | {steps} | {torque} | {100 * window.value:.0f} ({window.what}) "
+        f"| {100 * dyn.residual_force.value:.0f} / {100 * dyn.residual_force_mean:.0f} | {collision} "
+        f"| {'yes' if dyn.feasible else 'no'} |",
     )
 
 
@@ -73,24 +91,28 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("docs/images"))
     ap.add_argument("--steps", type=int, default=None, help="sampling steps (default: the model's)")
     ap.add_argument("--seconds", type=float, default=4.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0])
+    ap.add_argument("--robot", default="g1", help="'g1' (default), 'h1' or an MJCF file")
     ap.add_argument("--bandai", type=Path, default=Path("../shared/datasets/bandai-namco"))
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    model, robot = kinema.load_model(), load_robot("g1")
-    options = {"seconds": args.seconds, "seed": args.seed} | ({"steps": args.steps} if args.steps else {})
+    model, robot = kinema.load_model(), load_robot(args.robot)
     rows = []
     for name, prompt in PROMPTS:
-        human = model.generate(prompt, **options)[0]
-        rows.append(case_row(name, f'"{prompt}"', human, robot, args.out))
-        print(rows[-1], flush=True)
+        for k, seed in enumerate(args.seeds):
+            options = {"seconds": args.seconds, "seed": seed} | ({"steps": args.steps} if args.steps else {})
+            human = model.generate(prompt, **options)[0]
+            rows.append(case_rows(name, f'"{prompt}"', human, robot, args.out if k == 0 else None, str(seed)))
+            print(*rows[-1], sep="\n", flush=True)
     for name, clip in CLIPS:
         if (args.bandai / clip).is_file():
             human = kinema.load_motion(args.bandai / clip, scale=0.01)
-            rows.append(case_row(name, f"captured {Path(clip).name}", human, robot, args.out))
-            print(rows[-1], flush=True)
+            rows.append(case_rows(name, f"captured {Path(clip).name}", human, robot, args.out, "-"))
+            print(*rows[-1], sep="\n", flush=True)
     print(HEADER)
-    print("\n".join(rows))
+    print("\n".join(r[0] for r in rows))
+    print(TRACKER_HEADER)
+    print("\n".join(r[1] for r in rows))
 
 
 if __name__ == "__main__":

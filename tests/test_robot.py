@@ -7,6 +7,7 @@ retargeting's own bookkeeping.
 
 from __future__ import annotations
 
+import re
 import time
 
 import mujoco
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 import kinema
-from kinema.robot import RobotMotion, load_robot, replay_report, retarget_to_robot
+from kinema.robot import BUILTIN_ROBOTS, RobotMotion, dynamics_report, load_robot, replay_report, retarget_to_robot
 from kinema.robot.replay import leg_geoms
 
 SLIDE_LIMIT = 0.15  # m/s, planted soles (issue 39)
@@ -155,3 +156,40 @@ def test_walk_steps_clear_the_floor_within_velocity_limits(walk, g1):
     slow.velocity_limits = np.full(slow.num_joints, 3.0)
     slowed = retarget_to_robot(human, slow)
     assert np.abs(np.diff(slowed.joint_angles, axis=0)).max() * slowed.fps <= 3.0 + 1e-9
+
+
+@pytest.fixture(scope="module")
+def h1():
+    return load_robot("h1")
+
+
+def test_h1_walks_and_raises_its_left_hand(walk, left_hand, h1):
+    """The second shipped robot (Unitree H1, 19 joints, motor torque limits from ctrlrange), untuned: in its
+    ranges and velocity limits, soles on the floor, steps that clear it, the left hand above the head."""
+    assert h1.num_joints == 19 and h1.velocity_limits[h1.joint_names.index("left_knee")] == 14.0
+    for human, _ in (walk, left_hand):
+        robot_motion = retarget_to_robot(human, h1)
+        rep = replay_report(robot_motion, h1)
+        assert rep.range_overshoot == 0.0 and rep.lowest_sole >= FLOOR_LIMIT
+        speed = np.abs(np.diff(robot_motion.joint_angles, axis=0)) * robot_motion.fps
+        assert (speed <= h1.velocity_limits + 1e-9).all()
+        if human is walk[0]:
+            assert rep.steps >= 3 and rep.swing_clearance >= CLEARANCE_LIMIT and rep.travel > 1.0
+        else:
+            head, lhand, rhand = (rep.points[k][:, 2] for k in ("head", "left_hand", "right_hand"))
+            assert (lhand - head).max() > 0.0 and (rhand - head).max() < -0.2
+    dynamics = dynamics_report(robot_motion, h1)
+    assert dynamics.mass == pytest.approx(51.4, abs=0.1) and "left_knee" in dynamics.joint_torque_share
+
+
+def test_steps_clear_the_floor_on_an_untuned_mjcf(walk, tmp_path):
+    """A G1 whose feet are the four 5-mm sole spheres of Unitree's URDF instead of Menagerie's box."""
+    spheres = "".join(f'<geom type="sphere" size="0.005" pos="{x} {y} -0.03"/>'
+                      for x, y in ((-0.05, 0.025), (-0.05, -0.025), (0.12, 0.03), (0.12, -0.03)))
+    text = re.sub(r'<geom name="(left|right)_foot_box_collision"[^>]*/>', spheres, BUILTIN_ROBOTS["g1"].read_text())
+    text = re.sub(r'<geom name="(left|right)_foot[123]_collision"[^>]*/>', "", text, flags=re.S)
+    (tmp_path / "g1_spheres.xml").write_text(text)
+    robot = load_robot(tmp_path / "g1_spheres.xml")
+    assert len(robot.soles["left"].points) == 16  # the corners of the four spheres' boxes
+    rep = replay_report(retarget_to_robot(walk[0], robot), robot)
+    assert rep.steps >= 3 and rep.swing_clearance >= CLEARANCE_LIMIT and rep.lowest_sole >= FLOOR_LIMIT

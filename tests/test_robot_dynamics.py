@@ -1,6 +1,7 @@
 """Inverse dynamics of robot motions in MuJoCo (kinema.robot.dynamics): physics checked against cases whose
 answer is known (a robot standing still, one floating, one teleported), then a captured walk and the faces
-that carry the report (the `kinema robot` command, the request's report)."""
+that carry the report (the request's report, the server's JSON; the `kinema robot` command's lines are
+checked in tests/test_robot_exports.py)."""
 
 from __future__ import annotations
 
@@ -89,16 +90,6 @@ def test_captured_walk_dynamics(walk_clip, g1):
     assert set(rep.as_dict()) >= {"torque", "residual_force", "speed", "collision", "feasible", "problems"}
 
 
-def test_robot_command_prints_dynamics(walk_clip, tmp_path, capsys):
-    from kinema.cli import main
-
-    assert main(["robot", str(walk_clip), "--scale", "0.01", "--robot", "g1", "--out", str(tmp_path / "w.npz")]) == 0
-    said = capsys.readouterr()
-    line = next(x for x in said.out.splitlines() if x.startswith("dynamics"))
-    assert "% of limit" in line and "of body weight" in line and "self-penetration" in line
-    assert said.err.count("robot motion not feasible") <= 1
-
-
 def test_request_report_and_server_json_carry_dynamics():
     import json
 
@@ -114,8 +105,9 @@ def test_request_report_and_server_json_carry_dynamics():
     assert dynamics["residual_force"]["value"] >= 0.0 and dynamics["feasible"] == measured["feasible"]
     assert (measured["warning"] in res.report.warnings) if not measured["feasible"] else measured["warning"] is None
     client = TestClient(create_app(ServerConfig(limits=ServerLimits(max_steps=4)), ModelRegistry.load(["default"])))
-    answer = client.post("/v1/generate", json={"prompt": "A person waves.", "seconds": 1.0, "steps": 2, "robot": "g1",
-                                               "format": "csv"})
+    answer = client.post("/v1/generate", json={"prompt": "A person waves.", "seconds": 1.0, "steps": 2, "robot": "h1",
+                                               "format": "csv"})  # the second shipped robot, by name
     assert answer.status_code == 200, answer.text
     (robot,) = answer.json()["report"]["robot"]
-    assert "base residual" in robot["dynamics_summary"] and "torque" in robot["dynamics"]
+    assert "base residual" in robot["dynamics_summary"] and "torque" in robot["dynamics"] and robot["robot"] == "h1"
+    assert answer.json()["motions"][0]["data"].startswith("time,root_x")

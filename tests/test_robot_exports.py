@@ -4,6 +4,8 @@ quaternions) and checked against MuJoCo's forward kinematics of the motion kinem
 
 from __future__ import annotations
 
+import contextlib
+import io
 import pickle
 
 import mujoco
@@ -27,9 +29,14 @@ ISAAC_G1_JOINTS = [
 
 @pytest.fixture(scope="module")
 def walk_g1(walk_clip, tmp_path_factory):
-    """The captured walk on the G1, written by `kinema robot` as kinema's npz."""
-    out = tmp_path_factory.mktemp("exports") / "walk_g1.npz"
-    assert main(["robot", str(walk_clip), "--scale", "0.01", "--robot", "g1", "--out", str(out)]) == 0
+    """The captured walk on the G1, written by `kinema robot` as kinema's npz; the command prints the replay
+    and the dynamics (kinema.robot.dynamics) in a line each."""
+    out, said = tmp_path_factory.mktemp("exports") / "walk_g1.npz", io.StringIO()
+    with contextlib.redirect_stdout(said):
+        assert main(["robot", str(walk_clip), "--scale", "0.01", "--robot", "g1", "--out", str(out)]) == 0
+    replay, dynamics = said.getvalue().splitlines()[-2:]
+    assert "steps clearing at least" in replay and "of the human's; legs 0.78" in replay
+    assert dynamics.startswith("dynamics") and "% of limit" in dynamics and "of body weight" in dynamics
     return out
 
 

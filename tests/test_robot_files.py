@@ -167,7 +167,7 @@ def test_name_guess_prefers_the_exact_word():
     names = ["world", "torso", "head", "waist_lower", "pelvis", "thigh_right", "shin_right", "foot_right",
              "thigh_left", "shin_left", "foot_left", "upper_arm_right", "lower_arm_right", "hand_right",
              "upper_arm_left", "lower_arm_left", "hand_left"]  # fmt: skip
-    points = {key: p.body for key, p in resolve_mapping(names, None, False, "humanoid.xml").items()}
+    points = {key: p.body for key, p in resolve_mapping(names, None, None, "humanoid.xml").items()}
     assert points["pelvis"] == "pelvis" and points["torso"] == "torso" and points["head"] == "head"
     assert points["left_hip"] == "thigh_left" and points["right_foot"] == "foot_right"
     assert points["left_shoulder"] == "upper_arm_left" and points["right_hand"] == "hand_right"

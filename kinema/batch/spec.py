@@ -38,7 +38,8 @@ BatchJob = request_model(
         "rig": Annotated[str, Field(max_length=1000, description="a GLB/BVH file (relative to the jobs file) or a "
                                                                  "training rig id")],
         "format": (Format, Field("bvh", description="output format: bvh, bvh.gz, npz or glb; csv or npz with a robot")),
-        "robot": Annotated[str, Field(max_length=1000, description="'g1' or an MJCF file (relative to the jobs file)")],
+        "robot": Annotated[str, Field(max_length=1000,
+                                      description="'g1', 'h1' or an MJCF file (relative to the jobs file)")],
         "robot_mapping": dict[str, Any] | str,
     },
     extra={"id": (Annotated[str, Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")] | None, None),

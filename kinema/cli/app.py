@@ -42,7 +42,7 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--robot",
-        help="also retarget every generated motion onto a robot and draw it beside the human: 'g1' or an MJCF "
+        help="also retarget every generated motion onto a robot and draw it beside the human: 'g1', 'h1' or an MJCF "
         "file (docs/robots.md; human model only)",
     )
     p.add_argument("--mapping", type=Path, help="with --robot: JSON landmark -> body mapping of an MJCF whose body "

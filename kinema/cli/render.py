@@ -26,7 +26,7 @@ def register(sub) -> None:
     p.add_argument("--constraints", type=Path, help="constraints JSON whose targets are marked")
     p.add_argument("--fps", type=float, help="GIF frame rate (default: the motion's, at most 20; GIF only)")
     p.add_argument("--title", help="title drawn at the top (default: the input file name)")
-    p.add_argument("--robot", help="robot motion input (.csv, or .npz from `kinema robot`): 'g1' or its MJCF "
+    p.add_argument("--robot", help="robot motion input (.csv, or .npz from `kinema robot`): 'g1', 'h1' or its MJCF "
                    "(default: the robot the npz names, else g1); --mapping as for `kinema robot`")
     p.add_argument("--mapping", type=Path, help="robot input: JSON landmark -> body mapping of the MJCF")
     p.set_defaults(func=run)

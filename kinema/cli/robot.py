@@ -27,7 +27,7 @@ def register(sub) -> None:
     p = sub.add_parser("robot", help="retarget a motion onto a humanoid robot (MuJoCo MJCF) as CSV/npz poses")
     p.add_argument("motion", type=Path, help="a human motion: .npz or .bvh written by `kinema generate`, .glb; or "
                    "a robot motion (.csv, or .npz from --robot) to write for a tracker")
-    p.add_argument("--robot", default="g1", help="'g1' (default) or a MuJoCo MJCF .xml humanoid")
+    p.add_argument("--robot", default="g1", help="'g1' (default), 'h1' or a MuJoCo MJCF .xml humanoid")
     p.add_argument("--mapping", type=Path, help="JSON: robot landmark -> body name, for unrecognised robots")
     p.add_argument("--out", type=Path, required=True, help="walk.csv (MuJoCo qpos table) or walk.npz; with "
                    "--tracker, that tracker's file (beyondmimic: .npz, gmr: .pkl)")

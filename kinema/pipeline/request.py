@@ -138,8 +138,8 @@ class GenerationRequest:
     rig: Any = option(None, kind="json", metavar="RIG",
                       help="the character: a GLB/BVH file, a training rig id, or inline {format, data}")
     robot: str | None = option(None, metavar="ROBOT",
-                               help="also give the motion on a humanoid robot: 'g1' or an MJCF file (docs/robots.md); "
-                                    "the output is the robot's joint angles (.csv or .npz)")
+                               help="also give the motion on a humanoid robot: 'g1', 'h1' or an MJCF file "
+                                    "(docs/robots.md); the output is the robot's joint angles (.csv or .npz)")
     robot_mapping: Any = option(None, kind="json", file=True, metavar="FILE",
                                 help="which robot body is which human joint, for an MJCF whose names kinema does not "
                                      "know (docs/robots.md)")

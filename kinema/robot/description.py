@@ -3,7 +3,8 @@ the bodies that stand for human joints (kinema.robot.mapping), its soles, and it
 
 Conventions are MuJoCo's: metres, radians, world Z up; the robot is expected to face +X with its left
 side towards +Y in its rest pose (``qpos0``), as Menagerie's humanoids do; this is checked.
-``load_robot("g1")`` reads the Unitree G1 shipped in kinema/assets/robots/g1 (see its README and LICENSE).
+``load_robot("g1")`` reads the Unitree G1 shipped in kinema/assets/robots/g1, ``load_robot("h1")`` the Unitree
+H1 in kinema/assets/robots/h1 (see their READMEs and LICENSEs).
 
 Joint velocity limits: MJCF has no attribute for them, so kinema reads
 ``<custom><numeric name="velocity_limit/JOINT" data="RAD_PER_S"/></custom>`` (the shipped G1 has them,
@@ -25,7 +26,7 @@ from kinema.robot.mapping import BodyPoint, read_mapping, resolve_mapping
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "assets" / "robots"
 #: Robots shipped with kinema, by name.
-BUILTIN_ROBOTS = {"g1": ROBOTS_DIR / "g1" / "g1.xml"}
+BUILTIN_ROBOTS = {"g1": ROBOTS_DIR / "g1" / "g1.xml", "h1": ROBOTS_DIR / "h1" / "h1.xml"}
 #: how far (degrees) a robot's rest pose may lean from Z up with its left towards +Y
 MAX_REST_TILT_DEG = 30.0
 _SOLE_BAND = 0.005  # geom bottoms within 5 mm of the lowest belong to the sole
@@ -45,7 +46,7 @@ class Sole:
 class Robot:
     """A robot description ready for retargeting (see the module docstring)."""
 
-    name: str  # "g1" or the MJCF path it was read from
+    name: str  # "g1", "h1" or the MJCF path it was read from
     model: mujoco.MjModel
     points: dict[str, BodyPoint]  # landmark -> body and point in it
     body_ids: dict[str, int]  # landmark -> body id
@@ -83,7 +84,7 @@ class Robot:
 
 
 def _read_model(path: Path) -> mujoco.MjModel:
-    check_input_file(path, "robot file (use 'g1' or a MuJoCo MJCF .xml)")
+    check_input_file(path, "robot file (use 'g1', 'h1' or a MuJoCo MJCF .xml)")
     if path.stat().st_size > MAX_JSON_BYTES:
         raise KinemaError(f"{path}: larger than {MAX_JSON_BYTES} bytes, too large for an MJCF robot file")
     if path.suffix.lower() != ".xml":
@@ -189,7 +190,7 @@ def load_robot(name_or_path: str | Path, mapping: str | Path | dict | None = Non
     names, qadr, dadr, ranges = _hinges(model, where)
     given = None if mapping is None else read_mapping(mapping)
     bodies = [model.body(b).name for b in range(1, model.nbody)]
-    points = resolve_mapping(bodies, given, key.lower() == "g1", where)
+    points = resolve_mapping(bodies, given, key.lower() if key.lower() in BUILTIN_ROBOTS else None, where)
     body_ids = {k: model.body(p.body).id for k, p in points.items()}
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)

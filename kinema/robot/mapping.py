@@ -58,6 +58,21 @@ G1_MAPPING: dict[str, tuple[str, tuple[float, float, float]]] = {
     "right_hand": ("right_wrist_yaw_link", (0.0, 0.0, 0.0)),
 }
 
+#: The Unitree H1 (Menagerie's unitree_h1): the hip is where the thigh turns (the hip-pitch link), the hand
+#: the centre of the sphere at the end of the forearm, the head the centre of the helmet sphere.
+H1_MAPPING: dict[str, tuple[str, tuple[float, float, float]]] = {
+    "pelvis": ("pelvis", (0.0, 0.0, 0.0)),
+    "torso": ("torso_link", (0.0, 0.0, 0.0)),
+    "head": ("torso_link", (0.045, 0.0, 0.68)),
+    **{f"{s}_{key}": (f"{s}_{body}", (0.0, 0.0, 0.0)) for s in ("left", "right") for key, body in (
+        ("hip", "hip_pitch_link"), ("knee", "knee_link"), ("foot", "ankle_link"), ("shoulder", "shoulder_roll_link"),
+        ("elbow", "elbow_link"))},
+    "left_hand": ("left_elbow_link", (0.28, 0.0, -0.015)),
+    "right_hand": ("right_elbow_link", (0.28, 0.0, -0.015)),
+}
+#: Built-in robots' landmark tables, by robot name.
+BUILTIN_MAPPINGS = {"g1": G1_MAPPING, "h1": H1_MAPPING}
+
 #: Words that identify a landmark in a body name (the last matching body of the chain wins for feet and
 #: hands, the first for the rest: a hip or shoulder is where its first link starts; see _guess).
 _WORDS = {
@@ -137,17 +152,18 @@ def read_mapping(source: str | Path | dict, where: str = "robot_mapping") -> dic
 
 
 def resolve_mapping(
-    body_names: list[str], given: dict[str, BodyPoint] | None, is_g1: bool, where: str
+    body_names: list[str], given: dict[str, BodyPoint] | None, builtin: str | None, where: str
 ) -> dict[str, BodyPoint]:
-    """Every landmark of ROBOT_POINTS as a BodyPoint: given entries first, then the G1's table for the G1,
-    then a guess from the body names; an unknown body or an unguessable landmark is a KinemaError."""
+    """Every landmark of ROBOT_POINTS as a BodyPoint: given entries first, then the table of a built-in
+    robot (``builtin``: its name in BUILTIN_MAPPINGS), then a guess from the body names; an unknown body or
+    an unguessable landmark is a KinemaError."""
     out: dict[str, BodyPoint] = {}
     missing = []
     for key in ROBOT_POINTS:
         if given and key in given:
             out[key] = given[key]
-        elif is_g1:
-            body, offset = G1_MAPPING[key]
+        elif builtin is not None:
+            body, offset = BUILTIN_MAPPINGS[builtin][key]
             out[key] = BodyPoint(body, offset)
         else:
             guess = _guess(key, body_names)

@@ -8,9 +8,11 @@ this frame and the next. Leg self-intersection uses the MJCF's capsule and spher
 (the bodies below each hip): the deepest overlap of a left-leg geom with a right-leg geom, in metres.
 
 Steps: a sole steps where its centre moves over the floor faster than ``STEP_SPEED`` for at least
-kinema.robot.feet.STEP_MIN; a step's clearance is how high the sole's lowest point gets above the floor
-during it (a foot that slides or shuffles clears little or nothing), and ``swing_clearance`` is the
-lowest over all steps of both soles; steps cut by the clip's first or last frame are left out.
+kinema.robot.feet.STEP_MIN and at least ``STEP_TIME``; a step's clearance is how high the sole's lowest
+point gets above the floor during it (a foot that shuffles clears little or nothing), and
+``swing_clearance`` is the lowest over all steps of both soles; steps cut by the clip's first or last
+frame are left out. A shorter move of that length is a ``slide`` (a foot that jumps along the floor
+between two frames: where a source foot skates into its landing).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from kinema.robot.targets import SIDES
 
 _PLANTED_HEIGHT = 0.01
 STEP_SPEED = 0.2  # m/s
+STEP_TIME = 0.15  # s
 
 
 @dataclass(frozen=True)
@@ -40,6 +43,7 @@ class ReplayReport:
     travel: float  # horizontal distance from the root's first to its last position
     leg_overlap: float  # deepest overlap of left- and right-leg capsules (0 when apart)
     steps: int  # steps of both soles (see the module docstring)
+    slides: int  # moves too short to be steps (see the module docstring)
     swing_clearance: float  # the least clearance of any step (m; inf without steps)
     sole_centres: np.ndarray  # (T, 2, 3) left and right sole centres
     points: dict[str, np.ndarray]  # landmark -> (T, 3) world positions
@@ -91,15 +95,21 @@ def _planted(motion: RobotMotion, highest: np.ndarray) -> np.ndarray:
     return flags[1:] & flags[:-1]
 
 
-def step_clearances(centres: np.ndarray, lowest: np.ndarray, speed: np.ndarray) -> list[float]:
-    """Each step's clearance (m), both soles: ``centres`` (T, 2, 3), ``lowest`` (T, 2) lowest sole points,
-    ``speed`` (T - 1, 2) horizontal sole-centre speeds (see the module docstring)."""
-    out = []
+def step_clearances(centres: np.ndarray, lowest: np.ndarray, speed: np.ndarray, fps: float) -> tuple[list, int]:
+    """(each step's clearance (m), the number of slides), both soles: ``centres`` (T, 2, 3), ``lowest``
+    (T, 2) lowest sole points, ``speed`` (T - 1, 2) horizontal sole-centre speeds (see the module
+    docstring)."""
+    out, slides = [], 0
     for i in range(2):
         for a, b in spans(speed[:, i] > STEP_SPEED):  # moving between frames a and b + 1
-            if a > 0 and b + 2 < len(lowest) and np.linalg.norm(centres[b + 1, i, :2] - centres[a, i, :2]) >= STEP_MIN:
+            inside = a > 0 and b + 2 < len(lowest)
+            if not inside or np.linalg.norm(centres[b + 1, i, :2] - centres[a, i, :2]) < STEP_MIN:
+                continue
+            if (b + 1 - a) / fps < STEP_TIME:
+                slides += 1
+            else:
                 out.append(float(lowest[a : b + 2, i].max()))
-    return out
+    return out, slides
 
 
 def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
@@ -122,7 +132,7 @@ def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
     lo, hi = robot.ranges[:, 0], robot.ranges[:, 1]
     over = np.maximum(lo - motion.joint_angles, motion.joint_angles - hi).max(initial=0.0)
     speed = np.linalg.norm(np.diff(centres[..., :2], axis=0), axis=-1) * motion.fps
-    clearances = step_clearances(centres, lowest, speed)
+    clearances, slides = step_clearances(centres, lowest, speed, motion.fps)
     planted = _planted(motion, highest)
     return ReplayReport(
         range_overshoot=float(max(over, 0.0)),
@@ -132,6 +142,7 @@ def replay_report(motion: RobotMotion, robot: Robot) -> ReplayReport:
         travel=float(np.linalg.norm(motion.root_position[-1, :2] - motion.root_position[0, :2])),
         leg_overlap=float(overlap),
         steps=len(clearances),
+        slides=slides,
         swing_clearance=float(min(clearances, default=np.inf)),
         sole_centres=centres,
         points=points,

@@ -30,14 +30,14 @@ def robot_measures(motion, robot_motion: RobotMotion, robot: Robot) -> dict:
     """The replay measurements of a human ``motion``'s ``robot_motion``: range overshoot (rad), lowest sole
     and planted-sole slide (m, m/s), travel (m) and its ratio to the human's beside the ratio of leg
     lengths (the travel is scaled by it), leg overlap (m), the steps and the least clearance of a swing (m,
-    None without steps); ``dynamics`` (kinema.robot.dynamics), its one-line ``dynamics_summary`` and, for
-    a motion that is not feasible, its one-line ``warning``."""
+    None without steps) and the slides (moves too short for steps); ``dynamics`` (kinema.robot.dynamics),
+    its one-line ``dynamics_summary`` and, for a motion that is not feasible, its one-line ``warning``."""
     rep = replay_report(robot_motion, robot)
     dynamics = dynamics_report(robot_motion, robot)
     return {"robot": robot.name, "range_overshoot_rad": rep.range_overshoot, "lowest_sole_m": rep.lowest_sole,
             "planted_slide_m_s": rep.planted_slide, "travel_m": rep.travel,
             "leg_scale": leg_scale(motion, robot_sizes(robot)), "travel_ratio": _travel_ratio(motion, rep.travel),
-            "leg_overlap_m": rep.leg_overlap, "steps": rep.steps,
+            "leg_overlap_m": rep.leg_overlap, "steps": rep.steps, "slides": rep.slides,
             "swing_clearance_m": rep.swing_clearance if rep.steps else None, "feasible": dynamics.feasible,
             "dynamics_summary": dynamics.summary(), "warning": dynamics.warning(), "dynamics": dynamics.as_dict()}
 
@@ -47,7 +47,7 @@ def replay_words(measured: dict) -> str:
     m = measured
     ratio = "" if m["travel_ratio"] is None else f" ({m['travel_ratio']:.2f} of the human's; legs {m['leg_scale']:.2f})"
     steps = (f"{m['steps']} steps clearing at least {100 * m['swing_clearance_m']:.1f} cm" if m["steps"]
-             else "no steps")
+             else "no steps") + (f", {m['slides']} slides" if m["slides"] else "")
     return (f"range overshoot {m['range_overshoot_rad']:.3f} rad, lowest sole {100 * m['lowest_sole_m']:+.1f} cm, "
             f"planted-sole slide {m['planted_slide_m_s']:.2f} m/s, travel {m['travel_m']:.2f} m{ratio}, {steps}")
 

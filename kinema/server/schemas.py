@@ -20,7 +20,7 @@ from pydantic.json_schema import SkipJsonSchema
 
 from kinema.errors import KinemaError
 from kinema.pipeline.request import GenerationRequest, RequestBounds
-from kinema.pipeline.request_json import Segment, Strict, _no_bool, request_model, to_request
+from kinema.pipeline.request_json import Segment, Strict, number_only, request_model, to_request
 from kinema.server.config import ServerLimits
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -136,7 +136,7 @@ def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> 
     bounds = RequestBounds(max_seconds=limits.max_seconds, max_samples=limits.max_samples,
                            max_steps=limits.max_steps, max_prompt_chars=limits.max_prompt_chars)
     prompt_t = Annotated[str, Field(max_length=limits.max_prompt_chars)]
-    seconds_t = Annotated[float, BeforeValidator(_no_bool), Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
+    seconds_t = Annotated[float, BeforeValidator(number_only), Field(gt=0, le=limits.max_seconds, allow_inf_nan=False)]
     these_limits = limits  # a class body cannot read an enclosing name it also assigns
 
     class LimitedSegment(Segment):
@@ -162,7 +162,7 @@ def build_request_model(limits: ServerLimits, cls: type = GenerationRequest) -> 
         "format": (Format, Field("bvh", description="bvh (text), npz or glb (base64), json (arrays); with a robot "
                                                    "csv (text) or npz")),
         "robot": (Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]{1,40}$")] | None,
-                  Field(None, description="a built-in robot by name ('g1'); the server reads no MJCF files")),
+                  Field(None, description="a built-in robot by name ('g1' or 'h1'); the server reads no MJCF files")),
         "robot_mapping": (dict[str, Any] | None, Field(None, description="the robot's bodies as human joints, inline")),
     }
     extra = {"model": (str | None, Field(None, max_length=200, description="a name from GET /v1/models "
