@@ -228,3 +228,20 @@ def test_a_character_stands_on_the_world_floor_whatever_its_rest_height(drop):
     P = retarget(source_walk(), moved).positions
     lowest = float(P[..., 1].min())
     assert -0.02 * height <= lowest <= 0.08 * height, lowest
+
+
+# ---------------------------------------------------------------------------- the server
+def test_the_server_takes_numbers_as_numbers_only():
+    """"seconds": "5" was taken while "samples": "2" was refused; both are 422 naming the field."""
+    from fastapi.testclient import TestClient
+
+    from kinema.server.app import create_app
+    from kinema.server.config import ServerConfig, ServerLimits
+    from kinema.server.models import ModelRegistry
+
+    client = TestClient(create_app(ServerConfig(limits=ServerLimits(max_steps=4)), ModelRegistry.load(["default"])))
+    for body, path in (({"prompt": "walk", "seconds": "5"}, "$.seconds"),
+                       ({"prompt": "walk", "samples": "2"}, "$.samples"),
+                       ({"timeline": [{"prompt": "walk", "seconds": "1"}]}, "$.timeline[0].seconds")):
+        answer = client.post("/v1/generate", json=body | {"steps": 2})
+        assert answer.status_code == 422 and answer.json()["detail"][0]["path"] == path, answer.text

@@ -30,10 +30,11 @@ class Segment(Strict):
     seconds: Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
-def _no_bool(value: Any) -> Any:
-    """Numbers only: JSON ``true`` is not 1 (pydantic would take it)."""
-    if isinstance(value, bool):
-        raise ValueError("expected a number, got a boolean")
+def number_only(value: Any) -> Any:
+    """Numbers only: JSON ``true`` is not 1 and ``"5"`` is not 5 (pydantic would take both), as integer
+    fields (StrictInt) take neither."""
+    if isinstance(value, bool | str):
+        raise ValueError(f"expected a number, got {'a boolean' if isinstance(value, bool) else 'a string'}")
     return value
 
 
@@ -46,7 +47,7 @@ def _number_type(opt: Option, bounds: RequestBounds, integer: bool) -> Any:
         limits["le"] = high
     if integer:
         return Annotated[StrictInt, Field(**limits)]
-    return Annotated[float, BeforeValidator(_no_bool), Field(allow_inf_nan=False, **limits)]
+    return Annotated[float, BeforeValidator(number_only), Field(allow_inf_nan=False, **limits)]
 
 
 def field_type(opt: Option, bounds: RequestBounds | None = None) -> Any:
