@@ -245,3 +245,26 @@ def test_the_server_takes_numbers_as_numbers_only():
                        ({"timeline": [{"prompt": "walk", "seconds": "1"}]}, "$.timeline[0].seconds")):
         answer = client.post("/v1/generate", json=body | {"steps": 2})
         assert answer.status_code == 422 and answer.json()["detail"][0]["path"] == path, answer.text
+
+
+@pytest.mark.parametrize(("field", "value"), [("translation", [1.5, 0.25, 0.25]), ("rotation", [0, 0, 0, 0]),
+                                              ("scale", [1, "x", 1])])
+def test_a_glb_node_with_a_bad_transform_is_one_line_naming_the_file(tmp_path, capsys, field, value):
+    import warnings
+
+    import pygltflib
+
+    from tests.gltf_synthetic import write_synthetic_glb
+
+    glb = pygltflib.GLTF2().load(str(write_synthetic_glb(tmp_path / "good.glb")))
+    names = [n.name for n in glb.nodes]
+    setattr(glb.nodes[names.index("Neck")], field, value)
+    glb.save(str(tmp_path / "bad.glb"))
+    if field == "translation":  # JSON's NaN, which pygltflib does not write: the same length in place
+        data = (tmp_path / "bad.glb").read_bytes()
+        assert data.count(b"[1.5,0.25,0.25]") == 1
+        (tmp_path / "bad.glb").write_bytes(data.replace(b"[1.5,0.25,0.25]", b"[NaN,0.25,0.25]"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no numpy RuntimeWarning before the error
+        assert main(["inspect", str(tmp_path / "bad.glb")]) == 2
+    one_line_error(capsys, f"bad.glb: node {names.index('Neck')} (Neck) has a bad {field}")

@@ -19,6 +19,7 @@ What is read, and how it maps to kinema (metres, Y up, quaternions ``(w, x, y, z
 from __future__ import annotations
 
 import math
+import reprlib
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from kinema.finite import is_finite_real
 from kinema.geometry.rotations import quat_mul, quat_rotate
 from kinema.input_files import read_bytes_bounded
 from kinema.io.gltf_data import GltfBuffers, GltfDocument, GltfError, decompose, node_matrix, parse_document, sample
@@ -96,6 +98,24 @@ def _check_skins(gltf, path: Path) -> None:
     for n, node in enumerate(gltf.nodes):
         if node.skin is not None and not (type(node.skin) is int and 0 <= node.skin < len(gltf.skins)):
             raise GltfError(f"{path}: node {n} uses skin {node.skin!r}, which does not exist")
+
+
+_TRANSFORM_SIZES = {"matrix": 16, "translation": 3, "rotation": 4, "scale": 3}
+
+
+def _check_transforms(gltf, path: Path) -> None:
+    """Every node's matrix / translation / rotation / scale is a list of finite numbers of its size, and a
+    rotation is no zero quaternion (NaN transforms used to reach the rig as numpy warnings and an error
+    naming no file)."""
+    for n, node in enumerate(gltf.nodes):
+        for key, size in _TRANSFORM_SIZES.items():
+            value = getattr(node, key)
+            if value is None:
+                continue
+            ok = isinstance(value, list) and len(value) == size and all(is_finite_real(v) for v in value)
+            if not ok or (key == "rotation" and not any(value)):
+                raise GltfError(f"{path}: node {n} ({_node_name(gltf, n)}) has a bad {key} {reprlib.repr(value)}; "
+                                f"expected {size} finite numbers{' (not all zero)' if key == 'rotation' else ''}")
 
 
 def _select_joints(gltf, parent, parts: list[RawPart], keep_helpers: bool):
@@ -332,6 +352,7 @@ def read_gltf(
     if not gltf.skins:
         raise GltfError(f"{path}: has no skin (armature); kinema reads skinned, rigged models")
     _check_skins(gltf, path)
+    _check_transforms(gltf, path)
     buffers = GltfBuffers(gltf, path)
     parent = _parents(gltf, path)
     world = _world(gltf, parent)
