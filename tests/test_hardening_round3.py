@@ -268,3 +268,35 @@ def test_a_glb_node_with_a_bad_transform_is_one_line_naming_the_file(tmp_path, c
         warnings.simplefilter("error")  # no numpy RuntimeWarning before the error
         assert main(["inspect", str(tmp_path / "bad.glb")]) == 2
     one_line_error(capsys, f"bad.glb: node {names.index('Neck')} (Neck) has a bad {field}")
+
+
+def test_checking_an_inline_rig_does_not_hold_up_the_server(monkeypatch):
+    """/healthz took 1.6-3.5 s while a 909 KB inline BVH was checked on the event loop."""
+    import threading
+
+    from fastapi.testclient import TestClient
+
+    import kinema.server.app as server_app
+    from kinema.server.config import ServerConfig, ServerLimits
+    from kinema.server.errors import RequestError
+    from kinema.server.models import ModelRegistry
+
+    checking, answered = threading.Event(), threading.Event()
+
+    def slow_prepare(*args):
+        checking.set()
+        assert answered.wait(20), "/healthz did not answer while a request was being checked"
+        raise RequestError.at(["body", "rig"], "checked")
+
+    monkeypatch.setattr(server_app, "prepare", slow_prepare)
+    client = TestClient(server_app.create_app(ServerConfig(limits=ServerLimits(max_steps=4)),
+                                              ModelRegistry.load(["default"])))
+    with client:
+        posted = []
+        poster = threading.Thread(target=lambda: posted.append(client.post("/v1/generate", json={"prompt": "x"})))
+        poster.start()
+        assert checking.wait(20)
+        assert client.get("/healthz").status_code == 200
+        answered.set()
+        poster.join(30)
+    assert posted and posted[0].status_code == 422 and "checked" in posted[0].text

@@ -119,7 +119,7 @@ def _add_generate_route(v1: APIRouter, request_model, registry: ModelRegistry, p
     @v1.post("/generate", response_model=GenerateResponse, tags=["generate"], responses=ERRORS | TIMEOUT)
     async def generate(body: request_model):
         """Generate motion(s); answers with them and the residual report when done."""
-        prep = prepare(body, registry, limits.max_steps)
+        prep = await asyncio.to_thread(prepare, body, registry, limits.max_steps)  # reads inline rigs
         try:
             future = pool.submit(execute, prep)
         except PoolFull as full:
@@ -136,7 +136,7 @@ def _add_job_routes(v1: APIRouter, request_model, registry: ModelRegistry, pool:
     @v1.post("/jobs", response_model=JobOut, status_code=202, tags=["jobs"], responses=ERRORS)
     async def create_job(body: request_model):
         """Queue a generation; poll ``GET /v1/jobs/{id}``, then download ``/result`` or ``/motions/{i}``."""
-        prep = prepare(body, registry, limits.max_steps)
+        prep = await asyncio.to_thread(prepare, body, registry, limits.max_steps)  # reads inline rigs
         try:
             job = store.create()
         except StoreFull as full:
