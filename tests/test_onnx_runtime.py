@@ -2,9 +2,9 @@
 
 The shipped model is exported once into a temporary folder; the same prompt and initial noise through
 Python's ``generate(postprocess=False)`` and through the exported graphs with the numpy loop give joint
-positions within :data:`MEAN_MM` / :data:`MAX_MM` (fp32), with and without waypoints and on the action
-expert; grounding from the JSON alone equals kinema.model.grounding; the float16-weight graphs stay
-close; bad inputs are one-line errors. The export is shared with tests/test_web_runtime.py
+positions within :data:`MEAN_MM` / :data:`MAX_MM` (fp32): text alone, waypoints, a dense path, full-body
+keyframes, and on the action expert; grounding from the JSON alone equals kinema.model.grounding; the
+float16-weight graphs stay close; bad inputs are one-line errors. The export is shared with tests/test_web_runtime.py
 (tests/onnx_export.py).
 """
 
@@ -23,6 +23,7 @@ pytest.importorskip("onnxruntime", reason="pip install 'kinema[onnx]'")
 pytest.importorskip("onnxscript", reason="pip install 'kinema[onnx]'")
 
 from kinema.cli import main as cli_main  # noqa: E402
+from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
 from kinema.motion.smoothing import smooth_time  # noqa: E402
 from kinema.portable.noise import standard_normal, uniforms  # noqa: E402
 from kinema.portable.runtime import OnnxHumanModel, read_manifest  # noqa: E402
@@ -110,6 +111,37 @@ def test_waypoints_agree_and_are_met_raw(runtime, pipeline):
         assert np.hypot(*(pelvis[round(t * pipeline.fps)] - [x, z])) < 0.10
 
 
+def test_dense_path_agrees_with_generate(runtime, pipeline):
+    path = ((0.0, 0.5, 0.5), (0.6, 2.0, 2.0), (1.5, 3.5, 3.5))  # (x, z, seconds)
+    frames = round(SECONDS * pipeline.fps)
+    noise = torch_noise(8, frames, runtime.m["feature_dim"])
+    out = runtime.generate(PROMPT, SECONDS, path=path, noise=noise, steps=10)
+    cons = [{"type": "root2d", "dense": True, "frame_indices": [round(t * pipeline.fps) for *_, t in path],
+             "smooth_root_2d": [[x, z] for x, z, _ in path]}]
+    want = pipeline.generate(PROMPT, seconds=SECONDS, seed=8, postprocess=False, constraints=cons, steps=10)
+    mean, worst = distances_mm(out["positions"], want.motions[0].global_transforms()[1].numpy())
+    print(f"dense path (10 steps): onnxruntime vs generate {mean:.4f} mm mean, {worst:.4f} mm max")
+    assert mean < MEAN_MM and worst < MAX_MM
+
+
+def test_fullbody_keyframes_agree_with_generate(runtime, pipeline):
+    src = pipeline.generate(PROMPT, seconds=SECONDS, seed=1, postprocess=False, steps=10).motions[0]
+    aa, root = quat_to_axis_angle(src.local_rotations).numpy(), src.root_translation.numpy()
+    frames = [40, 80]
+    cons = [{"type": "fullbody", "frame_indices": frames, "local_joints_rot": aa[frames].tolist(),
+             "root_positions": root[frames].tolist()}]
+    want = pipeline.generate(PROMPT, seconds=SECONDS, seed=9, postprocess=False, steps=10, constraints=cons)
+    noise = torch_noise(9, round(SECONDS * pipeline.fps), runtime.m["feature_dim"])
+    out = runtime.generate(PROMPT, SECONDS, noise=noise, steps=10,
+                           keyframes=[(f / pipeline.fps, root[f], aa[f]) for f in frames])
+    mean, worst = distances_mm(out["positions"], want.motions[0].global_transforms()[1].numpy())
+    print(f"full-body keyframes (10 steps): onnxruntime vs generate {mean:.4f} mm mean, {worst:.4f} mm max")
+    assert mean < MEAN_MM and worst < MAX_MM
+    posed = src.global_transforms()[1].numpy()
+    for f in frames:  # the keyframed poses are met raw within a few centimetres
+        assert np.linalg.norm(out["positions"][f] - posed[f], axis=-1).mean() < 0.03
+
+
 def test_grounding_from_json_equals_python(runtime, pipeline):
     prompts = ["A person walks forward.", "Someone strolls slowly ahead.", "A person jabs with the right hand.",
                "A man kicks hard using his left leg.", "A person dances wildly.", "Somebody heads forward.",
@@ -144,6 +176,10 @@ def test_bad_inputs_are_one_line_errors(runtime, tmp_path, capsys):
         runtime.generate(PROMPT, 30.0)
     with pytest.raises(KinemaError, match="outside the motion"):
         runtime.generate(PROMPT, 2.0, waypoints=[(0.0, 1.0, 3.0)])
+    with pytest.raises(KinemaError, match="increasing frames"):
+        runtime.generate(PROMPT, 2.0, path=[(0.0, 1.0, 1.0), (0.0, 2.0, 0.5)])
+    with pytest.raises(KinemaError, match="rotations 21 x 3"):
+        runtime.generate(PROMPT, 2.0, keyframes=[(1.0, (0.0, 0.9, 0.0), np.zeros((20, 3)))])
     with pytest.raises(KinemaError, match="non-empty"):
         runtime.generate("  ", 2.0)
     with pytest.raises(KinemaError, match="not an exported kinema folder"):

@@ -6,6 +6,7 @@ the JavaScript runtime (web/kinema-runtime.js on onnxruntime-web) makes Python's
   joint positions (1 mm mean / 5 mm max, fp32).
 - Seeded (the documented mulberry32 noise) with two waypoints: the same motion as the Python onnxruntime
   reference, and each waypoint met raw within 10 cm.
+- A dense path and full-body keyframes: the same motion as the Python onnxruntime reference.
 - The form: a typed prompt makes a 5-s walk (its time is printed), the BVH download holds the shown motion.
 - Bad input is a one-line error.
 
@@ -36,9 +37,11 @@ pytest.importorskip("onnxruntime", reason="pip install 'kinema[onnx]'")
 pytest.importorskip("onnxscript", reason="pip install 'kinema[onnx]'")
 
 from kinema.errors import KinemaError  # noqa: E402
+from kinema.geometry.rotations import matrix_to_quat, quat_to_axis_angle  # noqa: E402
 from kinema.io.bvh import read_bvh  # noqa: E402
 from kinema.motion.smoothing import smooth_time  # noqa: E402
 from kinema.portable.runtime import OnnxHumanModel  # noqa: E402
+from kinema.portable.sampler import sixd_to_matrix  # noqa: E402
 from kinema.portable.serve import WebServer, check_page  # noqa: E402
 from tests.onnx_export import export_once  # noqa: E402
 
@@ -113,6 +116,34 @@ def test_seeded_waypoints_match_the_reference_and_are_met(page, model_dir):
     misses = [float(np.hypot(*(pelvis[round(w["time"] * got["fps"])] - [w["x"], w["z"]]))) for w in waypoints]
     print(f"page waypoint residuals (raw, smoothed pelvis): {[round(m * 100, 1) for m in misses]} cm")
     assert max(misses) < 0.10
+
+
+def test_dense_path_matches_the_reference(page, model_dir):
+    path = [{"x": 0.0, "z": 0.5, "time": 0.5}, {"x": 0.6, "z": 2.0, "time": 2.0}, {"x": 1.5, "z": 3.5, "time": 3.5}]
+    got = page.evaluate("(a) => window.kinema.generate(a)",
+                        {"prompt": PROMPT, "seconds": 4.0, "seed": 2, "steps": 5, "path": path})
+    ref = OnnxHumanModel(model_dir).generate(PROMPT, 4.0, seed=2, steps=5,
+                                             path=[(w["x"], w["z"], w["time"]) for w in path])
+    pos = np.asarray(got["positions"]).reshape(ref["positions"].shape)
+    assert np.linalg.norm(pos - ref["positions"], axis=-1).max() < 0.005
+
+
+def test_fullbody_keyframes_match_the_reference(page, model_dir):
+    ref = OnnxHumanModel(model_dir)
+    src = ref.generate(PROMPT, 5.0, seed=1, steps=5)
+    sl, parents = ref.m["layout"]["slices"], ref.m["skeleton"]["parents"]
+    G = sixd_to_matrix(src["features"][:, slice(*sl["joint_rot"])].reshape(len(src["positions"]), len(parents), 6))
+    keyframes = []
+    for f in (30, 70):  # the reference motion's poses as local axis-angle rotations
+        local = np.stack([G[f, j] if p < 0 else G[f, p].T @ G[f, j] for j, p in enumerate(parents)])
+        keyframes.append({"time": f / 20, "root": src["positions"][f, 0].tolist(),
+                          "rotations": quat_to_axis_angle(matrix_to_quat(torch.from_numpy(local))).tolist()})
+    got = page.evaluate("(a) => window.kinema.generate(a)",
+                        {"prompt": PROMPT, "seconds": 5.0, "seed": 4, "steps": 5, "keyframes": keyframes})
+    want = ref.generate(PROMPT, 5.0, seed=4, steps=5,
+                        keyframes=[(k["time"], k["root"], k["rotations"]) for k in keyframes])["positions"]
+    pos = np.asarray(got["positions"]).reshape(want.shape)
+    assert np.linalg.norm(pos - want, axis=-1).max() < 0.005
 
 
 def test_form_generates_and_downloads_the_shown_motion_as_bvh(page, tmp_path):

@@ -110,13 +110,13 @@ function timed(list, seconds, fps) {
 
 async function generate(opts = {}) {
   if (!model) throw new KinemaError("the model is not loaded yet");
-  const {prompt, seconds = 5, seed = 0, waypoints: wps = [], steps, noise} = opts;
+  const {prompt, seconds = 5, seed = 0, waypoints: wps = [], path = [], keyframes = [], steps, noise} = opts;
   $("generate").disabled = true;
   $("error").textContent = "";
   const progress = $("progress");
   progress.value = 0;
   try {
-    const m = await model.generate({prompt, seconds, seed, steps, noise: noise ? Float32Array.from(noise) : undefined,
+    const m = await model.generate({prompt, seconds, seed, steps, path, keyframes, noise: noise ? Float32Array.from(noise) : undefined,
       waypoints: timed(wps, seconds, model.fps), onStep: (d, n) => { progress.value = d / n; }});
     showMotion(m);
     markers.clear();  // the waypoints this motion was made with

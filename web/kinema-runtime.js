@@ -271,6 +271,19 @@ function displaceChannel(x0, aim, mask, T, D, c, origin) {
   }
 }
 
+function axisAngleToMatrix(aa) {  // Rodrigues, row-major 3x3
+  const angle = Math.hypot(aa[0], aa[1], aa[2]), l = Math.max(angle, 1e-12);
+  const [x, y, z] = aa.map((v) => v / l), c = Math.cos(angle), s = Math.sin(angle), C = 1 - c;
+  return [c + x * x * C, x * y * C - z * s, x * z * C + y * s,
+    y * x * C + z * s, c + y * y * C, y * z * C - x * s,
+    z * x * C - y * s, z * y * C + x * s, c + z * z * C];
+}
+
+const matMul = (A, B) => Array.from({length: 9}, (_, k) => {
+  const r = Math.floor(k / 3), c = k % 3;
+  return A[3 * r] * B[c] + A[3 * r + 1] * B[3 + c] + A[3 * r + 2] * B[6 + c];
+});
+
 function sixdToMatrix(d) {  // columns b1, b2, b3 (row-major 3x3)
   const n = (v) => { const l = Math.sqrt(Math.max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2], 1e-38)); return v.map((x) => x / l); };
   const b1 = n([d[0], d[1], d[2]]);
@@ -345,8 +358,10 @@ export class KinemaModel {
     return T;
   }
 
-  // {prompt, seconds, seed, waypoints: [{x, z, time}], steps, noise (Float32Array T*D), guidance: [w_text, w_constr], onStep}
-  async generate({prompt, seconds = 5, seed = 0, waypoints = [], steps, noise, guidance, onStep} = {}) {
+  // {prompt, seconds, seed, waypoints: [{x, z, time}], path: [{x, z, time}] (dense),
+  //  keyframes: [{time, root: [x, y, z], rotations: J x [ax, ay, az] local axis-angle}], steps, noise (Float32Array T*D),
+  //  guidance: [w_text, w_constr], onStep}
+  async generate({prompt, seconds = 5, seed = 0, waypoints = [], path = [], keyframes = [], steps, noise, guidance, onStep} = {}) {
     const m = this.m, t0 = performance.now();
     if (typeof prompt !== "string" || !prompt.trim()) throw new KinemaError("prompt must be a non-empty text");
     const T = this.frames(seconds), D = m.feature_dim, fps = this.fps;
@@ -361,18 +376,41 @@ export class KinemaModel {
     const grounded = await this.condition(prompt);
     const graph = this.graphFor(prompt, grounded);
     const [rx, rz] = m.layout.root_xz, [px, pz] = m.layout.pelvis_xz;
-    // constraints: waypoints on the smoothed root
+    // constraints (docs/onnx_runtime.md step 5): full-body keyframes, then waypoints at their frames, then a
+    // dense path (a later entry wins); a keyframe's joint x/z are relative to its frame's final root x/z
     let tgtN = null, mask = null;
-    if (!Array.isArray(waypoints)) throw new KinemaError("waypoints must be a list of {x, z, time}");
-    if (waypoints.length) {
-      tgtN = new Float32Array(T * D); mask = new Float32Array(T * D);
-      for (const w of waypoints) {
-        if (![w?.x, w?.z, w?.time].every((v) => typeof v === "number" && Number.isFinite(v))) throw new KinemaError(`waypoint ${JSON.stringify(w)}: x, z and time must be finite numbers`);
-        const f = Math.round(w.time * fps);
-        if (f < 0 || f >= T) throw new KinemaError(`waypoint time ${w.time} s is outside the motion (0 to ${(T - 1) / fps} s)`);
-        for (const [c, v] of [[rx, w.x], [rz, w.z]]) { tgtN[f * D + c] = (v - this.mean[c]) / this.std[c]; mask[f * D + c] = 1; }
+    for (const [name, v] of [["waypoints", waypoints], ["path", path], ["keyframes", keyframes]]) {
+      if (!Array.isArray(v)) throw new KinemaError(`${name} must be a list`);
+    }
+    const frameOf = (w, what) => {
+      if (![w?.x ?? 0, w?.z ?? 0, w?.time].every((v) => typeof v === "number" && Number.isFinite(v))) throw new KinemaError(`${what} ${JSON.stringify(w).slice(0, 80)}: x, z and time must be finite numbers`);
+      const f = Math.round(w.time * fps);
+      if (f < 0 || f >= T) throw new KinemaError(`${what} time ${w.time} s is outside the motion (0 to ${(T - 1) / fps} s)`);
+      return f;
+    };
+    const tgt = new Float64Array(T * D);
+    if (waypoints.length || path.length || keyframes.length) mask = new Float32Array(T * D);
+    const put = (f, x, z) => { tgt[f * D + rx] = x; tgt[f * D + rz] = z; mask[f * D + rx] = 1; mask[f * D + rz] = 1; };
+    const world = keyframes.map((k) => this.keyframe(k, tgt, mask, frameOf(k, "keyframe")));
+    for (const w of waypoints) put(frameOf(w, "waypoint"), w.x, w.z);
+    if (path.length) {
+      const fs = path.map((w) => frameOf(w, "path point"));
+      if (fs.length < 2 || fs.some((f, i) => i > 0 && f <= fs[i - 1])) throw new KinemaError("a path needs at least two points at increasing frames");
+      for (let k = 0; k + 1 < fs.length; k++) {
+        for (let f = fs[k]; f <= fs[k + 1]; f++) {
+          const a = (f - fs[k]) / (fs[k + 1] - fs[k]);
+          put(f, path[k].x + a * (path[k + 1].x - path[k].x), path[k].z + a * (path[k + 1].z - path[k].z));
+        }
       }
     }
+    const jp0 = m.layout.slices.joint_pos[0];
+    for (const {f, xz} of world) {
+      for (let j = 0; j < xz.length; j++) {
+        tgt[f * D + jp0 + 3 * j] = xz[j][0] - tgt[f * D + rx];
+        tgt[f * D + jp0 + 3 * j + 2] = xz[j][1] - tgt[f * D + rz];
+      }
+    }
+    if (mask) tgtN = Float32Array.from(tgt, (v, i) => (Math.fround(v) - this.mean[i % D]) / this.std[i % D] * mask[i]);
     let {mode, w_text: wt, w_constr: wc} = m.guidance;
     if (guidance) { mode = "separated"; [wt, wc] = guidance; }
     if (!mask && mode === "separated") mode = "regular";
@@ -432,6 +470,37 @@ export class KinemaModel {
     return {fps, names: sk.names, parents: sk.parents, offsets: sk.offsets, frames: T, positions, rotations,
       grounding: {status: grounded.status, captions: grounded.captions}, graph, guidance: mode,
       seconds: (performance.now() - t0) / 1000};
+  }
+
+  // one full-body keyframe's channels into tgt / mask at frame f; returns {f, xz: world joint x/z}
+  keyframe(k, tgt, mask, f) {
+    const m = this.m, sk = m.skeleton, sl = m.layout.slices, D = m.feature_dim, J = sk.parents.length;
+    const rot = k.rotations, root = k.root;
+    const finite = (a, n) => Array.isArray(a) && a.length === n && a.every((v) => typeof v === "number" && Number.isFinite(v));
+    if (!finite(root, 3) || !Array.isArray(rot) || rot.length !== J || !rot.every((r) => finite(r, 3))) {
+      throw new KinemaError(`keyframe at ${k.time} s: root must be 3 finite numbers and rotations ${J} x 3`);
+    }
+    if (sk.left_hip == null) throw new KinemaError("this model's skeleton names no hips, so its keyframes have no heading");
+    const G = [], P = [];
+    sk.parents.forEach((p, j) => {
+      const L = axisAngleToMatrix(rot[j]);
+      if (p < 0) { G.push(L); P.push([...root]); return; }
+      G.push(matMul(G[p], L));
+      const o = sk.offsets[j], A = G[p];
+      P.push([0, 1, 2].map((a) => P[p][a] + A[3 * a] * o[0] + A[3 * a + 1] * o[1] + A[3 * a + 2] * o[2]));
+    });
+    const set = (c, v) => { tgt[f * D + c] = v; mask[f * D + c] = 1; };
+    const r = P[sk.root];
+    [0, 1, 2].forEach((a) => set(sl.root_pos[0] + a, r[a]));
+    const v = [0, 1, 2].map((a) => P[sk.right_hip][a] - P[sk.left_hip][a]);
+    const fx = v[2], fz = -v[0], n = Math.max(Math.hypot(fx, fz), 1e-9);
+    set(sl.heading[0], fz / n); set(sl.heading[0] + 1, fx / n);
+    for (let j = 0; j < J; j++) {
+      [0, 1, 2].forEach((a) => set(sl.joint_pos[0] + 3 * j + a, a === 1 ? P[j][1] : 0));
+      const A = G[j];
+      [A[0], A[3], A[6], A[1], A[4], A[7]].forEach((x, i) => set(sl.joint_rot[0] + 6 * j + i, x));
+    }
+    return {f, xz: P.map((p) => [p[0], p[2]])};
   }
 
   // joint positions (T*J*3) and global rotation matrices (T*J*9, row-major) of unnormalised features

@@ -15,6 +15,7 @@ import base64
 import numpy as np
 
 from kinema.diffusion.sampler import spaced_timesteps
+from kinema.errors import KinemaError
 from kinema.human.sampling import ROOT_SMOOTHING_SECONDS
 from kinema.model.actions import ACTION_VERBS, ACTION_WORDS, actions_in
 from kinema.model.grounding import _AWAY_FROM_FORWARD, EXACT_ABOVE, off_forward
@@ -73,6 +74,15 @@ def grounding_table(known: KnownPrompts, settings) -> dict:
     }
 
 
+def _hips(skel) -> dict:
+    """The hip joints a full-body keyframe's heading is measured between (kinema.motion.heading)."""
+    try:
+        roles = skel.require_roles(["left_hip", "right_hip"])
+    except KinemaError:
+        return {"left_hip": None, "right_hip": None}
+    return {"left_hip": int(roles["left_hip"]), "right_hip": int(roles["right_hip"])}
+
+
 def build_manifest(loaded: LoadedModel, known: KnownPrompts | None, graphs: dict, text: dict, source: str) -> dict:
     """The runtime JSON of a loaded human model (module docstring); ``graphs``/``text`` describe the files."""
     rep, sampler, cfg = loaded.representation, loaded.sampler, loaded.denoiser.config
@@ -97,7 +107,7 @@ def build_manifest(loaded: LoadedModel, known: KnownPrompts | None, graphs: dict
         "normalization": {"mean": _floats(rep.mean), "std": _floats(rep.std)},
         "skeleton": {"name": skel.name, "names": list(skel.names), "parents": [int(p) for p in skel.parents],
                      "offsets": [_floats(o) for o in skel.offsets], "root": int(rep.rig.root), "up": "+Y",
-                     "forward": "+Z", "units": "metres"},
+                     "forward": "+Z", "units": "metres", **_hips(skel)},
         "schedule": {"kind": sampler.schedule.to_dict().get("kind"), "num_train_steps": sampler.num_train_steps,
                      "alphas_cumprod": _floats(abar), "timestep_spacing": sampler.timestep_spacing,
                      "eta": sampler.eta, "steps": sampler.num_inference_steps,

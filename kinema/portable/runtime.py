@@ -21,8 +21,10 @@ from kinema.portable.noise import standard_normal
 from kinema.portable.sampler import (
     ddim_step,
     displace_root,
+    heading_of,
     joint_positions,
     pelvis_offset_targets,
+    pose_from_local,
     smooth_time,
     spaced_timesteps,
 )
@@ -56,6 +58,16 @@ def frames_for(seconds, fps: float, max_frames: int) -> int:
     if not 2 <= T <= max_frames:
         raise KinemaError(f"seconds must be in [{2 / fps:g}, {max_frames / fps:g}], got {seconds:g}")
     return T
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A whole pose at ``time`` seconds: the root joint's world ``root`` (3,) metres and every joint's local
+    rotation ``rotations`` (J, 3) axis-angle radians (parent frame -> joint frame; zeros: the rest pose)."""
+
+    time: float
+    root: tuple
+    rotations: tuple
 
 
 class OnnxHumanModel:
@@ -113,27 +125,74 @@ class OnnxHumanModel:
         return "action_expert" if self.grounding.actions(words) & set(expert["actions"]) else "denoiser"
 
     # ------------------------------------------------------------------ constraints
-    def targets(self, T: int, waypoints) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Unnormalised targets and mask ``(T, D)`` of waypoints (root x/z at their frames), or (None, None)."""
-        if not waypoints:
+    def targets(self, T: int, waypoints=(), path=(), keyframes=()) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Unnormalised targets and mask ``(T, D)`` of the constraints, or (None, None) without any: full-body
+        keyframes, then each waypoint at its frame, then a dense path (keyframes at increasing frames,
+        positions linearly interpolated onto every frame between the first and the last); a later entry
+        wins, and a keyframe's joint x/z are made relative to its frame's final root x/z."""
+        if not waypoints and not path and not keyframes:
             return None, None
         D, fps = self.m["feature_dim"], self.m["fps"]
         rx, rz = self.m["layout"]["root_xz"]
         tgt, mask = np.zeros((T, D), np.float32), np.zeros((T, D), np.float32)
-        for w in waypoints:
-            w = w if isinstance(w, Waypoint) else Waypoint(*w)
-            if not all(math.isfinite(float(v)) for v in (w.x, w.z, w.time)):
-                raise KinemaError(f"waypoint {w}: x, z and time must be finite numbers")
+
+        def frame_of(w, what: str) -> int:
+            if not all(math.isfinite(float(v)) for v in (w.x, w.z, w.time) if v is not None):
+                raise KinemaError(f"{what} {w}: x, z and time must be finite numbers")
             f = round(w.time * fps)
             if not 0 <= f < T:
-                raise KinemaError(f"waypoint time {w.time:g} s is outside the motion (0 to {(T - 1) / fps:g} s)")
+                raise KinemaError(f"{what} time {w.time:g} s is outside the motion (0 to {(T - 1) / fps:g} s)")
+            return f
+
+        world = {f: xz for f, xz in (self._keyframe(k, tgt, mask, frame_of) for k in keyframes)}
+        for w in (w if isinstance(w, Waypoint) else Waypoint(*w) for w in waypoints):
+            f = frame_of(w, "waypoint")
             tgt[f, rx], tgt[f, rz] = w.x, w.z
             mask[f, [rx, rz]] = 1.0
+        if path:
+            keys = [w if isinstance(w, Waypoint) else Waypoint(*w) for w in path]
+            frames = [frame_of(w, "path point") for w in keys]
+            if len(keys) < 2 or any(b <= a for a, b in zip(frames, frames[1:], strict=False)):
+                raise KinemaError("a path needs at least two points at increasing frames")
+            full = np.arange(frames[0], frames[-1] + 1)
+            tgt[full, rx] = np.interp(full, frames, [w.x for w in keys])
+            tgt[full, rz] = np.interp(full, frames, [w.z for w in keys])
+            mask[full[:, None], [rx, rz]] = 1.0
+        sl = self.m["layout"]["slices"]
+        for f, xz in world.items():  # joint x/z relative to the frame's final root
+            jp = np.arange(*sl["joint_pos"]).reshape(-1, 3)
+            tgt[f, jp[:, 0]] = xz[:, 0] - tgt[f, rx]
+            tgt[f, jp[:, 2]] = xz[:, 1] - tgt[f, rz]
         return tgt, mask
 
+    def _keyframe(self, k, tgt: np.ndarray, mask: np.ndarray, frame_of) -> tuple[int, np.ndarray]:
+        """Write one full-body keyframe's channels (root position, heading, joint heights, 6D rotations);
+        its frame and world joint x/z ``(J, 2)``."""
+        sk, sl = self.m["skeleton"], self.m["layout"]["slices"]
+        k = k if isinstance(k, Keyframe) else Keyframe(*k)
+        J = len(sk["parents"])
+        rot, root = np.asarray(k.rotations, dtype=np.float64), np.asarray(k.root, dtype=np.float64)
+        if rot.shape != (J, 3) or root.shape != (3,) or not (np.isfinite(rot).all() and np.isfinite(root).all()):
+            raise KinemaError(f"keyframe at {k.time} s: root must be 3 finite numbers and rotations {J} x 3")
+        if sk.get("left_hip") is None:
+            raise KinemaError("this model's skeleton names no hips, so its keyframes have no heading")
+        f = frame_of(Waypoint(0.0, 0.0, float(k.time)), "keyframe")
+        G, P = pose_from_local(rot, root, sk)
+        row = np.zeros(tgt.shape[1])
+        row[slice(*sl["root_pos"])] = P[sk["root"]]
+        row[slice(*sl["heading"])] = heading_of(P, sk["left_hip"], sk["right_hip"])
+        row[slice(*sl["joint_pos"])] = np.stack([np.zeros(J), P[:, 1], np.zeros(J)], -1).reshape(-1)
+        row[slice(*sl["joint_rot"])] = np.concatenate([G[:, :, 0], G[:, :, 1]], -1).reshape(-1)
+        on = np.zeros(tgt.shape[1], dtype=bool)
+        for group in ("root_pos", "heading", "joint_pos", "joint_rot"):
+            on[slice(*sl[group])] = True
+        tgt[f, on], mask[f, on] = row[on], 1.0
+        return f, P[:, [0, 2]]
+
     # ------------------------------------------------------------------ the loop
-    def generate(self, prompt: str, seconds: float, seed: int = 0, waypoints=(), *, noise: np.ndarray | None = None,
-                 steps: int | None = None, guidance: tuple[float, float] | None = None) -> dict:
+    def generate(self, prompt: str, seconds: float, seed: int = 0, waypoints=(), *, path=(), keyframes=(),
+                 noise: np.ndarray | None = None, steps: int | None = None,
+                 guidance: tuple[float, float] | None = None) -> dict:
         """One raw motion (docs/onnx_runtime.md): ``positions (T, J, 3)`` metres, Y up, plus its features."""
         m = self.m
         if not isinstance(prompt, str) or not prompt.strip():
@@ -142,13 +201,15 @@ class OnnxHumanModel:
         steps = m["schedule"]["steps"] if steps is None else steps
         if isinstance(steps, bool) or not isinstance(steps, int) or not 1 <= steps <= m["schedule"]["num_train_steps"]:
             raise KinemaError(f"steps must be an integer in [1, {m['schedule']['num_train_steps']}], got {steps!r}")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise KinemaError(f"seed must be a non-negative integer, got {seed!r}")
         if noise is None:
-            noise = standard_normal(int(seed), (T, D))
+            noise = standard_normal(seed, (T, D))
         elif noise.shape != (T, D):
             raise KinemaError(f"noise must have shape {(T, D)}, got {noise.shape}")
         text, grounded = self.condition(prompt)
         graph = self.weights_for(prompt, grounded)
-        tgt, mask = self.targets(T, waypoints)
+        tgt, mask = self.targets(T, waypoints, path, keyframes)
         mode, w_text, w_constr = m["guidance"]["mode"], m["guidance"]["w_text"], m["guidance"]["w_constr"]
         if guidance is not None:
             mode, (w_text, w_constr) = "separated", guidance

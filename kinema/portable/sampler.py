@@ -116,3 +116,38 @@ def joint_positions(features: np.ndarray, layout: dict, skeleton: dict) -> np.nd
         if p >= 0:
             pos[:, j] = pos[:, p] + rot[:, p] @ offsets[j]
     return pos
+
+
+def axis_angle_to_matrix(aa: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(..., 3, 3)`` of axis-angle vectors ``(..., 3)`` (Rodrigues)."""
+    angle = np.linalg.norm(aa, axis=-1, keepdims=True)
+    axis = aa / np.maximum(angle, 1e-12)
+    x, y, z = axis[..., 0], axis[..., 1], axis[..., 2]
+    c, s = np.cos(angle[..., 0]), np.sin(angle[..., 0])
+    C = 1 - c
+    return np.stack([np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], -1),
+                     np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], -1),
+                     np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], -1)], -2)
+
+
+def pose_from_local(local_aa: np.ndarray, root: np.ndarray, skeleton: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotation matrices ``(J, 3, 3)`` and positions ``(J, 3)`` of one pose given as local axis-angle
+    rotations ``(J, 3)`` and the root joint's position: ``G_j = G_parent L_j``, ``p_j = p_parent + G_parent
+    offset_j`` (parents before children)."""
+    L = axis_angle_to_matrix(np.asarray(local_aa, dtype=np.float64))
+    offsets = np.asarray(skeleton["offsets"], dtype=np.float64)
+    G, P = np.zeros_like(L), np.zeros((len(L), 3))
+    for j, p in enumerate(skeleton["parents"]):
+        if p < 0:
+            G[j], P[j] = L[j], root
+        else:
+            G[j], P[j] = G[p] @ L[j], P[p] + G[p] @ offsets[j]
+    return G, P
+
+
+def heading_of(P: np.ndarray, left_hip: int, right_hip: int) -> np.ndarray:
+    """``(cos psi, sin psi)`` of a pose's positions ``(J, 3)``: up x (right hip - left hip) on the ground."""
+    v = P[right_hip] - P[left_hip]
+    fx, fz = v[2], -v[0]
+    n = max(math.hypot(fx, fz), 1e-9)
+    return np.array([fz / n, fx / n])

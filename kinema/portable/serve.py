@@ -82,8 +82,8 @@ class WebServer:
         handler = functools.partial(_Handler, directory=str(web_dir), model_dir=model_dir.resolve())
         try:
             self.httpd = _QuietServer((host, port), handler)
-        except OSError as err:
-            raise KinemaError(f"cannot listen on {host}:{port}: {err.strerror or err}") from None
+        except (OSError, OverflowError) as err:  # OverflowError: a port outside 0-65535
+            raise KinemaError(f"cannot listen on {host}:{port}: {getattr(err, 'strerror', None) or err}") from None
         self.url = f"http://{host}:{self.httpd.server_address[1]}/"
         self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True) if background else None
         if self.thread is not None:
