@@ -19,7 +19,7 @@ from tests.test_app_browser import open_tab, sync_api, wait_for
 # isort: split
 import kinema
 from kinema.app.server import AppServer
-from tests.browser import button, launch, row_input
+from tests.browser import button, launch, row_input, world_to_screen
 from tests.server_process import free_port
 
 
@@ -113,6 +113,18 @@ def _steady_orientation(camera, still: float = 2.0, timeout: float = 60.0) -> np
             return now
     raise AssertionError(f"the camera kept turning for {timeout:g} s")
 
+
+
+def test_a_ground_click_in_live_mode_adds_nothing(live_tab):
+    """A click on the ground used to add a waypoint (84 m away) to the hidden timeline's motion, silently."""
+    page, session, _ = live_tab
+    before = list(session.doc.constraints)
+    assert session.constraints.mode.value == "waypoint"
+    root = _root(session.live.run)
+    box = page.locator("canvas").first.bounding_box()
+    page.mouse.click(*world_to_screen(session.client.camera, (float(root[0]) + 0.5, 0.0, float(root[2]) + 0.5), box))
+    page.get_by_text("Nothing added in live mode").wait_for(timeout=10000)
+    assert session.doc.constraints == before
 
 @contextlib.contextmanager
 def _facings(run):

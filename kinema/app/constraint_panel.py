@@ -253,6 +253,11 @@ class ConstraintPanel:
         hit = edits.ground_point(event.ray_origin, event.ray_direction)
         if hit is None or self.mode.value == "off":
             return
+        if self.host.live.running:  # the timeline's motion is hidden: a click would edit what is not shown
+            self.host.notify("Nothing added in live mode",
+                             "steer with the arrow keys or the Live buttons; ground clicks add waypoints to the "
+                             "timeline's motion after Stop live", error=True)
+            return
         if self.mode.value == "waypoint":
             frame = self.host.player.frame
             if any(c["type"] == "root2d" and frame in c["frame_indices"] for c in self.constraints):
