@@ -11,6 +11,7 @@ ort.env.wasm.numThreads = 1;
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const modelUrl = params.get("model") || "./model/";
+const precision = params.get("precision") === "fp16" ? "fp16" : "fp32";  // fp16: the float16-weight graphs, half the download
 
 // ------------------------------------------------------------------------------------------- scene
 const view = $("view");
@@ -150,12 +151,12 @@ $("bvh").onclick = () => {
 window.kinema = {generate, ready: false, frame: 0, bvh: () => (motion ? toBvh(motion) : null), view: {camera, controls, renderer}};
 
 const t0 = performance.now();
-KinemaModel.load(modelUrl, ort).then((m) => {
+KinemaModel.load(modelUrl, ort, {precision}).then((m) => {
   model = m;
   window.kinema.model = m;
   window.kinema.ready = true;
   $("generate").disabled = false;
-  $("status").textContent = `model loaded in ${((performance.now() - t0) / 1000).toFixed(1)} s · up to ${m.maxSeconds} s`;
+  $("status").textContent = `model (${precision}) loaded in ${((performance.now() - t0) / 1000).toFixed(1)} s · up to ${m.maxSeconds} s`;
 }).catch((err) => {
   window.kinema.loadError = String(err.message || err);
   $("error").textContent = `cannot load the model from ${modelUrl}: ${String(err.message || err).split("\n")[0]}`;
