@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 import torch
 
-import kinema
 from kinema.errors import KinemaError
 
 pytest.importorskip("onnxruntime", reason="pip install 'kinema[onnx]'")
@@ -27,7 +26,7 @@ from kinema.geometry.rotations import quat_to_axis_angle  # noqa: E402
 from kinema.motion.smoothing import smooth_time  # noqa: E402
 from kinema.portable.noise import standard_normal, uniforms  # noqa: E402
 from kinema.portable.runtime import OnnxHumanModel, read_manifest  # noqa: E402
-from tests.onnx_export import export_once  # noqa: E402
+from tests.onnx_export import export_once, fp32_pipeline  # noqa: E402
 
 #: agreement of the fp32 onnxruntime path with Python's generate (joint positions, millimetres)
 MEAN_MM, MAX_MM = 1.0, 5.0
@@ -48,7 +47,7 @@ def runtime(exported):
 
 @pytest.fixture(scope="module")
 def pipeline():
-    return kinema.load_model("default", precision="fp32")
+    return fp32_pipeline()
 
 
 def torch_noise(seed: int, frames: int, dim: int) -> np.ndarray:

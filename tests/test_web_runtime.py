@@ -22,7 +22,6 @@ import numpy as np
 import pytest
 import torch
 
-import kinema
 from tests.browser import chromium_path, launch
 
 if os.environ.get("KINEMA_REQUIRE_BROWSER") == "1":  # CI (.ci/run): a missing browser is a failure
@@ -43,7 +42,7 @@ from kinema.motion.smoothing import smooth_time  # noqa: E402
 from kinema.portable.runtime import OnnxHumanModel  # noqa: E402
 from kinema.portable.sampler import sixd_to_matrix  # noqa: E402
 from kinema.portable.serve import WebServer, check_page  # noqa: E402
-from tests.onnx_export import export_once  # noqa: E402
+from tests.onnx_export import export_once, fp32_pipeline  # noqa: E402
 
 try:
     check_page()
@@ -87,7 +86,7 @@ def test_page_loads_without_errors_or_outside_requests(page):
 
 
 def test_page_makes_pythons_motion_from_the_same_noise(page):
-    pipeline = kinema.load_model("default", precision="fp32")
+    pipeline = fp32_pipeline()
     seed, seconds, steps = 3, 5.0, 20
     frames = round(seconds * pipeline.fps)
     noise = torch.randn((1, frames, pipeline.representation.dim), generator=torch.Generator().manual_seed(seed))[0]
