@@ -208,6 +208,9 @@ def test_robot_is_drawn_beside_each_sample(model):
     robot = AppRobot("g1", load_robot("g1"))
     result = _walk(model, model_rig(model.skeleton), samples=2, robot=robot)
     assert len(result.robot_motions) == 2 and "robot g1" in result.text
+    # the app shows each sample's MuJoCo inverse dynamics, and a sample that is not feasible also warns
+    assert "sample 1 dynamics: peak torque" in result.text and "feasible in MuJoCo inverse dynamics" in result.text
+    assert all(w.startswith("robot motion not feasible") for w in result.warnings if "feasible" in w)
     drawn = result.robot_motions[0]
     assert drawn.num_frames == result.motions[0].num_frames
     heights = drawn.positions[..., 1]
