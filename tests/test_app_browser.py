@@ -191,6 +191,9 @@ def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
         px, py = world_to_screen(session.client.camera, (x, 0.0, z), box)
         page.mouse.click(px, py)
         wait_for(lambda f=frame: any(c["frame_indices"] == [f] for c in session.doc.constraints), what="a waypoint")
+    said = "2. waypoint @ 100 (5.0 s) asks 1.0 m/s, a walk"  # the pace it asks for, before generating
+    assert session.constraints.items.value == said
+    page.get_by_text(said, exact=True).wait_for(state="attached", timeout=10000)
     for (frame, x, z), c in zip(WAYPOINTS, session.doc.constraints, strict=True):
         cx, cz = c["smooth_root_2d"][0]
         assert c["frame_indices"] == [frame]

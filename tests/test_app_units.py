@@ -115,3 +115,18 @@ def test_cli_app_arguments(capsys):
     assert (args.port, args.steps, args.host, args.model) == (8090, 10, "0.0.0.0", "default")
     assert main(["app", "--model", "/no/such/model"]) == 2
     assert "no such model folder" in capsys.readouterr().err
+
+
+def test_waypoint_speeds_in_plain_words():
+    """Issue 61: the speed each waypoint asks for, from the one before it in time (the origin at frame 0
+    first), shown before generating; paths are left out."""
+    from kinema.app.edits import TOO_FAST, speed_words, waypoint, waypoint_speeds
+
+    fps = 20.0
+    cs = [waypoint(100, 0.0, 8.0), waypoint(40, 0.0, 2.0), {"type": "root2d", "dense": True, "frame_indices": [1],
+                                                            "smooth_root_2d": [[50.0, 0.0]]}, waypoint(110, 0.0, 92.0)]
+    speeds = waypoint_speeds(cs, fps)
+    assert set(speeds) == {0, 1, 3}
+    assert speeds[1] == pytest.approx(1.0) and speeds[0] == pytest.approx(2.0) and speeds[3] == pytest.approx(168.0)
+    assert [speed_words(speeds[i]) for i in (1, 0, 3)] == ["a walk", "a walk", TOO_FAST]
+    assert speed_words(3.0) == "a jog" and speed_words(5.0) == "a run"

@@ -115,11 +115,17 @@ class ConstraintPanel:
         self.refresh(select=len(self.constraints) - 1)
 
     def selected_index(self) -> int | None:
-        labels = self._labels()
-        return labels.index(self.items.value) if self.items.value in labels else None
+        """The selected constraint, by the number its label starts with (a waypoint's label changes with
+        the speed it asks for when another one moves)."""
+        number = str(self.items.value).split(".", 1)[0]
+        return int(number) - 1 if number.isdigit() and 0 < int(number) <= len(self.constraints) else None
 
     def _labels(self) -> list[str]:
-        return [f"{i + 1}. {edits.label(c, self.host.model.fps)}" for i, c in enumerate(self.constraints)]
+        """Each constraint's list label; a waypoint's says the ground speed it asks for, before generating."""
+        fps = self.host.model.fps
+        speeds = edits.waypoint_speeds(self.constraints, fps)
+        return [f"{i + 1}. {edits.label(c, fps)}" + (f" asks {speeds[i]:.1f} m/s, {edits.speed_words(speeds[i])}"
+                                                    if i in speeds else "") for i, c in enumerate(self.constraints)]
 
     def set_length(self, num_frames: int) -> None:
         """Frame ranges follow the timeline's length; a range that reached the old end keeps reaching it."""
@@ -268,6 +274,10 @@ class ConstraintPanel:
                 )
                 return
             self._add(edits.waypoint(frame, *hit, heading=0.0 if self.heading.value else None))
+            speed = edits.waypoint_speeds(self.constraints, self.host.model.fps)[len(self.constraints) - 1]
+            if edits.speed_words(speed) == edits.TOO_FAST:
+                self.host.notify("A very fast waypoint", f"it asks for {speed:.1f} m/s, {edits.TOO_FAST}; "
+                                 "scrub to a later frame or click nearer", error=True)
         else:
             self.path_points.append(hit)
             self.finish_path.disabled = len(self.path_points) < 2

@@ -143,6 +143,32 @@ def label(c: dict, fps: float) -> str:
     return f"{name} @ {span}"
 
 
+#: plain words for the ground speed a waypoint asks for: (at most this many m/s, words), a person's pace
+SPEED_WORDS = ((0.3, "standing about"), (2.0, "a walk"), (4.0, "a jog"), (7.0, "a run"))
+#: said of a waypoint asking for more than the last of `SPEED_WORDS`
+TOO_FAST = "faster than a person runs: the motion will rush there and may stop short"
+
+
+def waypoint_speeds(constraints: list[dict], fps: float) -> dict[int, float]:
+    """{index in ``constraints``: ground speed (m/s)} each waypoint asks for, in time order: the straight
+    distance from the waypoint before it (from the start, the origin at frame 0, for the first) over the
+    time between them; inf for a move in no time. Paths (dense root2d) are left out."""
+    points = sorted((c["frame_indices"][0], i, c["smooth_root_2d"][0]) for i, c in enumerate(constraints)
+                    if c["type"] == "root2d" and not c.get("dense"))
+    out: dict[int, float] = {}
+    frame, at = 0, (0.0, 0.0)
+    for f, i, xz in points:
+        distance, seconds = math.dist(at, xz), (f - frame) / fps
+        out[i] = distance / seconds if seconds > 0 else (0.0 if distance == 0 else math.inf)
+        frame, at = f, xz
+    return out
+
+
+def speed_words(speed: float) -> str:
+    """What a waypoint asking for ``speed`` m/s makes the character do, in plain words."""
+    return next((words for most, words in SPEED_WORDS if speed <= most), TOO_FAST)
+
+
 def anchor(c: dict) -> tuple[float, float, float]:
     """Where a constraint's move gizmo sits (world metres): the first waypoint / target / pose root."""
     if c["type"] == "root2d":
