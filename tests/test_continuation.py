@@ -9,7 +9,7 @@ import torch
 import kinema
 from kinema.errors import KinemaError
 from kinema.human.continuation import CAPTURE_SHARE, continuation_window
-from kinema.model.vocabulary import KnownPrompts, median_seconds
+from kinema.model.vocabulary import KnownPrompts, median_seconds, median_speeds
 from kinema.pipeline.request import GenerationRequest
 from kinema.text import get_text_encoder
 
@@ -52,6 +52,9 @@ def test_a_long_run_keeps_running_and_is_reproducible(model):
     assert early > 1.8 and late >= 0.75 * early, (early, late)
     made = result.report.prompts[0]["continued"]
     assert made["windows"] >= 3 and made["window_seconds"] == pytest.approx(CAPTURE_SHARE * 3.15, abs=0.05)
+    # kept at the speed the captures of its caption travel at, from the first window on
+    assert made["speed_from"] == "captures" and made["speed"] == pytest.approx(2.69, abs=0.01)
+    assert early == pytest.approx(made["speed"], rel=0.15) and late == pytest.approx(made["speed"], rel=0.15)
     again = model.generate(RUN, seconds=7, seed=1, steps=10)[0]
     assert torch.equal(again.root_translation, motion.root_translation)
     two = model.generate(RUN, seconds=7, seed=1, steps=10, samples=2)
@@ -71,6 +74,20 @@ def test_caption_seconds_are_saved_and_checked(tmp_path):
         median_seconds(["A person waves."], clips, [1.0, 2.0, 3.0])
     with pytest.raises(KinemaError, match="one positive length per caption"):
         KnownPrompts(known.captions, known.embeddings, known.encoder_id, caption_seconds=[1.0])
+
+
+def test_caption_speeds_are_the_median_of_the_travelling_clips(tmp_path):
+    enc = get_text_encoder("hash-test-32")
+    clips = [["A person runs."], ["A person runs.", "A person bows."], ["A person bows."], ["A person runs."]]
+    known = KnownPrompts.from_clips(clips, enc, clip_seconds=[3.0, 5.0, 2.0, 1.0], clip_speeds=[2.0, None, None, 3.0])
+    assert known.speed_of("A person runs.") == 2.5  # the clip that does not travel is left out
+    assert known.speed_of("A person bows.") is None and known.speed_of("A person waves.") is None
+    known.save(tmp_path)
+    assert KnownPrompts.load(tmp_path).caption_speeds == known.caption_speeds
+    with pytest.raises(KinemaError, match="4 clips but 3 clip speeds"):
+        median_speeds(known.captions, clips, [1.0, 2.0, 3.0])
+    with pytest.raises(KinemaError, match="one speed"):
+        KnownPrompts(known.captions, known.embeddings, known.encoder_id, caption_speeds=[1.0, float("nan")])
 
 
 def test_bench_lengths_reports_cost_per_second_of_motion(model):

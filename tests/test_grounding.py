@@ -373,3 +373,29 @@ def test_a_listed_synonym_far_from_the_captions_is_judged_in_the_captions_words(
     assert ground("A person strides forward.", near, known, ON,
                   enc.encode(["A person walks forward."])).captions == ground(
         "A person strides forward.", near, known, ON).captions
+
+
+def test_grounding_prefers_captions_whose_action_the_model_makes(tmp_path):
+    """Caption fidelity decides between two captions of the same action and side: the one whose content does
+    not hold on its own captions is passed over while a made one is near enough, and warned about when it
+    is conditioned on."""
+    caps = ["Someone kicks with their right leg.", "Someone kicks with the right foot.", "A person bows."]
+    emb = torch.tensor([[1.0, 0, 0, 0], [0.9, 0.4359, 0, 0], [0, 0, 1.0, 0]])
+    contents = ["kick", "kick-right", "bow"]
+    fidelity = {"kick": (0, 6, False), "kick-right": (5, 6, True), "bow": (6, 6, True)}
+    known = KnownPrompts(caps, emb, "x", caption_contents=contents, content_fidelity=fidelity)
+    assert known.made.tolist() == [False, True, True]
+    e = torch.nn.functional.normalize(torch.tensor([[0.8, 0.1, 0, 0.5]]), dim=-1)  # nearer the Bandai kick
+    settings = Grounding(weight=1.0, top_k=1)
+    out = ground("Someone delivers a kick with the right leg.", e, known, settings)
+    assert out.captions[0][0] == caps[1]
+    unmeasured = KnownPrompts(caps, emb, "x", caption_contents=contents)
+    assert ground("Someone delivers a kick with the right leg.", e, unmeasured, settings).captions[0][0] == caps[0]
+    assert "0 of 6 measured samples" in known.content_note(caps[0]) and known.content_note(caps[1]) is None
+    match = known.match("Someone kicks with their right leg.", emb[0], conditioned=caps[0])
+    assert not match.known and "does not reliably make 'kick'" in match.warning()
+    known.save(tmp_path)
+    again = KnownPrompts.load(tmp_path)
+    assert again.caption_contents == contents and again.content_fidelity == fidelity
+    with pytest.raises(KinemaError, match="not a share of samples"):
+        KnownPrompts(caps, emb, "x", content_fidelity={"kick": (7, 6, True)})

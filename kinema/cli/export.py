@@ -42,6 +42,10 @@ def register(sub) -> None:
                    help="with --known-prompts: per-action measurements of this model (scripts/humanoid_action_"
                         "probes.py --json); an action counts as learned when half its samples pass, instead of "
                         "by its number of training clips")
+    p.add_argument("--fidelity", type=Path, nargs="+", metavar="JSON",
+                   help="with --known-prompts: this model's caption-fidelity results (`kinema evaluate fidelity "
+                        "--out`; a later file's actions replace an earlier one's): a prompt conditioned on a caption "
+                        "whose action does not hold on its own captions is warned about")
     p.add_argument("--mix", nargs=2, metavar=("MODEL", "SHARE"),
                    help="weight-space ensemble: pack (1 - SHARE) x the run's weights + SHARE x MODEL's ('default' or "
                         "a folder: the model the run was fine-tuned from), e.g. --mix default 0.5 keeps part of "
@@ -75,6 +79,13 @@ def run(args: argparse.Namespace) -> int:
         if args.known_prompts is None:
             raise KinemaError("--action-probes: give --known-prompts DATA too (the probes qualify its actions)")
         probes = read_action_probes(args.action_probes)
+    fidelity = None
+    if args.fidelity is not None:
+        from kinema.model.vocabulary import read_content_fidelity
+
+        if args.known_prompts is None:
+            raise KinemaError("--fidelity: give --known-prompts DATA too (the results qualify its captions)")
+        fidelity = read_content_fidelity(args.fidelity)
     if (args.action_expert is None) != (args.expert_actions is None):
         raise KinemaError("--action-expert RUN and --expert-actions ACTION ... go together")
     expert = None if args.action_expert is None else (resolve_model_path(args.action_expert), args.expert_actions)
@@ -87,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
                        expert_mirror_side=args.expert_mirror_side)
     loaded = load_weights(out)  # prove the folder loads
     if args.known_prompts is not None:
-        _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes)
+        _write_known_prompts(args.known_prompts, out, loaded.text_encoder_id, probes, fidelity)
     size = sum(p.stat().st_size for p in out.iterdir() if p.is_file())
     stage = "" if getattr(loaded, "root_stage", None) is None else ", with a root stage"
     mixed = loaded.info.get("export", {}).get("mixed_with")
@@ -115,22 +126,27 @@ def _mix(mix: list[str] | None) -> tuple[Path, float] | None:
     return resolve_model_path(mix[0]), share
 
 
-def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | None) -> None:
-    """Embed the train captions of ``data`` with the model's text encoder into ``out``, with the
-    per-action ``probes`` (kinema.model.vocabulary.read_action_probes) when given. Clips per action count
-    each source clip once per side: the humanoid actions, built at two idle lengths, are one clip each."""
+def _write_known_prompts(data: Path, out: Path, encoder_id: str, probes: dict | None, fidelity: dict | None) -> None:
+    """Embed the train captions of ``data`` with the model's text encoder into ``out``, with their clips'
+    lengths, speeds and contents, the per-action ``probes`` (kinema.model.vocabulary.read_action_probes) and
+    the per-content caption ``fidelity`` (read_content_fidelity) when given. Clips per action count each
+    source clip once per side: the humanoid actions, built at two idle lengths, are one clip each."""
     from kinema.data.dataset import MotionDataset
+    from kinema.data.phases import steady_speeds
     from kinema.data.phrasings import manner_phrases
     from kinema.model.vocabulary import KnownPrompts
     from kinema.text import get_text_encoder
 
-    records = MotionDataset(data, "train").clips
-    once = {(rec.get("source_clip_id", rec["clip_id"]), rec.get("mirrored")): rec for rec in records}
+    dataset = MotionDataset(data, "train")
+    once = {(rec.get("source_clip_id", rec["clip_id"]), rec.get("mirrored")): rec for rec in dataset.clips}
     clips = [rec["captions"] for rec in once.values()]
     encoder = get_text_encoder(encoder_id, cache_dir=text_cache_dir())
-    known = KnownPrompts.from_clips(clips, encoder, manner_phrases(), [rec["duration_s"] for rec in once.values()])
+    known = KnownPrompts.from_clips(clips, encoder, manner_phrases(), [rec["duration_s"] for rec in once.values()],
+                                    steady_speeds(dataset, once.values()), [rec["content"] for rec in once.values()])
     if probes:
         known = known.with_probes(probes)
+    if fidelity:
+        known = known.with_content_fidelity(fidelity)
     learned = "" if not probes else "; measured: " + ", ".join(
         f"{a} {p}/{n}{'' if a in known.learned else ' (not learned)'}" for a, (p, n) in known.action_probes.items())
     print(f"wrote {known.save(out)} ({len(known.captions)} known captions{learned})")

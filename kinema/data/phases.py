@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import torch
 
+from kinema.representation.kimodo_features import features_to_motion
+
 #: the contents that travel
 LOCOMOTION = ("walk", "run", "dash", "walk-back", "walk-left", "walk-right")
 
@@ -105,3 +107,15 @@ def find_phases(root_xz: torch.Tensor, fps: float) -> Phases | None:
         ends_at_rest=bool(v[-edge:].mean() < REST_SHARE * cruise),
         steady_speed=steady_speed, cruise_speed=cruise,
     )
+
+
+def steady_speeds(dataset, records) -> list[float | None]:
+    """Per record of ``dataset`` (a kinema.data.dataset.MotionDataset) its steady speed (m/s), None for a
+    clip that does not travel: what a known caption's speed is measured from."""
+    out = []
+    for rec in records:
+        feats = dataset.features[rec["start"] : rec["start"] + rec["length"]].double()
+        motion = features_to_motion(feats, dataset.skeleton, dataset.fps)
+        phases = find_phases(motion.root_translation[:, [0, 2]], dataset.fps)
+        out.append(None if phases is None else phases.steady_speed)
+    return out

@@ -9,11 +9,16 @@ at 1.0-1.6 m/s for 7 s, then 0.4-0.9 m/s at 7-9 s. So a prompt is sampled in one
 grounded on, or its nearest caption: ``KnownPrompts.caption_seconds``) and of the model's window; a
 longer one is a stream (kinema.stream: the same prompt, each window continuing the last frames generated,
 imposed as keyframes) of windows that long, then post-processed as one motion. A 10-s run is then six
-2.35-s windows that each keep running. After the first window the stream is steered straight on at the
-speed that window settled at (`cruising_speed`, a root path every later window follows, kinema.stream.
-controls.Steer): left alone, each window picked its own speed and two walks of six (held-out phrasings,
-seeds 0-2, 10 s; scripts/long_motion_probe.py) slowed to 0.67-0.71 x their first seconds; steered, all six
-keep 0.95-0.99 x and the runs 1.00-1.03 x.
+2.35-s windows that each keep running. After the first window the stream is steered straight on (a root
+path every later window follows, kinema.stream.controls.Steer): left alone, each window picked its own
+speed and two walks of six (held-out phrasings, seeds 0-2, 10 s; scripts/long_motion_probe.py) slowed to
+0.67-0.71 x their first seconds; steered, all six keep 0.95-0.99 x and the runs 1.00-1.03 x. The speed
+steered at is the one the captures of the prompt's caption travel at (`captured_speed`: the median steady
+speed of its training clips, ``KnownPrompts.caption_speeds``, kinema.data.phases), else the speed the
+first window settled at (`cruising_speed`): the model's own windows travel 1.3-1.45 x faster than the
+captures of their caption (held-out phrasings grounded on slow walks: 0.93-1.33 m/s for captures at
+0.78 m/s; on gentle runs 2.2-2.3 for 1.67; on runs 3.2-3.8 for 2.7-2.8), so a stroll kept at the first
+window's speed was no slower than 1.1 m/s.
 
 Only prompts whose actions are all travel (`CONTINUED_ACTIONS`: walks and runs, "A person walks forward
 happily.", not "walks and turns left" nor "bows") are continued: another action is made once, in one
@@ -77,19 +82,33 @@ def learned_window(pipeline, prompt: str, grounding=None) -> float | None:
 
 
 def captured_seconds(pipeline, prompt: str, grounding=None) -> float | None:
-    """How long the captures of ``prompt`` last: those of the caption it is grounded on (the first of the
-    blend), else of its nearest caption; None without known capture lengths or for an empty prompt."""
+    """How long the captures of ``prompt`` last (:func:`captured_caption`'s clips); None without known
+    capture lengths or for an empty prompt."""
+    caption = captured_caption(pipeline, prompt, grounding)
+    return None if caption is None else pipeline.known_prompts.seconds_of(caption)
+
+
+def captured_speed(pipeline, prompt: str, grounding=None) -> float | None:
+    """How fast the captures of ``prompt`` travel (m/s, the median steady speed of :func:`captured_caption`'s
+    clips); None without known capture speeds, for an empty prompt or a caption whose clips do not travel
+    or have no steady second (a 0.65-s dash)."""
+    caption = captured_caption(pipeline, prompt, grounding)
+    return None if caption is None else pipeline.known_prompts.speed_of(caption)
+
+
+def captured_caption(pipeline, prompt: str, grounding=None) -> str | None:
+    """The training caption whose captures stand for ``prompt``: the caption it is grounded on (the first of
+    the blend), else itself when it is one, else its nearest caption; None without known prompts or for an
+    empty prompt."""
     known = pipeline.known_prompts
-    if known is None or known.caption_seconds is None or not prompt.strip():
+    if known is None or not prompt.strip():
         return None
     grounded = pipeline.ground_prompts([prompt], grounding)[prompt]
     if grounded.captions:
-        caption = grounded.captions[0][0]
-    elif prompt.strip() in known.caption_set:
-        caption = prompt.strip()
-    else:
-        caption = pipeline.match_prompts([prompt])[0].nearest[0][0]
-    return known.seconds_of(caption)
+        return grounded.captions[0][0]
+    if prompt.strip() in known.caption_set:
+        return prompt.strip()
+    return pipeline.match_prompts([prompt])[0].nearest[0][0]
 
 
 def cruising_speed(motion: Motion) -> float:
@@ -108,14 +127,17 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
     window_request = request.replace(rig=None, robot=None, robot_mapping=None, fps=None, format=None,
                                      seconds=None, samples=1)
     motions, residuals, post_seconds, windows = [], [], 0.0, 0
+    speed = captured_speed(pipeline, request.prompt, request.grounding_settings())  # None: the first window's
     for i in range(request.samples):
         stream = open_stream(pipeline, window_request.replace(seed=(request.seed + i) % 2**63),
                              window_seconds=window, lookahead=0.0, steps=steps)
+        if speed is not None:  # every window at the captures' speed, the first from standing
+            stream.steer(None, min(MAX_SPEED, speed))
         parts = [stream.next_frames(1)]
         parts.append(stream.next_frames(stream.buffered_frames))  # the rest of window 1
-        first = frames_to_motion(parts, pipeline.skeleton)
-        stream.steer(None, min(MAX_SPEED, cruising_speed(first)))  # straight on at the first window's speed
-        parts.append(stream.next_frames(frames - first.num_frames))
+        if speed is None:  # straight on at the speed the first window settled at
+            stream.steer(None, min(MAX_SPEED, cruising_speed(frames_to_motion(parts, pipeline.skeleton))))
+        parts.append(stream.next_frames(frames - sum(p.num_frames for p in parts)))
         motion = frames_to_motion(parts, pipeline.skeleton)
         windows += len(stream.windows)
         # the stream's frames carry no predicted contacts: label them as the training data's are labelled
@@ -127,7 +149,7 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
         post_seconds += time.perf_counter() - t_post
         motions.append(motion)
         residuals.append(report)
-    matches = pipeline.match_prompts([request.prompt])
+    matches = pipeline.match_prompts([request.prompt], request.grounding_settings())
     texts = pipeline.ground_prompts([request.prompt], request.grounding_settings())
     own = pipeline.loaded.guidance  # the stream's windows run separated guidance (kinema.stream.continuation)
     guidance = request.guidance if request.guidance is not None else (own.w_text, own.w_constr)
@@ -136,8 +158,10 @@ def continued(pipeline, request: GenerationRequest, seconds: float, window: floa
         seconds=t1 - t0, segments=1, frames=frames, steps=steps, guidance=guidance, guidance_mode="separated",
         seed=request.seed, residuals=residuals,
         warnings=[m.warning() for m in matches if not m.known] + [w for r in residuals for w in r.get("warnings", [])],
-        prompts=[pipeline.prompt_report(m, {}, texts) | {"continued": {"window_seconds": round(window, 3),
-                                                                        "windows": windows // request.samples}}
+        prompts=[pipeline.prompt_report(m, {}, texts) | {"continued": {
+                     "window_seconds": round(window, 3), "windows": windows // request.samples,
+                     "speed": None if speed is None else round(speed, 3),
+                     "speed_from": "first window" if speed is None else "captures"}}
                  for m in matches],
         timings={"sampling": t1 - t0 - post_seconds, "postprocess": post_seconds}, joints=pipeline.skeleton.num_joints,
     )

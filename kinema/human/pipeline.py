@@ -168,7 +168,7 @@ class HumanPipeline(MotionPipeline):
         samples, steps, seed = self._check_counts(r.samples, r.steps, r.seed)
         steps_given = r.steps
         segments = self._segments(r)
-        matches = self.match_prompts([s.prompt for s in segments])
+        matches = self.match_prompts([s.prompt for s in segments], r.grounding_settings())
         guide = self._guidance(r.guidance)
         plan = plan_segments(self.representation, segments, r.constraints, r.constraints_fps)
         g = torch.Generator().manual_seed(seed)
@@ -356,12 +356,15 @@ class HumanPipeline(MotionPipeline):
             texts = self.ground_prompts([prompt])
         return texts[prompt].embedding
 
-    def match_prompts(self, prompts: list[str]) -> list[PromptMatch]:
-        """Nearest training captions of each distinct non-empty prompt ([] without known prompts)."""
+    def match_prompts(self, prompts: list[str], grounding=None) -> list[PromptMatch]:
+        """Nearest training captions of each distinct non-empty prompt ([] without known prompts), each judged
+        also by what the model makes of the caption it is conditioned on (grounded with ``grounding``)."""
         if self.known_prompts is None:
             return []
-        distinct = dict.fromkeys(p for p in prompts if p.strip())
-        return [self.known_prompts.match(p, self.encode_text(p)[0], self.encode_reworded(p)) for p in distinct]
+        distinct = list(dict.fromkeys(p for p in prompts if p.strip()))
+        texts = self.ground_prompts(distinct, grounding)
+        return [self.known_prompts.match(p, self.encode_text(p)[0], self.encode_reworded(p),
+                                         self.conditioned_text(p, texts)) for p in distinct]
 
     def _settings(self, num_frames: int, guide, steps) -> SampleSettings:
         return SampleSettings(num_frames, guide, steps, root_displacement=self.root_displacement,

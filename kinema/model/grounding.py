@@ -207,8 +207,18 @@ def _candidates(prompt: str, actions: frozenset[str], known: KnownPrompts, manne
 
 def _nearest(same: torch.Tensor, ref_unit: torch.Tensor, known: KnownPrompts, settings: Grounding,
              floor: float = UNKNOWN_BELOW):
-    """The top-k (values, indices) of the candidate captions ``same (N,)`` by cosine to ``ref_unit (1, E)``;
-    None when there is none or the nearest is below ``floor``."""
+    """The top-k (values, indices) of the candidate captions ``same (N,)`` by cosine to ``ref_unit (1, E)``,
+    among those whose action the model makes (``KnownPrompts.made``, by its caption fidelity) when one of them
+    is near enough, else among all; None when there is none or the nearest is below ``floor``.
+
+    Why (issue 58): "Someone delivers a kick with the right leg." was grounded on the Bandai Namco kick's
+    caption, which the model does not make (0 of 6 samples of its own captions kick), while the CC0 humanoid
+    kick captions of the same side, a little farther, are made in 5 of 6."""
+    made = _top(same & known.made, ref_unit, known, settings, floor)
+    return made if made is not None else _top(same, ref_unit, known, settings, floor)
+
+
+def _top(same: torch.Tensor, ref_unit: torch.Tensor, known: KnownPrompts, settings: Grounding, floor: float):
     sims = torch.where(same, known.embeddings @ ref_unit[0], -math.inf)
     top = sims.topk(min(settings.top_k, int(same.sum())))
     if top.values.numel() == 0 or float(top.values[0]) < floor:

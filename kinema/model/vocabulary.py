@@ -38,6 +38,7 @@ import json
 import math
 import re
 import statistics
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,7 +89,7 @@ class PromptMatch:
         what = (
             "is far from every caption the model was trained on"
             if far
-            else "asks for what the model was not trained on"
+            else "asks for what the model was not trained on or does not make"
         )
         return (
             f"prompt {self.prompt!r} {what} ({'; '.join(reasons + list(self.action_notes))}); "
@@ -108,6 +109,9 @@ class KnownPrompts:
         action_clips: Mapping[str, int] | None = None,
         action_probes: Mapping[str, tuple[int, int]] | None = None,
         caption_seconds: Sequence[float] | None = None,
+        caption_speeds: Sequence[float | None] | None = None,
+        caption_contents: Sequence[str | None] | None = None,
+        content_fidelity: Mapping[str, tuple[int, int, bool]] | None = None,
     ):
         if embeddings.ndim != 2 or embeddings.shape[0] != len(captions) or not captions:
             raise KinemaError(
@@ -141,6 +145,30 @@ class KnownPrompts:
                 math.isfinite(x) and x > 0 for x in self.caption_seconds)):
             raise KinemaError(f"known prompts: caption_seconds must hold one positive length per caption "
                               f"({len(self.captions)})")
+        # per caption the median steady ground speed (m/s) of the training clips that carry it and travel
+        # (kinema.data.phases), None for a caption whose clips do not: the speed a continued prompt keeps
+        self.caption_speeds = None if caption_speeds is None else [None if x is None else float(x)
+                                                                   for x in caption_speeds]
+        if self.caption_speeds is not None and (len(self.caption_speeds) != len(self.captions) or not all(
+                x is None or (math.isfinite(x) and x >= 0) for x in self.caption_speeds)):
+            raise KinemaError(f"known prompts: caption_speeds must hold one speed (m/s, >= 0) or null per caption "
+                              f"({len(self.captions)})")
+        # per caption the content label of the training clips that carry it (the most common; "wave-right-hand",
+        # "kick-left"), and per content the model's caption fidelity on its own captions (samples passed,
+        # samples, whether every caption holds: kinema.evaluate.fidelity); None / empty = not known
+        self.caption_contents = None if caption_contents is None else [None if c is None else str(c)
+                                                                       for c in caption_contents]
+        if self.caption_contents is not None and len(self.caption_contents) != len(self.captions):
+            raise KinemaError(f"known prompts: caption_contents must hold one content label or null per caption "
+                              f"({len(self.captions)})")
+        self.content_fidelity = {str(c): (int(p), int(n), bool(h))
+                                 for c, (p, n, h) in sorted((content_fidelity or {}).items())}
+        for c, (passed, total, _) in self.content_fidelity.items():
+            if not 0 <= passed <= total or total < 1:
+                raise KinemaError(f"known prompts: content {c!r} fidelity {passed}/{total} is not a share of samples")
+        # per caption: False where its content was measured and does not hold (grounding prefers the others)
+        self.made = torch.tensor([self.content_made(c) for c in (self.caption_contents or [None] * len(self.captions))],
+                                 dtype=torch.bool)
 
     def _learned(self, action: str) -> bool:
         """Whether the model learned ``action``: its probes pass (where measured), else enough clips show it."""
@@ -169,7 +197,30 @@ class KnownPrompts:
     def with_probes(self, action_probes: Mapping[str, tuple[int, int]]) -> KnownPrompts:
         """These known prompts with ``action_probes`` (per action: samples passed, samples) measured."""
         return KnownPrompts(self.captions, self.embeddings, self.encoder_id, self.manner_phrases,
-                            self.action_clips, action_probes, self.caption_seconds)
+                            self.action_clips, action_probes, self.caption_seconds, self.caption_speeds,
+                            self.caption_contents, self.content_fidelity)
+
+    def with_content_fidelity(self, content_fidelity: Mapping[str, tuple[int, int, bool]]) -> KnownPrompts:
+        """These known prompts with the caption fidelity per content (samples passed, samples, holds)."""
+        return KnownPrompts(self.captions, self.embeddings, self.encoder_id, self.manner_phrases,
+                            self.action_clips, self.action_probes or None, self.caption_seconds, self.caption_speeds,
+                            self.caption_contents, content_fidelity)
+
+    def content_made(self, content: str | None) -> bool:
+        """Whether the model makes ``content`` by its caption fidelity (True when not measured)."""
+        return content is None or content not in self.content_fidelity or self.content_fidelity[content][2]
+
+    def content_note(self, caption: str) -> str | None:
+        """Why the model does not make what a known ``caption`` shows, by the caption-fidelity table of its
+        content (None: it does, or it was not measured)."""
+        if self.caption_contents is None or caption not in self.caption_set:
+            return None
+        content = self.caption_contents[self.captions.index(caption)]
+        if self.content_made(content):
+            return None
+        passed, total, _ = self.content_fidelity[content]
+        return (f"the model does not reliably make {content!r}, which its caption {caption!r} shows: "
+                f"{passed} of {total} measured samples of that action's captions show it")
 
     def untrained(self, actions: frozenset[str]) -> frozenset[str]:
         """The ``actions`` the model has not learned (no caption names them, or too few clips show them)."""
@@ -195,16 +246,24 @@ class KnownPrompts:
 
     @classmethod
     def from_clips(cls, clip_captions: list[list[str]], encoder, manner_phrases: tuple[str, ...] = (),
-                   clip_seconds: Sequence[float] | None = None) -> KnownPrompts:
+                   clip_seconds: Sequence[float] | None = None,
+                   clip_speeds: Sequence[float | None] | None = None,
+                   clip_contents: Sequence[str] | None = None) -> KnownPrompts:
         """:meth:`build` from training clips, each given as its captions: all their captions, per action
-        the number of clips that show it and, given each clip's length ``clip_seconds``, per caption the
-        median length of the clips that carry it."""
+        the number of clips that show it and, given each clip's length ``clip_seconds`` and steady speed
+        ``clip_speeds`` (None: it does not travel), per caption the median length and speed of the clips
+        that carry it, and given their content labels ``clip_contents`` each caption's most common one."""
         captions = [c for caps in clip_captions for c in caps]
         known = cls.build(captions, encoder, manner_phrases, clips_per_action(clip_captions))
-        if clip_seconds is None:
+        if clip_seconds is None and clip_speeds is None and clip_contents is None:
             return known
         return cls(known.captions, known.embeddings, known.encoder_id, known.manner_phrases, known.action_clips,
-                   caption_seconds=median_seconds(known.captions, clip_captions, clip_seconds))
+                   caption_seconds=None if clip_seconds is None else median_seconds(known.captions, clip_captions,
+                                                                                   clip_seconds),
+                   caption_speeds=None if clip_speeds is None else median_speeds(known.captions, clip_captions,
+                                                                                 clip_speeds),
+                   caption_contents=None if clip_contents is None else common_contents(known.captions, clip_captions,
+                                                                                       clip_contents))
 
     def seconds_of(self, caption: str) -> float | None:
         """How long the clips of a known ``caption`` last (median, seconds), or None when not known."""
@@ -214,6 +273,13 @@ class KnownPrompts:
             return self.caption_seconds[self.captions.index(caption)]
         except ValueError:
             return None
+
+    def speed_of(self, caption: str) -> float | None:
+        """The steady ground speed (m/s, median) of the travelling clips of a known ``caption``, or None when
+        not known or its clips do not travel."""
+        if self.caption_speeds is None or caption not in self.caption_set:
+            return None
+        return self.caption_speeds[self.captions.index(caption)]
 
     @staticmethod
     def phrases_in(phrases, captions) -> tuple[str, ...]:
@@ -233,6 +299,12 @@ class KnownPrompts:
             meta["action_clips"] = json.dumps(self.action_clips)
         if self.caption_seconds is not None:
             meta["caption_seconds"] = json.dumps([round(x, 3) for x in self.caption_seconds])
+        if self.caption_speeds is not None:
+            meta["caption_speeds"] = json.dumps([None if x is None else round(x, 3) for x in self.caption_speeds])
+        if self.caption_contents is not None:
+            meta["caption_contents"] = json.dumps(self.caption_contents)
+        if self.content_fidelity:
+            meta["content_fidelity"] = json.dumps({c: list(v) for c, v in self.content_fidelity.items()})
         if self.action_probes:
             meta["action_probes"] = json.dumps({a: list(v) for a, v in self.action_probes.items()})
         path = Path(folder) / FILE_NAME
@@ -254,7 +326,11 @@ class KnownPrompts:
             clips = {str(a): int(n) for a, n in json.loads(meta.get("action_clips", "{}")).items()}
             probes = {str(a): (int(v[0]), int(v[1])) for a, v in json.loads(meta.get("action_probes", "{}")).items()}
             seconds = json.loads(meta["caption_seconds"]) if "caption_seconds" in meta else None
-            return cls(captions, emb, meta["text_encoder"], phrases, clips, probes, seconds)
+            speeds = json.loads(meta["caption_speeds"]) if "caption_speeds" in meta else None
+            contents = json.loads(meta["caption_contents"]) if "caption_contents" in meta else None
+            fidelity = {str(c): (int(v[0]), int(v[1]), bool(v[2]))
+                        for c, v in json.loads(meta.get("content_fidelity", "{}")).items()}
+            return cls(captions, emb, meta["text_encoder"], phrases, clips, probes, seconds, speeds, contents, fidelity)
         except (OSError, KeyError, TypeError, ValueError, AttributeError, RuntimeError, SafetensorError) as err:
             raise KinemaError(f"{path}: not a known-prompts file ({err})") from None
 
@@ -285,14 +361,37 @@ class KnownPrompts:
                 return r_sims, r_idx, reworded
         return sims, idx, embedding
 
-    def match(self, prompt: str, embedding: torch.Tensor, reworded: torch.Tensor | None = None) -> PromptMatch:
+    def match(self, prompt: str, embedding: torch.Tensor, reworded: torch.Tensor | None = None,
+              conditioned: str | None = None) -> PromptMatch:
         """Nearest training captions of ``prompt`` given its embedding ``(E,)`` or ``(1, E)``, judged in the
-        captions' words where its own are too far (``reworded``, :meth:`nearest_judged`)."""
+        captions' words where its own are too far (``reworded``, :meth:`nearest_judged`); ``conditioned``,
+        the caption the prompt is conditioned on (grounding), is judged by its content's caption fidelity."""
         sims, idx, _ = self.nearest_judged(embedding, reworded, NEAREST)
         nearest = [(self.captions[int(i)], float(v)) for v, i in zip(sims, idx, strict=True)]
         actions = actions_in(prompt)
         notes = self.action_notes(actions)
+        content = None if conditioned is None or notes else self.content_note(conditioned)
+        notes += () if content is None else (content,)
         return PromptMatch(prompt, nearest, nearest[0][1] >= UNKNOWN_BELOW and not notes, tuple(sorted(actions)), notes)
+
+
+def read_content_fidelity(paths: Sequence[str | Path]) -> dict[str, tuple[int, int, bool]]:
+    """Per content label, (samples passed, samples, holds) on its own captions, from the JSON files that
+    ``kinema evaluate fidelity --out`` writes (``actions`` -> label -> ``own``); a later file's actions
+    replace an earlier one's (an action measured again)."""
+    out: dict[str, tuple[int, int, bool]] = {}
+    for path in paths:
+        try:
+            actions = json.loads(Path(path).read_text(encoding="utf-8"))["actions"]
+            for content, entry in actions.items():
+                own = entry["own"]
+                out[str(content)] = (int(own["passed"]), int(own["total"]), bool(own["holds"]))
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError) as err:
+            raise KinemaError(f"{path}: not a caption-fidelity result of `kinema evaluate fidelity --out` "
+                              f"({type(err).__name__}: {err})") from None
+    if not out:
+        raise KinemaError(f"{', '.join(map(str, paths))}: no action measured")
+    return dict(sorted(out.items()))
 
 
 def read_action_probes(path: str | Path) -> dict[str, tuple[int, int]]:
@@ -325,13 +424,41 @@ def read_action_probes(path: str | Path) -> dict[str, tuple[int, int]]:
 def median_seconds(captions: list[str], clip_captions: list[list[str]], clip_seconds: Sequence[float]) -> list[float]:
     """Per caption of ``captions`` the median of ``clip_seconds`` over the clips (given as their captions)
     that carry it; a caption no clip carries is an error."""
-    if len(clip_captions) != len(clip_seconds):
-        raise KinemaError(f"known prompts: {len(clip_captions)} clips but {len(clip_seconds)} clip lengths")
-    lengths: dict[str, list[float]] = {}
-    for caps, seconds in zip(clip_captions, clip_seconds, strict=True):
+    return _medians(captions, clip_captions, clip_seconds, "clip lengths")
+
+
+def common_contents(captions: list[str], clip_captions: list[list[str]], clip_contents: Sequence[str]) -> list[str]:
+    """Per caption of ``captions`` the most common content label of the clips that carry it (ties: the first
+    in sorted order); a caption no clip carries is an error."""
+    if len(clip_captions) != len(clip_contents):
+        raise KinemaError(f"known prompts: {len(clip_captions)} clips but {len(clip_contents)} clip contents")
+    per: dict[str, Counter] = {}
+    for caps, content in zip(clip_captions, clip_contents, strict=True):
         for c in {c.strip() for c in caps}:
-            lengths.setdefault(c, []).append(float(seconds))
-    missing = [c for c in captions if c not in lengths]
+            per.setdefault(c, Counter())[str(content)] += 1
+    missing = [c for c in captions if c not in per]
     if missing:
         raise KinemaError(f"known prompts: no clip carries the caption {missing[0]!r}")
-    return [statistics.median(lengths[c]) for c in captions]
+    return [min(per[c].items(), key=lambda kv: (-kv[1], kv[0]))[0] for c in captions]
+
+
+def median_speeds(captions: list[str], clip_captions: list[list[str]],
+                  clip_speeds: Sequence[float | None]) -> list[float | None]:
+    """Per caption of ``captions`` the median of ``clip_speeds`` over the clips that carry it and travel
+    (speed not None), None where none does; a caption no clip carries is an error."""
+    return _medians(captions, clip_captions, clip_speeds, "clip speeds")
+
+
+def _medians(captions, clip_captions, values, what: str) -> list:
+    if len(clip_captions) != len(values):
+        raise KinemaError(f"known prompts: {len(clip_captions)} clips but {len(values)} {what}")
+    per: dict[str, list[float]] = {}
+    for caps, value in zip(clip_captions, values, strict=True):
+        for c in {c.strip() for c in caps}:
+            per.setdefault(c, [])
+            if value is not None:
+                per[c].append(float(value))
+    missing = [c for c in captions if c not in per]
+    if missing:
+        raise KinemaError(f"known prompts: no clip carries the caption {missing[0]!r}")
+    return [statistics.median(per[c]) if per[c] else None for c in captions]

@@ -381,7 +381,11 @@ class MotionStream:
                                   "samples": 1}
         self._path_headings = None
         self._window_index += 1
-        if context is None:
+        if context is None:  # the first window: steering and targets given before it start from standing
+            start = WindowFrame((0.0, 0.0), 0.0, (0.0, 0.0), 0.0, 0.0, s.fps)
+            controls = self.controls.window_constraints(start, 1, window)
+            if controls:
+                fields["constraints"] = controls
             return *self._run(fields), False
         controls = self.controls.window_constraints(frame, context.num_frames, window)
         fields["constraints"] = self.body.window_constraints(context, smooth, controls)
