@@ -17,8 +17,10 @@ RAMP_FRAMES = 4
 #: not shuffle. The foot is down where it is planted, or within DOWN_HEIGHT of its planted height (m, robot
 #: scale) and slower than SWING_SPEED (m/s: a generated foot that skates over the floor faster than that
 #: is stepping); a swing is a span of frames on which it is not down, in which it moves at least STEP_MIN
-#: (m) in at most MAX_SWING seconds (longer flights keep the source's lift).
-CLEARANCE, DOWN_HEIGHT, SWING_SPEED, STEP_MIN, MAX_SWING = 0.05, 0.015, 0.5, 0.05, 1.5
+#: (m) in at least MIN_SWING and at most MAX_SWING seconds (longer flights keep the source's lift; a
+#: shorter one is a foot that jumps along the floor, where a generated foot skates into its landing, which no
+#: arch that fast could follow).
+CLEARANCE, DOWN_HEIGHT, SWING_SPEED, STEP_MIN, MIN_SWING, MAX_SWING = 0.05, 0.015, 0.5, 0.05, 0.15, 1.5
 
 
 def clean_flags(flags: np.ndarray) -> np.ndarray:
@@ -70,7 +72,7 @@ def swing_arches(ground: np.ndarray, down: np.ndarray, fps: float) -> np.ndarray
     position; ``down`` (T,) bool: the frames on which the foot is down (see DOWN_HEIGHT)."""
     out = np.zeros(len(down))
     for a, b in spans(~down):
-        if (b - a + 1) / fps > MAX_SWING or np.linalg.norm(ground[b] - ground[a]) < STEP_MIN:
+        if not MIN_SWING <= (b - a + 1) / fps <= MAX_SWING or np.linalg.norm(ground[b] - ground[a]) < STEP_MIN:
             continue
         phase = (np.arange(a, b + 1) - a + 1) / (b - a + 2)
         out[a : b + 1] = np.sin(np.pi * phase) ** 2

@@ -8,7 +8,7 @@ this frame and the next. Leg self-intersection uses the MJCF's capsule and spher
 (the bodies below each hip): the deepest overlap of a left-leg geom with a right-leg geom, in metres.
 
 Steps: a sole steps where its centre moves over the floor faster than ``STEP_SPEED`` for at least
-kinema.robot.feet.STEP_MIN and at least ``STEP_TIME``; a step's clearance is how high the sole's lowest
+kinema.robot.feet.STEP_MIN and at least kinema.robot.feet.MIN_SWING; a step's clearance is how high the sole's lowest
 point gets above the floor during it (a foot that shuffles clears little or nothing), and
 ``swing_clearance`` is the lowest over all steps of both soles; steps cut by the clip's first or last
 frame are left out. A shorter move of that length is a ``slide`` (a foot that jumps along the floor
@@ -23,13 +23,12 @@ import mujoco
 import numpy as np
 
 from kinema.robot.description import Robot, subtree
-from kinema.robot.feet import STEP_MIN, spans
+from kinema.robot.feet import MIN_SWING, STEP_MIN, spans
 from kinema.robot.motion import RobotMotion
 from kinema.robot.targets import SIDES
 
 _PLANTED_HEIGHT = 0.01
 STEP_SPEED = 0.2  # m/s
-STEP_TIME = 0.15  # s
 
 
 @dataclass(frozen=True)
@@ -105,7 +104,7 @@ def step_clearances(centres: np.ndarray, lowest: np.ndarray, speed: np.ndarray, 
             inside = a > 0 and b + 2 < len(lowest)
             if not inside or np.linalg.norm(centres[b + 1, i, :2] - centres[a, i, :2]) < STEP_MIN:
                 continue
-            if (b + 1 - a) / fps < STEP_TIME:
+            if (b + 1 - a) / fps < MIN_SWING:
                 slides += 1
             else:
                 out.append(float(lowest[a : b + 2, i].max()))
