@@ -181,9 +181,27 @@ def test_played_frame_advances(tab):
     assert "s / 10.95 s" in shown
 
 
+def test_scrubbing_while_paused_keeps_the_character_in_view(tab):
+    """Issue 61: after Pause, a scrubbed character walked out of a view that stayed put, and Play kept the
+    offset; the camera now follows the scrubbed root (with "Follow character" on) at the angle it had."""
+    page, session, _ = tab
+    assert not session.player.playing and session.player.follow.value
+    cam = session.client.camera
+    motion = session.shown_motion()
+    seek(page, 0, session)
+    aim = np.asarray(cam.look_at, dtype=np.float64) - motion.positions[0, 0].double().numpy()
+    last = motion.num_frames - 1
+    seek(page, last, session)
+    root = motion.positions[last, 0].double().numpy()
+    assert float(np.linalg.norm((root - motion.positions[0, 0].double().numpy())[[0, 2]])) > 3.0
+    wait_for(lambda: float(np.linalg.norm((np.asarray(cam.look_at) - root - aim)[[0, 2]])) < 0.1,
+             what="the camera to follow the scrubbed character")
+    seek(page, 0, session)
+
 def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
     page, session, log = tab
     canvas = page.locator("canvas").first
+    session.player.follow.value = False  # clicks are aimed with the camera set here, not one following a scrub
     set_camera(session.client.camera, CAMERA_POSITION, CAMERA_LOOK_AT)  # the generated motion was framed closer
     for frame, x, z in WAYPOINTS:
         seek(page, frame, session)
@@ -191,6 +209,7 @@ def test_ground_clicks_lay_waypoints_the_motion_passes(tab):
         px, py = world_to_screen(session.client.camera, (x, 0.0, z), box)
         page.mouse.click(px, py)
         wait_for(lambda f=frame: any(c["frame_indices"] == [f] for c in session.doc.constraints), what="a waypoint")
+    session.player.follow.value = True
     said = "2. waypoint @ 100 (5.0 s) asks 1.0 m/s, a walk"  # the pace it asks for, before generating
     assert session.constraints.items.value == said
     page.get_by_text(said, exact=True).wait_for(state="attached", timeout=10000)

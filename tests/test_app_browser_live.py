@@ -19,7 +19,7 @@ from tests.test_app_browser import open_tab, sync_api, wait_for
 # isort: split
 import kinema
 from kinema.app.server import AppServer
-from tests.browser import button, launch, row_input, world_to_screen
+from tests.browser import button, launch, row_input, set_camera, world_to_screen
 from tests.server_process import free_port
 
 
@@ -125,6 +125,26 @@ def test_a_ground_click_in_live_mode_adds_nothing(live_tab):
     page.mouse.click(*world_to_screen(session.client.camera, (float(root[0]) + 0.5, 0.0, float(root[2]) + 0.5), box))
     page.get_by_text("Nothing added in live mode").wait_for(timeout=10000)
     assert session.doc.constraints == before
+
+
+def test_f_frames_the_live_character(live_tab):
+    """F (as in Blender or Unity) brings the character back into view after the user looked away."""
+    page, session, _ = live_tab
+    cam = session.client.camera
+    session.player.follow.value = False  # else the camera keeps moving with the character
+    set_camera(cam, (60.0, 40.0, 60.0), (50.0, 0.0, 50.0))
+    page.evaluate("document.activeElement && document.activeElement.blur()")  # no text box has the focus
+    page.keyboard.press("KeyF")
+
+    def framed() -> bool:
+        root = _root(session.live.run)
+        return float(np.linalg.norm(np.asarray(cam.look_at, dtype=np.float64)[[0, 2]] - root[[0, 2]])) < 1.5
+
+    try:
+        wait_for(framed, timeout=20, what="the camera on the live character")
+        assert float(np.linalg.norm(np.asarray(cam.position) - np.asarray(cam.look_at))) < 15.0
+    finally:
+        session.player.follow.value = True
 
 @contextlib.contextmanager
 def _facings(run):

@@ -51,16 +51,25 @@ def opening_view(motion, fov: float) -> tuple[np.ndarray, np.ndarray]:
 
 class CameraFollow:
     """Frames and follows the shown character in one tab (``client.camera``); ``enabled`` is read from
-    the "Follow character" checkbox."""
+    the "Follow character" checkbox: it follows while the motion plays and while the user scrubs (a paused
+    view left behind showed empty ground, and play kept the offset)."""
 
     def __init__(self, client, enabled):
         self.client, self.enabled = client, enabled
         self.target: np.ndarray | None = None
 
-    def frame(self, points: np.ndarray, target) -> None:
-        """Point the camera at ``points`` from the default angle; ``target``: the root it then follows."""
+    def frame(self, points: np.ndarray, target, *, keep_zoom: bool = False) -> None:
+        """Point the camera at ``points``; ``target``: the root it then follows. The first time from the
+        default angle, then from the angle the user orbited to (a new motion or F does not undo the user's
+        view), and with ``keep_zoom`` no closer than the user had it."""
         cam = self.client.camera
-        position, look_at = frame_view(points, float(cam.fov))
+        direction = VIEW_DIRECTION
+        user = np.asarray(cam.position, dtype=np.float64) - np.asarray(cam.look_at, dtype=np.float64)
+        if self.target is not None and float(np.linalg.norm(user)) > 1e-6:
+            direction = user / np.linalg.norm(user)
+        position, look_at = frame_view(points, float(cam.fov), direction)
+        if keep_zoom and self.target is not None:
+            position = look_at + direction * max(float(np.linalg.norm(user)), float(np.linalg.norm(position - look_at)))
         cam.position = tuple(position)
         cam.look_at = tuple(look_at)
         self.target = np.asarray(target, dtype=np.float64)

@@ -8,6 +8,8 @@ the top of the panel, a 1x1 transparent image (`PAGE_HTML`) whose ``onload`` run
   on the window in the capture phase, before viser's camera listener on the document, and turned into
   clicks on the Live folder's steer buttons (kinema.app.live_panel.BUTTONS); Enter in the "Live prompt"
   box clicks "Switch prompt". Otherwise, and while a text box has focus, the keys are viser's.
+- **F frames the character** (as in Blender or Unity): outside a text box, F clicks the Playback folder's
+  "Frame character" button (kinema.app.playback.FRAME_BUTTON), in live mode too.
 - **Upload notice.** viser's client says "File uploaded successfully." when the bytes have arrived,
   before the app has read the file, so a file the app then refuses got a green "uploaded successfully"
   and a red "Upload failed" at once. That text (found by its text, in a notification) is replaced as it
@@ -17,6 +19,8 @@ the top of the panel, a 1x1 transparent image (`PAGE_HTML`) whose ``onload`` run
 """
 
 from __future__ import annotations
+
+from kinema.app.playback import FRAME_BUTTON
 
 #: the Live folder's steer buttons per key (``event.code``), the labels kinema.app.live_panel gives them
 KEYS = {"ArrowUp": "Faster", "KeyW": "Faster", "ArrowDown": "Slower", "KeyS": "Slower", "ArrowLeft": "Turn left",
@@ -36,6 +40,8 @@ PAGE_SCRIPT = (
     "window.addEventListener('keydown',function(e){"
     "if(F(e.target)){if(e.key==='Enter'&&L()){var r=e.target.closest('.mantine-Flex-root');"
     "if(r&&r.textContent.indexOf('Live prompt')>=0){var s=B('Switch prompt');if(s)s.click();}}return;}"
+    f"if(e.code==='KeyF'&&!e.repeat&&!e.ctrlKey&&!e.metaKey&&!e.altKey){{var f=B('{FRAME_BUTTON}');"
+    "if(f){e.preventDefault();e.stopImmediatePropagation();f.click();}return;}"
     "var n=M[e.code];if(!n||!L())return;e.preventDefault();e.stopImmediatePropagation();"
     "if(!e.repeat){var b=B(n);if(b)b.click();}},true);"
     "window.addEventListener('keyup',function(e){if(M[e.code]&&L()&&!F(e.target))e.stopImmediatePropagation();},true);"

@@ -18,6 +18,10 @@ def next_frame(frame: int, num_frames: int, *, loop: bool) -> tuple[int, bool]:
     return (0, True) if loop else (num_frames - 1, False)
 
 
+#: the button that frames the character, clicked by the F key too (kinema.app.page_script)
+FRAME_BUTTON = "Frame character"
+
+
 class Player:
     """The playback panel and its clock; ``on_frame(frame)`` draws a frame."""
 
@@ -33,8 +37,10 @@ class Player:
             self.loop = gui.add_checkbox("Loop", True)
             self.speed = gui.add_dropdown("Speed", tuple(SPEEDS), initial_value="1x")
             self.follow = gui.add_checkbox(
-                "Follow character", True, hint="the camera moves with the character while it plays"
+                "Follow character", True, hint="the camera moves with the character while it plays or is scrubbed"
             )
+            self.frame_btn = gui.add_button(FRAME_BUTTON, icon="focus-centered",
+                                            hint="point the camera at the character (key F)")
         self.playing = False
         self._stop = threading.Event()
         self.play_btn.on_click(lambda _: self.set_playing(not self.playing))

@@ -89,7 +89,8 @@ class Session:
         )
         self._build_generate(gui)
         self.player = Player(gui, self.model.fps, self.show_frame)
-        self.camera = CameraFollow(client, lambda: bool(self.player.follow.value) and self.player.playing)
+        self.camera = CameraFollow(client, lambda: bool(self.player.follow.value))
+        self.player.frame_btn.on_click(lambda _: self.frame_camera())
         self.constraints = ConstraintPanel(gui, scene, self)
         self.files = FilesPanel(gui, self)
         self.rig_panel = RigPanel(gui, self)
@@ -158,7 +159,7 @@ class Session:
             self.status.content = f"Showing {source}."
         self._length_changed()
         self.player.seek(0)
-        self.frame_camera()
+        self.frame_camera(keep_zoom=True)
         self.player.set_playing(play)
 
     def spacing(self) -> float:
@@ -208,15 +209,21 @@ class Session:
         f = min(max(int(frame), 0), shown.num_frames - 1)
         self.camera.follow(shown.positions[f, 0].detach().double().numpy())
 
-    def frame_camera(self) -> None:
-        """Point the camera at the shown character (its widest pose, the samples beside it)."""
+    def frame_camera(self, *, keep_zoom: bool = False) -> None:
+        """Point the camera at the shown character (its widest pose, the samples beside it; the live one in
+        live mode): a new motion (``keep_zoom``), the "Frame character" button and the F key."""
+        run = self.live.run
+        if run is not None and run.drawn >= 0:
+            pose = np.asarray(run.view.positions[0], dtype=np.float64)
+            run.camera.frame(pose, pose[0])
+            return
         shown = self.shown_motion()
         positions = shown.positions.detach().double().numpy()
         frame = min(self.player.frame, len(positions) - 1)
         points = character_extent(positions, frame, self.lanes())
         if self.robot_motions:
             points = np.concatenate([points, points + np.array([self.spacing() / 2, 0.0, 0.0])])
-        self.camera.frame(points, positions[frame, 0])
+        self.camera.frame(points, positions[frame, 0], keep_zoom=keep_zoom)
 
     def _length_changed(self) -> None:
         """The Frame slider and the constraints' frame range span the same frames: the timeline's (so that
