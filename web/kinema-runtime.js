@@ -132,6 +132,7 @@ export class Grounding {
     Object.assign(this, {n, dim, emb: e});
     this.words_ = g.captions.map((_, i) => ({sides: new Set(g.caption_sides[i]), away: new Set(g.caption_away[i]),
       pace: g.caption_pace[i], manner: g.caption_manner[i], actions: new Set(g.caption_actions[i])}));
+    this.made = g.caption_made;  // false: the caption's action is measured not to be made
     this.learned = new Set(g.learned_actions);
     this.hasManner = g.manner_phrases.length > 0;
     const p = g.patterns;
@@ -189,7 +190,12 @@ export class Grounding {
     });
   }
 
+  // among the captions whose action is made when one is near enough, else among all
   nearest(same, sims, floor) {
+    return this.top(same.map((ok, i) => ok && this.made[i]), sims, floor) || this.top(same, sims, floor);
+  }
+
+  top(same, sims, floor) {
     const idx = [...same.keys()].filter((i) => same[i]).sort((a, b) => sims[b] - sims[a] || a - b).slice(0, this.topK);
     return !idx.length || sims[idx[0]] < floor ? null : idx;
   }

@@ -43,6 +43,7 @@ class GroundingTable:
             for sd, aw, pc, mn, ac in zip(entry["caption_sides"], entry["caption_away"], entry["caption_pace"],
                                           entry["caption_manner"], entry["caption_actions"], strict=True)
         ]
+        self.made = np.array(entry["caption_made"], dtype=bool)
         self.learned = frozenset(entry["learned_actions"])
         self.has_manner = bool(entry["manner_phrases"])
         p = entry["patterns"]
@@ -97,6 +98,11 @@ class GroundingTable:
         return np.array(out, dtype=bool)
 
     def _nearest(self, same: np.ndarray, ref_unit: np.ndarray, floor: float):
+        """Among the captions whose action is made when one is near enough, else among all."""
+        made = self._top(same & self.made, ref_unit, floor)
+        return made if made is not None else self._top(same, ref_unit, floor)
+
+    def _top(self, same: np.ndarray, ref_unit: np.ndarray, floor: float):
         if not same.any():
             return None
         sims = np.where(same, self.embeddings @ ref_unit, -np.inf)

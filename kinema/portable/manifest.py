@@ -62,6 +62,7 @@ def grounding_table(known: KnownPrompts, settings) -> dict:
         "caption_pace": [pace(c) for c in known.captions],
         "caption_manner": [bool(m) for m in known.mannered.tolist()],
         "caption_actions": [sorted(actions_in(c)) for c in known.captions],
+        "caption_made": [bool(m) for m in known.made.tolist()],  # False: its action measured not to be made
         "learned_actions": sorted(known.learned),
         "manner_phrases": sorted(known.manner_phrases, key=len, reverse=True),
         "patterns": {  # regular expressions, matched case-insensitively (Python and JavaScript syntax alike)
