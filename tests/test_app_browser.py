@@ -196,6 +196,7 @@ def test_scrubbing_while_paused_keeps_the_character_in_view(tab):
     assert float(np.linalg.norm((root - motion.positions[0, 0].double().numpy())[[0, 2]])) > 3.0
     wait_for(lambda: float(np.linalg.norm((np.asarray(cam.look_at) - root - aim)[[0, 2]])) < 0.1,
              what="the camera to follow the scrubbed character")
+    assert float(np.abs((np.asarray(session.ground.position) - root)[[0, 2]]).max()) <= 4.0  # the ground came too
     seek(page, 0, session)
 
 def test_ground_clicks_lay_waypoints_the_motion_passes(tab):

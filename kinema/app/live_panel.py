@@ -46,8 +46,6 @@ AHEAD_SECONDS = 0.3
 CHUNK_FRAMES = 3
 #: seconds between two readout updates
 READOUT_EVERY = 0.25
-#: metres the character may walk from the middle of the ground grid before the grid is moved under it
-GROUND_RECENTRE = 4.0
 #: the first prompt of live mode, per kind of model
 HUMAN_PROMPT = "A person walks forward."
 RIG_PROMPT = "An animal walks."
@@ -183,21 +181,11 @@ class LiveRun:
             if frame == 0:
                 self.camera.frame(positions, positions[0])  # the first frame: framed from the default angle
             self.camera.follow(positions[0])
-            self._ground_under(positions[0])
+            self.session.ground_under(positions[0])
             self._seen(frame)
             if time.perf_counter() - said > READOUT_EVERY:
                 said = time.perf_counter()
                 self.session.live.readout(self)
-
-    def _ground_under(self, root: np.ndarray) -> None:
-        """Keep the tab's ground grid (24 m across) under the character: moved by whole metres (its
-        section size, so its lines stay put) once the character is `GROUND_RECENTRE` metres off its middle."""
-        ground = getattr(self.session, "ground", None)
-        if ground is None:
-            return
-        middle = np.asarray(ground.position, dtype=np.float64)
-        if float(np.abs(root[[0, 2]] - middle[[0, 2]]).max()) > GROUND_RECENTRE:
-            ground.position = (float(np.round(root[0])), 0.0, float(np.round(root[2])))
 
     def _seen(self, frame: int) -> None:
         now = time.perf_counter()

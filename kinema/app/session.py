@@ -33,6 +33,8 @@ from kinema.app.views import (
 )
 from kinema.errors import KinemaError
 
+#: metres the character may move from the middle of the ground grid before the grid is moved under it
+GROUND_RECENTRE = 4.0
 #: spacing of the samples not selected (towards -X, away from the camera), drawn beside the selected one, in
 #: sizes of the rig (its rest pose's largest extent: 1.6 m for the human model's 1.36 m)
 SAMPLE_SPACING = 1.2
@@ -207,7 +209,17 @@ class Session:
         flags = contact_flags_at(self.doc.constraints, frame) if ours else None
         self.markers.draw_contacts(shown, frame, flags)
         f = min(max(int(frame), 0), shown.num_frames - 1)
-        self.camera.follow(shown.positions[f, 0].detach().double().numpy())
+        root = shown.positions[f, 0].detach().double().numpy()
+        self.camera.follow(root)
+        self.ground_under(root)
+
+    def ground_under(self, root: np.ndarray) -> None:
+        """Keep the ground grid (24 m across) under the character, in playback as in live mode (a galloping
+        fox ran off it into white space): moved by whole metres (its section size, so its lines stay put)
+        once the character is `GROUND_RECENTRE` metres off its middle."""
+        middle = np.asarray(self.ground.position, dtype=np.float64)
+        if float(np.abs(root[[0, 2]] - middle[[0, 2]]).max()) > GROUND_RECENTRE:
+            self.ground.position = (float(np.round(root[0])), 0.0, float(np.round(root[2])))
 
     def frame_camera(self, *, keep_zoom: bool = False) -> None:
         """Point the camera at the shown character (its widest pose, the samples beside it; the live one in
