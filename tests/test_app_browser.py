@@ -197,6 +197,8 @@ def test_scrubbing_while_paused_keeps_the_character_in_view(tab):
     wait_for(lambda: float(np.linalg.norm((np.asarray(cam.look_at) - root - aim)[[0, 2]])) < 0.1,
              what="the camera to follow the scrubbed character")
     assert float(np.abs((np.asarray(session.ground.position) - root)[[0, 2]]).max()) <= 4.0  # the ground came too
+    start = round(6.0 * session.model.fps)  # where the default timeline's second segment starts
+    page.get_by_text(f"segment 2 of 2 from frame {start} (6.00 s): A person waves.").wait_for(timeout=10000)
     seek(page, 0, session)
 
 def test_ground_clicks_lay_waypoints_the_motion_passes(tab):

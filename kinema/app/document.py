@@ -65,6 +65,14 @@ class Document:
         """Frames the generated motion will have (segments add up; see kinema.pipeline.timeline)."""
         return sum(round(s["seconds"] * fps) for s in self.timeline)
 
+    def segment_starts(self, fps: float) -> list[int]:
+        """The first frame of each timeline segment (as :meth:`num_frames` counts them)."""
+        starts, frame = [], 0
+        for s in self.timeline:
+            starts.append(frame)
+            frame += round(s["seconds"] * fps)
+        return starts
+
     def to_json(self, fps: float) -> str:
         """The session file's text."""
         obj = {

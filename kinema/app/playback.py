@@ -28,6 +28,7 @@ class Player:
     def __init__(self, gui, fps: float, on_frame: Callable[[int], None]):
         self.fps, self.on_frame = fps, on_frame
         self.num_frames = 1
+        self.segments: list[tuple[int, str]] = []  # (first frame, prompt) of each timeline segment shown
         with gui.add_folder("Playback"):
             self.play_btn = gui.add_button("Play", icon="player-play", hint="play / pause")
             self.slider = gui.add_slider(
@@ -69,9 +70,21 @@ class Player:
         self.play_btn.label = "Pause" if self.playing else "Play"
         self.play_btn.icon = "player-pause" if self.playing else "player-play"
 
+    def set_segments(self, segments: list[tuple[int, str]]) -> None:
+        """The timeline segments the shown motion is made of, (first frame, prompt) each ([]: none, an
+        uploaded clip): the readout under the slider says which one plays and where it starts."""
+        self.segments = list(segments)
+        self._shown()
+
     def _shown(self) -> None:
         f = self.frame
-        self.time_md.content = f"{f / self.fps:.2f} s / {(self.num_frames - 1) / self.fps:.2f} s (frame {f})"
+        text = f"{f / self.fps:.2f} s / {(self.num_frames - 1) / self.fps:.2f} s (frame {f})"
+        if len(self.segments) > 1:
+            k = max(i for i, (start, _) in enumerate(self.segments) if start <= f or i == 0)
+            start, prompt = self.segments[k]
+            text += (f"  \nsegment {k + 1} of {len(self.segments)} from frame {start} ({start / self.fps:.2f} s): "
+                     f"{prompt or '(no text)'}; starts at frames " + ", ".join(str(s) for s, _ in self.segments))
+        self.time_md.content = text
         self.on_frame(f)
 
     def _run(self) -> None:

@@ -244,6 +244,9 @@ class Session:
         frames = self.doc.num_frames(self.model.fps)
         clip = self.generated and not self.from_timeline
         self.player.set_length(self.shown_motion().num_frames if clip else frames)
+        starts = self.doc.segment_starts(self.model.fps)
+        self.player.set_segments([] if clip else [(f, s["prompt"]) for f, s in zip(starts, self.doc.timeline,
+                                                                                    strict=True)])
         self.constraints.set_length(frames)
 
     # ------------------------------------------------------------------ generation
