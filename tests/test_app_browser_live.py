@@ -115,6 +115,21 @@ def _steady_orientation(camera, still: float = 2.0, timeout: float = 60.0) -> np
 
 
 
+
+def test_the_camera_keeps_the_live_character_in_view(live_tab):
+    """Issue 61: with "Follow character" on, the live figure drifted out of view within about 20 s (each
+    step moved the pose the browser had last reported, which lags the one set)."""
+    _, session, _ = live_tab
+    run = session.live.run
+    start = run.drawn
+    wait_for(lambda: run.drawn > start + 300, timeout=120, what="15 s more of live frames")
+
+    def on_it() -> bool:  # the pose the browser reports lags on a loaded machine: a moment it catches up will do
+        look_at = np.asarray(session.client.camera.look_at, dtype=np.float64)
+        return float(np.linalg.norm((look_at - _root(run))[[0, 2]])) < 1.0
+
+    wait_for(on_it, timeout=15, what="the camera on the live character")
+
 def test_a_ground_click_in_live_mode_adds_nothing(live_tab):
     """A click on the ground used to add a waypoint (84 m away) to the hidden timeline's motion, silently."""
     page, session, _ = live_tab

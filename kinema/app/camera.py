@@ -8,6 +8,8 @@ Positions are world metres, Y up. ``direction`` is where the camera stands seen 
 from __future__ import annotations
 
 import math
+import time
+from collections import deque
 
 import numpy as np
 
@@ -17,6 +19,8 @@ VIEW_DIRECTION = np.array([4.4, 4.4, -2.4]) / np.linalg.norm([4.4, 4.4, -2.4])
 MARGIN = 1.35
 #: the camera follows once the character's root has moved this far (metres) since the last move
 FOLLOW_STEP = 0.02
+#: seconds a pose the server set may still come back from the browser (its echo, not a user's move)
+ECHO_SECONDS = 2.0
 
 
 def frame_view(points: np.ndarray, fov: float, direction=VIEW_DIRECTION) -> tuple[np.ndarray, np.ndarray]:
@@ -52,26 +56,51 @@ def opening_view(motion, fov: float) -> tuple[np.ndarray, np.ndarray]:
 class CameraFollow:
     """Frames and follows the shown character in one tab (``client.camera``); ``enabled`` is read from
     the "Follow character" checkbox: it follows while the motion plays and while the user scrubs (a paused
-    view left behind showed empty ground, and play kept the offset)."""
+    view left behind showed empty ground, and play kept the offset).
+
+    The browser reports the camera back some frames after the server sets it, so the pose read from
+    ``client.camera`` lags what was set: moving that stale pose by each step lost steps (a live character
+    walked out of view in 20 s) and undid a framing. The camera is moved from the pose last set instead,
+    unless the browser reports one that was never set in the last `ECHO_SECONDS`: the user's own orbit."""
 
     def __init__(self, client, enabled):
         self.client, self.enabled = client, enabled
         self.target: np.ndarray | None = None
+        self._sent: deque[tuple[float, np.ndarray, np.ndarray]] = deque()  # (time, position, look_at) set
+
+    def _pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(position, look_at) to move from: the last pose set, or the user's when the browser reports a
+        pose the server did not set."""
+        cam = self.client.camera
+        reported = (np.asarray(cam.position, dtype=np.float64), np.asarray(cam.look_at, dtype=np.float64))
+        now = time.time()
+        while self._sent and now - self._sent[0][0] > ECHO_SECONDS:
+            self._sent.popleft()
+        if not self._sent:
+            return reported
+        ours = any(np.allclose(reported[0], p, atol=1e-3) and np.allclose(reported[1], q, atol=1e-3)
+                   for _, p, q in self._sent)
+        return (self._sent[-1][1], self._sent[-1][2]) if ours or cam.update_timestamp < self._sent[-1][0] else reported
+
+    def _set(self, position: np.ndarray, look_at: np.ndarray) -> None:
+        cam = self.client.camera
+        cam.position = tuple(float(v) for v in position)
+        cam.look_at = tuple(float(v) for v in look_at)
+        self._sent.append((time.time(), np.asarray(position, dtype=np.float64),
+                           np.asarray(look_at, dtype=np.float64)))
 
     def frame(self, points: np.ndarray, target, *, keep_zoom: bool = False) -> None:
         """Point the camera at ``points``; ``target``: the root it then follows. The first time from the
         default angle, then from the angle the user orbited to (a new motion or F does not undo the user's
         view), and with ``keep_zoom`` no closer than the user had it."""
-        cam = self.client.camera
-        direction = VIEW_DIRECTION
-        user = np.asarray(cam.position, dtype=np.float64) - np.asarray(cam.look_at, dtype=np.float64)
+        position, look_at = self._pose()
+        direction, user = VIEW_DIRECTION, position - look_at
         if self.target is not None and float(np.linalg.norm(user)) > 1e-6:
             direction = user / np.linalg.norm(user)
-        position, look_at = frame_view(points, float(cam.fov), direction)
+        position, look_at = frame_view(points, float(self.client.camera.fov), direction)
         if keep_zoom and self.target is not None:
             position = look_at + direction * max(float(np.linalg.norm(user)), float(np.linalg.norm(position - look_at)))
-        cam.position = tuple(position)
-        cam.look_at = tuple(look_at)
+        self._set(position, look_at)
         self.target = np.asarray(target, dtype=np.float64)
 
     def follow(self, target) -> None:
@@ -84,8 +113,6 @@ class CameraFollow:
         delta[1] = 0.0
         if float(np.linalg.norm(delta)) < FOLLOW_STEP:
             return
-        cam = self.client.camera
-        look_at = np.asarray(cam.look_at, dtype=np.float64) + delta
-        cam.position = tuple(np.asarray(cam.position, dtype=np.float64) + delta)
-        cam.look_at = tuple(look_at)
+        position, look_at = self._pose()
+        self._set(position + delta, look_at + delta)
         self.target = target
