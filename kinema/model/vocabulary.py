@@ -39,9 +39,10 @@ import math
 import re
 import statistics
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import torch
 from safetensors import SafetensorError, safe_open
@@ -135,39 +136,28 @@ class KnownPrompts:
         # per measured action (passed, samples) of the model's own probes (empty = none measured)
         self.action_probes = {str(a): (int(p), int(n)) for a, (p, n) in sorted((action_probes or {}).items())}
         for a, (passed, total) in self.action_probes.items():
-            if not 0 <= passed <= total or total < 1:
-                raise KinemaError(f"known prompts: action {a!r} probes {passed}/{total} are not a share of samples")
+            _check_share(passed, total, f"action {a!r} probes")
         self.learned = frozenset(a for a in self.named_actions if self._learned(a))
+        n = len(self.captions)
         # per caption the median length (s) of the training clips that carry it: how long its action was
         # captured at, the window a longer prompt is continued in (kinema.human.continuation); None = not known
-        self.caption_seconds = None if caption_seconds is None else [float(x) for x in caption_seconds]
-        if self.caption_seconds is not None and (len(self.caption_seconds) != len(self.captions) or not all(
-                math.isfinite(x) and x > 0 for x in self.caption_seconds)):
-            raise KinemaError(f"known prompts: caption_seconds must hold one positive length per caption "
-                              f"({len(self.captions)})")
+        self.caption_seconds = _per_caption(caption_seconds, n, "caption_seconds must hold one positive length",
+                                            lambda x: math.isfinite(x) and x > 0, float)
         # per caption the median steady ground speed (m/s) of the training clips that carry it and travel
         # (kinema.data.phases), None for a caption whose clips do not: the speed a continued prompt keeps
-        self.caption_speeds = None if caption_speeds is None else [None if x is None else float(x)
-                                                                   for x in caption_speeds]
-        if self.caption_speeds is not None and (len(self.caption_speeds) != len(self.captions) or not all(
-                x is None or (math.isfinite(x) and x >= 0) for x in self.caption_speeds)):
-            raise KinemaError(f"known prompts: caption_speeds must hold one speed (m/s, >= 0) or null per caption "
-                              f"({len(self.captions)})")
+        self.caption_speeds = _per_caption(caption_speeds, n, "caption_speeds must hold one speed (m/s, >= 0) or null",
+                                           lambda x: x is None or (math.isfinite(x) and x >= 0), _optional(float))
         # per caption the content label of the training clips that carry it (the most common; "wave-right-hand",
         # "kick-left"), and per content the model's caption fidelity on its own captions (samples passed,
         # samples, whether every caption holds: kinema.evaluate.fidelity); None / empty = not known
-        self.caption_contents = None if caption_contents is None else [None if c is None else str(c)
-                                                                       for c in caption_contents]
-        if self.caption_contents is not None and len(self.caption_contents) != len(self.captions):
-            raise KinemaError(f"known prompts: caption_contents must hold one content label or null per caption "
-                              f"({len(self.captions)})")
-        self.content_fidelity = {str(c): (int(p), int(n), bool(h))
-                                 for c, (p, n, h) in sorted((content_fidelity or {}).items())}
+        self.caption_contents = _per_caption(caption_contents, n, "caption_contents must hold one content label or "
+                                             "null", lambda c: True, _optional(str))
+        self.content_fidelity = {str(c): (int(p), int(t), bool(h))
+                                 for c, (p, t, h) in sorted((content_fidelity or {}).items())}
         for c, (passed, total, _) in self.content_fidelity.items():
-            if not 0 <= passed <= total or total < 1:
-                raise KinemaError(f"known prompts: content {c!r} fidelity {passed}/{total} is not a share of samples")
+            _check_share(passed, total, f"content {c!r} fidelity")
         # per caption: False where its content was measured and does not hold (grounding prefers the others)
-        self.made = torch.tensor([self.content_made(c) for c in (self.caption_contents or [None] * len(self.captions))],
+        self.made = torch.tensor([self.content_made(c) for c in (self.caption_contents or [None] * n)],
                                  dtype=torch.bool)
 
     def _learned(self, action: str) -> bool:
@@ -425,6 +415,26 @@ def median_seconds(captions: list[str], clip_captions: list[list[str]], clip_sec
     """Per caption of ``captions`` the median of ``clip_seconds`` over the clips (given as their captions)
     that carry it; a caption no clip carries is an error."""
     return _medians(captions, clip_captions, clip_seconds, "clip lengths")
+
+
+def _per_caption(values, n: int, what: str, ok: Callable[[Any], bool], convert: Callable[[Any], Any]) -> list | None:
+    """``values`` converted, one per caption (None: not known), or a one-line error saying ``what`` they must be."""
+    if values is None:
+        return None
+    out = [convert(v) for v in values]
+    if len(out) != n or not all(ok(v) for v in out):
+        raise KinemaError(f"known prompts: {what} per caption ({n})")
+    return out
+
+
+def _optional(convert: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    """``convert`` that leaves None alone."""
+    return lambda v: None if v is None else convert(v)
+
+
+def _check_share(passed: int, total: int, what: str) -> None:
+    if not 0 <= passed <= total or total < 1:
+        raise KinemaError(f"known prompts: {what} {passed}/{total} is not a share of samples")
 
 
 def common_contents(captions: list[str], clip_captions: list[list[str]], clip_contents: Sequence[str]) -> list[str]:
