@@ -117,7 +117,8 @@ def test_right_side_actions_are_made_as_the_left_ones_mirror_and_move_the_right_
     caption uses is made as its left twin's mirror image (the report says so) and moves the right limb: the
     right foot above the pelvis with the left below half the pelvis' height; the right fist 0.25 m or more
     further ahead of the pelvis than at the start (along the body's forward, from the shoulders) and 0.1 m
-    more than the left (seed 2: one of the probe's passing seeds); neither is warned."""
+    more than the left (seed 2: one of the probe's passing seeds). The kick is not warned; the punch is, since
+    stop 64, by the caption-fidelity table (punches pass in 3 of 6 samples of their own captions)."""
     assert model.loaded.expert.mirror_side == "right"
     kick = model.generate("A man kicks hard using his right leg.", seconds=3, seed=0)
     P, names = kick[0].positions, list(kick[0].skeleton.names)
@@ -132,8 +133,10 @@ def test_right_side_actions_are_made_as_the_left_ones_mirror_and_move_the_right_
     gain = {h: float((a - a[0]).max()) for h, a in ahead.items()}
     assert gain["Hand_R"] >= 0.25 and gain["Hand_R"] >= gain["Hand_L"] + 0.1, gain
     for res, twin in ((kick, "A man kicks hard using his left leg."), (punch, "Someone jabs with the left hand.")):
-        assert res.report.prompts[0]["made_as_mirror_of"] == twin and res.report.prompts[0]["known"]
-        assert not [w for w in res.report.warnings if w.startswith("prompt ")]
+        assert res.report.prompts[0]["made_as_mirror_of"] == twin
+    assert kick.report.prompts[0]["known"] and not [w for w in kick.report.warnings if w.startswith("prompt ")]
+    assert not punch.report.prompts[0]["known"]
+    assert [w for w in punch.report.warnings if "does not reliably make 'punch-right'" in w]
 
 
 def test_default_guidance_is_regular_two_branches_and_weights_ask_for_separated(model, monkeypatch) -> None:

@@ -142,7 +142,9 @@ def test_timeline_example(path, model, timelines):
     assert motion.num_frames == round(seconds * model.fps)
     assert result.report.segments == len(segments)
     check_plausible(motion, path.name)
-    assert result.report.warnings == []
+    # the only warnings: the caption-fidelity table's, for a wave (a raised hand that does not swing; the
+    # examples' comments say so)
+    assert all("does not reliably make 'wave-" in w for w in result.report.warnings), result.report.warnings
 
 
 def _segment_measures(motion, bow: slice, wave: slice, walk: slice) -> dict[str, float]:
