@@ -216,4 +216,6 @@ def test_example_script(script, tmp_path, monkeypatch, capsys):
         path = tmp_path / name
         assert path.is_file() and path.resolve().is_relative_to((tmp_path / "out").resolve()), f"{script.name}: {name}"
         check_plausible(kinema.load_motion(path), f"{script.name}: {name}")
-    assert "warning" not in out.lower()
+    # no warning but the caption-fidelity table's for a wave (03_timeline's, whose timeline says waves are weak)
+    warned = [line for line in out.lower().splitlines() if "warning" in line]
+    assert all("does not reliably make 'wave-" in line for line in warned), warned
