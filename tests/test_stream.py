@@ -188,7 +188,8 @@ def test_script_lines_are_checked(tmp_path) -> None:
                        ({"t": 0, "prompt": "x", "steer": {}}, "exactly one"), ({"t": 0, "jump": 1}, "exactly one"),
                        ({"t": 0, "target": {"joint": "Hand_R"}}, "target"),
                        # issue 61: huge numbers, a clear that is false, a value error found when read
-                       ({"t": 10**400, "prompt": "x"}, r"'t' must be .* got 1000"), ({"t": 1e308, "prompt": "x"}, "'t'"),
+                       ({"t": 10**400, "prompt": "x"}, r"'t' must be .* got 1000"),
+                       ({"t": 1e308, "prompt": "x"}, "'t'"),
                        ({"t": 1, "clear": False}, "'clear' must be true"),
                        ({"t": 1, "steer": {"speed": 10**400}}, "speed must be a finite number"),
                        ({"t": 1, "steer": {"speed": 50}}, r"line: steer: speed must be in \[0, 6\]")]:
