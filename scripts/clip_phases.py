@@ -13,8 +13,7 @@ import statistics
 from collections import defaultdict
 
 from kinema.data.dataset import MotionDataset
-from kinema.data.phases import LOCOMOTION, find_phases
-from kinema.representation.kimodo_features import features_to_motion
+from kinema.data.phases import LOCOMOTION, clip_phases
 
 
 def main() -> int:
@@ -27,9 +26,7 @@ def main() -> int:
     for rec in ds.clips:
         if rec["content"] not in LOCOMOTION or rec["mirrored"]:
             continue
-        feats = ds.features[rec["start"] : rec["start"] + rec["length"]].double()
-        motion = features_to_motion(feats, ds.skeleton, ds.fps)
-        rows[rec["content"]].append((rec["duration_s"], find_phases(motion.root_translation[:, [0, 2]], ds.fps)))
+        rows[rec["content"]].append((rec["duration_s"], clip_phases(ds, rec)))
     print("content     clips steady starts ends  clip_s steady_s  steady m/s q20/50/80")
     for content, clips in sorted(rows.items()):
         phased = [p for _, p in clips if p is not None]

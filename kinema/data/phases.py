@@ -112,10 +112,11 @@ def find_phases(root_xz: torch.Tensor, fps: float) -> Phases | None:
 def steady_speeds(dataset, records) -> list[float | None]:
     """Per record of ``dataset`` (a kinema.data.dataset.MotionDataset) its steady speed (m/s), None for a
     clip that does not travel: what a known caption's speed is measured from."""
-    out = []
-    for rec in records:
-        feats = dataset.features[rec["start"] : rec["start"] + rec["length"]].double()
-        motion = features_to_motion(feats, dataset.skeleton, dataset.fps)
-        phases = find_phases(motion.root_translation[:, [0, 2]], dataset.fps)
-        out.append(None if phases is None else phases.steady_speed)
-    return out
+    return [None if (p := clip_phases(dataset, rec)) is None else p.steady_speed for rec in records]
+
+
+def clip_phases(dataset, rec: dict) -> Phases | None:
+    """:func:`find_phases` of one clip record of ``dataset`` (a kinema.data.dataset.MotionDataset)."""
+    feats = dataset.features[rec["start"] : rec["start"] + rec["length"]].double()
+    motion = features_to_motion(feats, dataset.skeleton, dataset.fps)
+    return find_phases(motion.root_translation[:, [0, 2]], dataset.fps)

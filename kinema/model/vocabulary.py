@@ -122,6 +122,7 @@ class KnownPrompts:
         self.embeddings = torch.nn.functional.normalize(embeddings.float(), dim=-1)
         self.encoder_id = encoder_id
         self.caption_set = frozenset(c.strip() for c in self.captions)
+        self._caption_index = {c: i for i, c in enumerate(self.captions)}
         # phrases that say how a caption's action is done ("wearily", "An elderly person", "slowly"); empty = not known
         self.manner_phrases = tuple(manner_phrases)
         longest_first = sorted(self.manner_phrases, key=len, reverse=True)
@@ -203,9 +204,7 @@ class KnownPrompts:
     def content_note(self, caption: str) -> str | None:
         """Why the model does not make what a known ``caption`` shows, by the caption-fidelity table of its
         content (None: it does, or it was not measured)."""
-        if self.caption_contents is None or caption not in self.caption_set:
-            return None
-        content = self.caption_contents[self.captions.index(caption)]
+        content = self._of(self.caption_contents, caption)
         if self.content_made(content):
             return None
         passed, total, _ = self.content_fidelity[content]
@@ -257,19 +256,17 @@ class KnownPrompts:
 
     def seconds_of(self, caption: str) -> float | None:
         """How long the clips of a known ``caption`` last (median, seconds), or None when not known."""
-        if self.caption_seconds is None:
-            return None
-        try:
-            return self.caption_seconds[self.captions.index(caption)]
-        except ValueError:
-            return None
+        return self._of(self.caption_seconds, caption)
 
     def speed_of(self, caption: str) -> float | None:
         """The steady ground speed (m/s, median) of the travelling clips of a known ``caption``, or None when
         not known or its clips do not travel."""
-        if self.caption_speeds is None or caption not in self.caption_set:
-            return None
-        return self.caption_speeds[self.captions.index(caption)]
+        return self._of(self.caption_speeds, caption)
+
+    def _of(self, values: list | None, caption: str):
+        """A known ``caption``'s entry of the per-caption ``values`` (None when either is not known)."""
+        i = self._caption_index.get(caption)
+        return None if values is None or i is None else values[i]
 
     @staticmethod
     def phrases_in(phrases, captions) -> tuple[str, ...]:
